@@ -1,0 +1,3 @@
+from motorlab.cli import main
+
+main()

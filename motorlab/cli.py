@@ -1,0 +1,236 @@
+"""The `motorlab` command: one sub-command per step, each calling one library function.
+
+User mistakes (motorlab.errors.MotorlabError, invalid settings) print one line
+and exit with status 2; an interrupted step exits with 130 and leaves its run
+folder without summary.json, i.e. visibly unfinished.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering works without a display
+
+import typer  # noqa: E402
+from rich.console import Console  # noqa: E402
+
+from motorlab.errors import MotorlabError  # noqa: E402
+
+app = typer.Typer(
+    name="motorlab",
+    help=(
+        "Learn motor control of simulated bodies in MuJoCo.\n\n"
+        "Each command is one step; it writes a run folder (--out, default runs/<step>-<time>) with "
+        "config.toml, summary.json, metrics.csv, tensorboard/ and plots/.\n\n"
+        "Start here:  motorlab run pendulum   (the robust-pendulum study, a few minutes)"
+    ),
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode="rich",
+)
+err = Console(stderr=True)
+stdout = Console()
+
+Out = Annotated[Optional[Path], typer.Option("--out", help="Run folder to write (default: runs/<step>-<timestamp>).")]
+Seed = Annotated[int, typer.Option("--seed", min=0, help="Random seed (training, env resets, evaluation).")]
+Delay = Annotated[Optional[float], typer.Option(
+    "--delay", help="Low-pass delay time constant TAU in seconds (alpha = dt/TAU must be in (0, 1)); e.g. 0.2.")]
+DelayOn = Annotated[Optional[str], typer.Option(
+    "--delay-on", help="What the delay filters: action (actuation delay), observation (perception) or both.")]
+History = Annotated[Optional[int], typer.Option("--history", help="Stack the last K observations (K=1: none).")]
+
+
+def _env_overrides(env: str | None, delay, delay_on, history, reward=None) -> dict:
+    given = {"id": env, "delay": delay, "delay_on": delay_on, "history": history, "reward": reward}
+    return {k: v for k, v in given.items() if v is not None}
+
+
+def _validation_message(e, flags: bool = True) -> str:
+    """One line from a pydantic ValidationError, naming the option."""
+    first = e.errors()[0]
+    loc = [str(x) for x in first["loc"]]
+    name = loc[-1] if loc else "?"
+    if name == "id":
+        name = "env"
+    label = f"--{name.replace('_', '-')}" if flags else ".".join(loc)
+    if first["type"] == "extra_forbidden":
+        return f"unknown setting {label}"
+    return f"{label}: {first['msg']}"
+
+
+@app.command(epilog="Examples:\n\n  motorlab train InvertedPendulum-v5 --until-solved --out runs/ppo\n\n"
+                    "  motorlab train InvertedPendulum-v5 --preset fast --delay 0.2 --until-solved\n\n"
+                    "  motorlab train InvertedPendulum-v5 --algo ppo --lr linear:3e-4,0 --clip-range linear:0.3,0.1 "
+                    "--history 10 --delay 0.2")
+def train(
+    env_id: Annotated[str, typer.Argument(help="Gymnasium env id, e.g. InvertedPendulum-v5.")],
+    algo: Annotated[Optional[str], typer.Option(
+        help="ppo | sac | td3 (Stable-Baselines3) | lqr (model-based: linear model + LQR).")] = None,
+    preset: Annotated[Optional[str], typer.Option(
+        help="Named settings: fast (motorlab's most sample-efficient), sb3-ppo, sb3-sac. Flags override it.")] = None,
+    timesteps: Annotated[Optional[int], typer.Option(help="Env-step budget (default 100000).")] = None,
+    seed: Seed = 0,
+    out: Out = None,
+    delay: Delay = None,
+    delay_on: DelayOn = None,
+    history: History = None,
+    reward: Annotated[Optional[str], typer.Option(
+        help="Reward shaping: task, alive, quadratic, action-penalty, or module:function "
+             "(fn(next_obs, action, reward, terminated, info) -> float).")] = None,
+    lr: Annotated[Optional[str], typer.Option(
+        help="Learning-rate schedule: 3e-4 (constant) or linear:START,END (over the budget).")] = None,
+    clip_range: Annotated[Optional[str], typer.Option(help="PPO clip-range schedule, e.g. linear:0.3,0.1.")] = None,
+    until_solved: Annotated[bool, typer.Option(
+        "--until-solved", help="Stop once --solve-episodes deterministic episodes all reach the maximum return; "
+                               "summary.json gets steps_to_success.")] = False,
+    solve_episodes: Annotated[Optional[int], typer.Option(help="Episodes that must all succeed (default 10).")] = None,
+    solve_return: Annotated[Optional[float], typer.Option(
+        help="Return that counts as solved (default: the env's maximum, 1000 for InvertedPendulum).")] = None,
+    eval_every: Annotated[Optional[int], typer.Option(
+        help="Env steps between evaluations (default: every PPO rollout, 1000 for SAC/TD3, each LQR refit).")] = None,
+    n_envs: Annotated[Optional[int], typer.Option(help="Parallel envs (subprocesses when > 1).")] = None,
+    normalize: Annotated[Optional[bool], typer.Option(
+        "--normalize/--no-normalize", help="Normalize observations with running statistics.")] = None,
+    device: Annotated[Optional[str], typer.Option(help="auto (CUDA when present) | cpu | cuda.")] = None,
+    hp: Annotated[Optional[list[str]], typer.Option(
+        "--set", help="Extra SB3 hyperparameter KEY=VALUE (VALUE as JSON), repeatable: --set n_steps=1024.")] = None,
+    progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
+):
+    """Train a policy on ENV_ID and write a run folder.
+
+    The folder holds config.toml, metrics.csv, tensorboard/, the policy (policy.json +
+    policy.safetensors, pickle-free; SB3's model.zip for continuing training) and
+    summary.json with steps_to_success (null if the budget ran out first) and wall_seconds.
+    """
+    from pydantic import ValidationError
+
+    from motorlab.rl.config import resolve
+    from motorlab.rl.train import train as run_train
+
+    settings = {
+        "algo": algo, "preset": preset, "timesteps": timesteps, "seed": seed, "lr": lr, "clip_range": clip_range,
+        "until_solved": until_solved or None, "solve_episodes": solve_episodes, "solve_return": solve_return,
+        "eval_every": eval_every, "n_envs": n_envs, "normalize": normalize, "device": device, "progress": progress,
+        "env": _env_overrides(env_id, delay, delay_on, history, reward),
+    }
+    if hp:
+        settings["hyperparams"] = _parse_sets(hp)
+    try:
+        cfg = resolve({k: v for k, v in settings.items() if v is not None})
+    except ValidationError as e:
+        raise MotorlabError(_validation_message(e)) from None
+    summary = run_train(cfg, out)
+    sts = summary["steps_to_success"]
+    stdout.print(f"[green]done[/green] {summary['run_dir']}: "
+              f"return {summary['eval_return_mean']:.1f} (min {summary['eval_return_min']:.0f}) over "
+              f"{summary['eval_episodes']} episodes, {summary['timesteps']:,} steps, {summary['wall_seconds']:.1f} s"
+              + (f", steps_to_success {sts:,}" if sts is not None else (", not solved" if cfg.until_solved else "")))
+
+
+def _parse_sets(items: list[str]) -> dict:
+    params = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise MotorlabError(f"--set {item!r}: write KEY=VALUE, e.g. --set n_steps=1024.")
+        try:
+            params[key] = json.loads(value)
+        except json.JSONDecodeError:
+            params[key] = value
+    return params
+
+
+@app.command(epilog="Examples:\n\n  motorlab evaluate runs/ppo --delay 0.2 --episodes 20\n\n"
+                    "  motorlab evaluate pid --env InvertedPendulum-v5\n\n"
+                    "  motorlab evaluate 'pid:kp=[1,20,0,0],kd=[1,3,0,0]' --env InvertedPendulum-v5")
+def evaluate(
+    policy: Annotated[str, typer.Argument(
+        help="A run folder, or a built-in controller: pid, pid:kp=[..],ki=[..],kd=[..], zero, random.")],
+    env: Annotated[Optional[str], typer.Option(help="Env id (default: the run's training env).")] = None,
+    delay: Delay = None,
+    delay_on: DelayOn = None,
+    history: History = None,
+    episodes: Annotated[int, typer.Option(help="Evaluation episodes.")] = 10,
+    seed: Seed = 0,
+    out: Out = None,
+):
+    """Evaluate a policy deterministically; print a table, write summary.json.
+
+    summary.json: return_mean, return_std, return_min, return_max, success_rate,
+    episode_lengths. Returns are the task's own (training-time reward shaping is not applied).
+    """
+    from pydantic import ValidationError
+    from rich.table import Table
+
+    from motorlab.evaluate import evaluate_step, resolve_env
+
+    try:
+        env_cfg = resolve_env(policy, _env_overrides(env, delay, delay_on, history))
+    except ValidationError as e:
+        raise MotorlabError(_validation_message(e)) from None
+    s = evaluate_step(policy, env_cfg, episodes, seed, out)
+    table = Table(title=f"{policy} on {env_cfg.id}" + (f", delay {env_cfg.delay} s" if env_cfg.delay else "")
+                  + (f", history {env_cfg.history}" if env_cfg.history > 1 else ""))
+    for col in ("episodes", "return mean ± std", "min", "max", "success", "mean length"):
+        table.add_column(col, justify="right")
+    table.add_row(str(s["episodes"]), f"{s['return_mean']:.1f} ± {s['return_std']:.1f}", f"{s['return_min']:.1f}",
+                  f"{s['return_max']:.1f}", f"{s['success_rate']:.0%}", f"{s['episode_length_mean']:.0f}")
+    stdout.print(table)
+    stdout.print(f"written: {s['run_dir']}/summary.json")
+
+
+@app.command(epilog="Example:\n\n  motorlab plot runs/ppo   # -> runs/ppo/plots/*.png")
+def plot(run_dir: Annotated[Path, typer.Argument(help="A run folder from train or evaluate.")]):
+    """Plot a run: learning curve (training runs) and the observation trace of one evaluation episode."""
+    from motorlab.report.run import plot_run
+
+    for path in plot_run(run_dir):
+        stdout.print(f"written: {path}")
+
+
+@app.command(epilog="Examples:\n\n  motorlab run pendulum --out runs/pendulum\n\n  motorlab run my_study.toml\n\n"
+                    "Re-running into the same --out keeps steps that already finished with the same settings.")
+def run(
+    recipe: Annotated[str, typer.Argument(help="A bundled recipe name (pendulum) or a path to a TOML recipe.")],
+    out: Out = None,
+):
+    """Run a study from a TOML recipe: its steps, a printed table, summary.json and plots.
+
+    Recipe format: see `motorlab recipes` and motorlab/recipes/pendulum.toml.
+    """
+    from motorlab.recipes import load_recipe
+    from motorlab.studies import run_study
+
+    summary = run_study(load_recipe(recipe), out, console=stdout)
+    stdout.print(f"\n[bold]Results:[/bold] {summary['study_dir']}  (table.txt, summary.json, plots/*.png, one folder per step)")
+
+
+@app.command()
+def recipes():
+    """List the bundled recipes."""
+    from motorlab.recipes import bundled, load_recipe
+
+    for name in sorted(bundled()):
+        r = load_recipe(name)
+        stdout.print(f"[bold]{name}[/bold]: {r.description} ({len(r.steps)} steps)")
+
+
+def main() -> None:
+    """Entry point: run the app, turning user mistakes into one-line errors."""
+    try:
+        app()
+    except MotorlabError as e:
+        err.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        err.print("[yellow]interrupted[/yellow]: the run folder has no summary.json, so it stays marked unfinished.")
+        sys.exit(130)
+
+
+if __name__ == "__main__":
+    main()

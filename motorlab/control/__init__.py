@@ -1,0 +1,1 @@
+"""Classical and model-based controllers: PID, linear system identification + LQR."""

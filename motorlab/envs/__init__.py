@@ -1,0 +1,82 @@
+"""Make environments by id, with motorlab's wrappers applied in a fixed order:
+
+    base env -> reward shaping -> low-pass delay -> observation history
+
+Reward shaping sees the true state; the policy sees delayed, stacked observations.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import gymnasium as gym
+from pydantic import BaseModel, ConfigDict, Field
+
+from motorlab.envs.rewards import resolve_reward
+from motorlab.envs.wrappers import DelayOn, LowPassDelay, RewardShaping, delay_alpha
+from motorlab.errors import MotorlabError, did_you_mean
+
+__all__ = ["EnvConfig", "make_env", "check_env_id", "max_return", "LowPassDelay", "RewardShaping", "delay_alpha"]
+
+# Envs whose reward is +1 per step alive: the maximum return is the time limit.
+_ALIVE_REWARD_PREFIXES = ("InvertedPendulum-",)
+
+
+class EnvConfig(BaseModel):
+    """Which env, and how it is wrapped."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    id: str = "InvertedPendulum-v5"
+    delay: float | None = Field(None, description="low-pass time constant in seconds (None: no delay)")
+    delay_on: DelayOn = "action"
+    history: int = Field(1, ge=1, description="observation frames stacked (1: no history)")
+    reward: str | None = Field(None, description="built-in reward name or module:function")
+
+
+def check_env_id(env_id: str) -> None:
+    """Raise a clear error for an env id Gymnasium does not know, with close matches."""
+    if env_id not in gym.registry:
+        raise MotorlabError(
+            f"unknown env id {env_id!r}{did_you_mean(env_id, gym.registry.keys())}; "
+            "`python -c \"import gymnasium; gymnasium.pprint_registry()\"` lists the ids."
+        )
+
+
+def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None, **kwargs: Any) -> gym.Env:
+    """Build the env described by `cfg`.
+
+    Args:
+        cfg: env id and wrappers.
+        shaped: apply reward shaping (evaluation passes False to report the task's return).
+        render_mode: passed to `gymnasium.make` (e.g. "rgb_array" for videos).
+
+    Raises:
+        MotorlabError: unknown id, bad delay, unknown reward.
+    """
+    check_env_id(cfg.id)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # -v4 deprecation notices are noise here
+        env = gym.make(cfg.id, render_mode=render_mode, **kwargs)
+    if shaped and cfg.reward and cfg.reward != "task":
+        env = RewardShaping(env, resolve_reward(cfg.reward), name=cfg.reward)
+    if cfg.delay:
+        env = LowPassDelay(env, cfg.delay, on=cfg.delay_on)
+    if cfg.history > 1:
+        env = gym.wrappers.FrameStackObservation(env, cfg.history, padding_type="reset")
+        env = gym.wrappers.FlattenObservation(env)
+    return env
+
+
+def max_return(env_id: str) -> float | None:
+    """The best return an episode can reach, where the task defines one.
+
+    InvertedPendulum pays +1 per step, so it is the time limit (1000);
+    otherwise the env's registered reward threshold, else None.
+    """
+    check_env_id(env_id)
+    spec = gym.spec(env_id)
+    if env_id.startswith(_ALIVE_REWARD_PREFIXES) and spec.max_episode_steps:
+        return float(spec.max_episode_steps)
+    return float(spec.reward_threshold) if spec.reward_threshold is not None else None

@@ -1,0 +1,116 @@
+"""Gymnasium wrappers for robust-policy studies: delay and reward shaping.
+
+Observation history uses Gymnasium's own FrameStackObservation + FlattenObservation
+(see `motorlab.envs.make_env`); only what Gymnasium lacks is written here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Literal
+
+import gymnasium as gym
+import numpy as np
+
+from motorlab.errors import MotorlabError
+
+DelayOn = Literal["action", "observation", "both"]
+
+# fn(next_obs, action, reward, terminated, info) -> shaped reward
+RewardFn = Callable[[np.ndarray, np.ndarray, float, bool, dict], float]
+
+
+def delay_alpha(dt: float, time_constant: float) -> float:
+    """Filter coefficient of a first-order low-pass: alpha = dt / time_constant.
+
+    Raises:
+        MotorlabError: unless 0 < alpha < 1 (time constant longer than one step).
+    """
+    if not np.isfinite(time_constant) or time_constant <= 0:
+        raise MotorlabError(f"delay time constant must be a positive number of seconds, got {time_constant}.")
+    alpha = dt / time_constant
+    if not 0.0 < alpha < 1.0:
+        raise MotorlabError(
+            f"delay time constant {time_constant} s gives alpha = dt/tau = {dt}/{time_constant} = {alpha:.3g}; "
+            f"alpha must be in (0, 1), so choose a time constant above the env's step dt = {dt} s."
+        )
+    return alpha
+
+
+class LowPassDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Actuation and/or perception delay as a first-order low-pass filter.
+
+    Each step `y <- y + alpha * (x - y)` with `alpha = dt / time_constant`, where x
+    is the commanded action (actuation delay) or the true observation (perception
+    delay). The filter restarts with every episode: the action filter at zero
+    (clipped into the action space), the observation filter at the first observation.
+
+    Args:
+        env: an env with a Box action space and a `dt` (MuJoCo envs have one).
+        time_constant: seconds; must exceed the env's dt.
+        on: "action", "observation" or "both".
+    """
+
+    def __init__(self, env: gym.Env, time_constant: float, on: DelayOn = "action"):
+        gym.utils.RecordConstructorArgs.__init__(self, time_constant=time_constant, on=on)
+        super().__init__(env)
+        if on not in ("action", "observation", "both"):
+            raise MotorlabError(f"delay must act on 'action', 'observation' or 'both', got {on!r}.")
+        dt = getattr(env.unwrapped, "dt", None)
+        if dt is None:
+            raise MotorlabError(f"{env.spec.id if env.spec else env} has no step dt; delay needs one.")
+        if not isinstance(env.action_space, gym.spaces.Box):
+            raise MotorlabError("delay needs a continuous (Box) action space.")
+        self.time_constant = float(time_constant)
+        self.alpha = delay_alpha(float(dt), self.time_constant)
+        self.on = on
+        space = env.action_space
+        self._action_rest = np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
+        self._action = self._action_rest.copy()
+        self._obs: np.ndarray | None = None
+
+    @property
+    def filters_action(self) -> bool:
+        return self.on in ("action", "both")
+
+    @property
+    def filters_observation(self) -> bool:
+        return self.on in ("observation", "both")
+
+    def reset(self, **kwargs: Any):
+        obs, info = self.env.reset(**kwargs)
+        self._action = self._action_rest.copy()
+        self._obs = np.array(obs, copy=True)
+        return self._obs.copy(), info
+
+    def step(self, action):
+        action = np.asarray(action, dtype=self._action.dtype)
+        if self.filters_action:
+            self._action = (self._action + self.alpha * (action - self._action)).astype(self._action.dtype)
+            action = self._action
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if self.filters_observation:
+            self._obs = (self._obs + self.alpha * (obs - self._obs)).astype(obs.dtype)
+            obs = self._obs.copy()
+        info["applied_action"] = np.array(action, copy=True)
+        return obs, reward, terminated, truncated, info
+
+
+class RewardShaping(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Replace the reward with `fn(next_obs, action, reward, terminated, info)`.
+
+    The task's own reward is kept in `info["task_reward"]`, so evaluation can
+    still report the return the task defines.
+    """
+
+    def __init__(self, env: gym.Env, fn: RewardFn, name: str = "custom"):
+        gym.utils.RecordConstructorArgs.__init__(self, fn=fn, name=name)
+        super().__init__(env)
+        self.fn = fn
+        self.name = name
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        info["task_reward"] = float(reward)
+        shaped = float(self.fn(obs, np.asarray(action), float(reward), bool(terminated), info))
+        return obs, shaped, terminated, truncated, info

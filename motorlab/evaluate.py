@@ -1,0 +1,188 @@
+"""Batched evaluation rollouts: N episodes stepped side by side, one policy call
+per time step for the whole batch (stateful controllers keep one row per episode).
+
+Returns are the task's own returns (reward shaping is for training only).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import gymnasium as gym
+import numpy as np
+
+from motorlab.envs import EnvConfig, make_env, max_return
+
+
+class Policy(Protocol):
+    """What every policy does: start a batch of episodes, map observations to actions."""
+
+    def reset(self, n: int) -> None: ...
+
+    def act(self, obs: np.ndarray) -> np.ndarray: ...
+
+
+@dataclass
+class Rollouts:
+    """Outcome of evaluation episodes (aborted episodes are not included)."""
+
+    returns: np.ndarray
+    lengths: np.ndarray
+    success: np.ndarray
+    aborted: bool = False
+    observations: list[np.ndarray] = field(default_factory=list)  # per episode, when recorded
+    actions: list[np.ndarray] = field(default_factory=list)
+    dt: float = 0.0
+
+    def summary(self) -> dict:
+        r = self.returns
+        return {
+            "episodes": int(len(r)),
+            "return_mean": float(np.mean(r)) if len(r) else None,
+            "return_std": float(np.std(r)) if len(r) else None,
+            "return_min": float(np.min(r)) if len(r) else None,
+            "return_max": float(np.max(r)) if len(r) else None,
+            "success_rate": float(np.mean(self.success)) if len(r) else None,
+            "episode_length_mean": float(np.mean(self.lengths)) if len(r) else None,
+            "episode_lengths": [int(x) for x in self.lengths],
+        }
+
+
+def _success(info: dict, ret: float, target: float | None) -> bool:
+    for key in ("success", "solved", "is_success"):
+        if key in info:
+            return bool(info[key])
+    return target is not None and ret >= target
+
+
+class Evaluator:
+    """Holds `episodes` envs for repeated evaluation (e.g. during training).
+
+    Args:
+        env_cfg: the env and wrappers the policy was made for.
+        episodes: episodes per evaluation, run as one batch.
+        seed: episode i starts from reset(seed=seed + i), so evaluations repeat exactly.
+    """
+
+    def __init__(self, env_cfg: EnvConfig, episodes: int, seed: int):
+        self.env_cfg = env_cfg
+        self.episodes = episodes
+        self.seed = seed
+        self.envs = [make_env(env_cfg, shaped=False) for _ in range(episodes)]
+        self.target = max_return(env_cfg.id)
+        self.dt = float(getattr(self.envs[0].unwrapped, "dt", 0.0))
+
+    @property
+    def observation_space(self) -> gym.Space:
+        return self.envs[0].observation_space
+
+    @property
+    def action_space(self) -> gym.Space:
+        return self.envs[0].action_space
+
+    def run(self, policy: Policy, stop_below: float | None = None, record: bool = False) -> Rollouts:
+        """Run one episode per env.
+
+        Args:
+            policy: acts on a batch of observations.
+            stop_below: abort as soon as any episode ends with a return below this
+                (used by --until-solved: one failure already means "not solved").
+            record: keep observation and action traces.
+        """
+        n = self.episodes
+        obs = np.stack([env.reset(seed=self.seed + i)[0] for i, env in enumerate(self.envs)])
+        policy.reset(n)
+        active = np.ones(n, dtype=bool)
+        returns = np.zeros(n)
+        lengths = np.zeros(n, dtype=int)
+        success = np.zeros(n, dtype=bool)
+        traces_o = [[o] for o in obs] if record else []
+        traces_a: list[list] = [[] for _ in range(n)] if record else []
+        while active.any():
+            actions = np.asarray(policy.act(obs), dtype=np.float32)
+            for i in np.flatnonzero(active):
+                o, r, terminated, truncated, info = self.envs[i].step(actions[i])
+                obs[i] = o
+                returns[i] += r
+                lengths[i] += 1
+                if record:
+                    traces_o[i].append(o)
+                    traces_a[i].append(actions[i])
+                if terminated or truncated:
+                    active[i] = False
+                    success[i] = _success(info, returns[i], self.target)
+                    if stop_below is not None and returns[i] < stop_below:
+                        done = ~active
+                        return Rollouts(returns[done], lengths[done], success[done], aborted=True, dt=self.dt)
+        return Rollouts(
+            returns, lengths, success, dt=self.dt,
+            observations=[np.array(t) for t in traces_o], actions=[np.array(t) for t in traces_a],
+        )
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, record: bool = False) -> Rollouts:
+    """Evaluate `policy` for `episodes` episodes on the env `env_cfg` describes."""
+    ev = Evaluator(env_cfg, episodes, seed)
+    try:
+        return ev.run(policy, record=record)
+    finally:
+        ev.close()
+
+
+def resolve_env(policy_spec: str, overrides: dict) -> EnvConfig:
+    """The env to evaluate on: the run folder's training env (if the policy is a run
+    folder), with the given overrides (id, delay, delay_on, history) on top.
+
+    Raises:
+        MotorlabError: no env id known (built-in controller without --env).
+    """
+    from pathlib import Path
+
+    from motorlab.errors import MotorlabError
+    from motorlab.runs import read_config, require_run_dir
+
+    base: dict = {}
+    if Path(policy_spec).exists():
+        base = dict(read_config(require_run_dir(Path(policy_spec))).get("env", {}))
+        base.pop("reward", None)  # evaluation reports the task's own return
+    elif policy_spec.split(":", 1)[0] not in ("pid", "zero", "random"):
+        from motorlab.policies import load_policy  # raises the clear "not a run folder" message
+
+        load_policy(policy_spec, None, "")
+    base.update({k: v for k, v in overrides.items() if v is not None})
+    if "id" not in base:
+        raise MotorlabError(f"no env for {policy_spec!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")
+    return EnvConfig.model_validate(base)
+
+
+def evaluate_step(policy_spec: str, env_cfg: EnvConfig, episodes: int, seed: int, out) -> dict:
+    """`motorlab evaluate`: evaluate a policy and write a run folder (config.toml, summary.json).
+
+    Returns:
+        The summary: return mean/std/min/max, success rate, episode lengths.
+    """
+    from motorlab.policies import load_policy
+    from motorlab.runs import prepare_run_dir, write_config, write_summary
+
+    if episodes <= 0:
+        from motorlab.errors import MotorlabError
+
+        raise MotorlabError(f"--episodes must be positive, got {episodes}.")
+    ev = Evaluator(env_cfg, episodes, seed)
+    try:
+        policy = load_policy(policy_spec, ev.envs[0], env_cfg.id, seed)
+        result = ev.run(policy)
+    finally:
+        ev.close()
+    run_dir = prepare_run_dir(out, "evaluate")
+    write_config(run_dir, {"policy": policy_spec, "episodes": episodes, "seed": seed, "env": env_cfg.model_dump()})
+    summary = {"policy": policy_spec, "env_id": env_cfg.id, "delay": env_cfg.delay, "history": env_cfg.history,
+               "seed": seed, "max_return": ev.target, **result.summary()}
+    write_summary(run_dir, summary)
+    summary["run_dir"] = str(run_dir)
+    return summary

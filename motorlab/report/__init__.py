@@ -1,0 +1,1 @@
+"""Figures (PNG, non-interactive matplotlib) for runs and studies."""

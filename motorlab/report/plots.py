@@ -1,0 +1,103 @@
+"""PNG figures for runs and studies, one consistent style."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only, never a window
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from motorlab.runs import atomic_write_bytes, read_metrics  # noqa: E402
+
+STYLE = {"figure.dpi": 110, "axes.grid": True, "grid.alpha": 0.3, "axes.spines.top": False,
+         "axes.spines.right": False, "font.size": 10, "legend.frameon": False}
+
+# Observation labels (with units) for envs whose layout is known.
+OBS_LABELS = {
+    "InvertedPendulum": ["cart position (m)", "pole angle (rad)", "cart velocity (m/s)", "pole angular velocity (rad/s)"],
+}
+
+
+def obs_labels(env_id: str, n: int) -> list[str]:
+    for prefix, labels in OBS_LABELS.items():
+        if env_id.startswith(prefix) and len(labels) == n:
+            return labels
+    return [f"obs[{i}]" for i in range(n)]
+
+
+def _save(fig, path: Path) -> Path:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", bbox_inches="tight")
+    plt.close(fig)
+    atomic_write_bytes(Path(path), buf.getvalue())
+    return Path(path)
+
+
+def learning_curve(run_dir: Path, path: Path, title: str = "", solve_return: float | None = None,
+                   steps_to_success: int | None = None) -> Path:
+    """Training episode returns (and their running mean) and evaluation returns vs env steps."""
+    rows = read_metrics(run_dir)
+    ep = [(r["timesteps"], r["episode_return"]) for r in rows if np.isfinite(r.get("episode_return", np.nan))]
+    ev = [(r["timesteps"], r["eval_return_mean"], r["eval_return_min"]) for r in rows
+          if np.isfinite(r.get("eval_return_mean", np.nan))]
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(7, 4))
+        if ep:
+            x, y = np.array(ep).T
+            ax.plot(x, y, ".", ms=2, alpha=0.3, color="tab:blue", label="training episode")
+            k = max(1, min(20, len(y) // 5))
+            ax.plot(x[k - 1:], np.convolve(y, np.ones(k) / k, mode="valid"), color="tab:blue", label=f"running mean ({k})")
+        if ev:
+            x, m, lo = np.array(ev).T
+            ax.plot(x, m, "o-", color="tab:orange", ms=4, label="evaluation mean")
+            ax.plot(x, lo, "v:", color="tab:orange", ms=3, alpha=0.7, label="evaluation min")
+        if solve_return is not None:
+            ax.axhline(solve_return, color="gray", ls="--", lw=1, label="maximum return")
+        if steps_to_success is not None:
+            ax.axvline(steps_to_success, color="tab:green", lw=1, label=f"solved at {steps_to_success:,} steps")
+        ax.set_xlabel("environment steps")
+        ax.set_ylabel("episode return")
+        ax.set_title(title or f"Learning curve: {Path(run_dir).name}")
+        ax.legend(loc="best", fontsize=8)
+        return _save(fig, path)
+
+
+def observation_trace(observations: np.ndarray, actions: np.ndarray, dt: float, labels: list[str],
+                      path: Path, title: str = "") -> Path:
+    """Each observation element (and the action) against time for one episode."""
+    observations = np.asarray(observations)
+    n = observations.shape[1]
+    t = np.arange(len(observations)) * dt
+    with plt.rc_context(STYLE):
+        fig, axes = plt.subplots(n + 1, 1, figsize=(7, 1.6 * (n + 1)), sharex=True)
+        for i in range(n):
+            axes[i].plot(t, observations[:, i], lw=1.2)
+            axes[i].set_ylabel(labels[i], fontsize=8)
+        if len(actions):
+            axes[n].plot(t[1:], np.asarray(actions).reshape(len(actions), -1), lw=1.2, color="tab:red")
+        axes[n].set_ylabel("action", fontsize=8)
+        axes[n].set_xlabel("time (s)")
+        fig.suptitle(title or "Observation trace", fontsize=11)
+        fig.align_ylabels(axes)
+        return _save(fig, path)
+
+
+def comparison_bars(names: list[str], values: list[float | None], ylabel: str, path: Path, title: str,
+                    missing_label: str = "not reached") -> Path:
+    """One bar per study step; steps without a value are marked, not drawn as zero."""
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(max(5, 1.1 * len(names)), 4))
+        xs = np.arange(len(names))
+        heights = [v if v is not None else 0.0 for v in values]
+        bars = ax.bar(xs, heights, color=["tab:blue" if v is not None else "lightgray" for v in values])
+        for x, v, b in zip(xs, values, bars):
+            ax.annotate(f"{v:,.0f}" if v is not None else missing_label, (x, b.get_height()),
+                        ha="center", va="bottom", fontsize=8)
+        ax.set_xticks(xs, names, rotation=25, ha="right", fontsize=8)
+        ax.set_ylabel(ylabel)
+        ax.set_title(title)
+        return _save(fig, path)

@@ -1,0 +1,1 @@
+"""Training: Stable-Baselines3 algorithms and motorlab's model-based learner."""

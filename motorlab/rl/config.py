@@ -1,0 +1,87 @@
+"""Training settings as data (one validated model), and named presets.
+
+A preset is a partial TrainConfig; settings given explicitly (CLI flags, recipe
+fields) win over the preset's.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from motorlab.control.lqr import LQRSettings
+from motorlab.envs import EnvConfig
+from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.rl.schedules import parse_schedule
+
+Algo = Literal["ppo", "sac", "td3", "lqr"]
+ALGOS = ("ppo", "sac", "td3", "lqr")
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # motorlab's most sample-efficient configuration for balance/regulation tasks:
+    # least-squares linear model + LQR, refitted every 100 steps (see control/lqr.py).
+    # InvertedPendulum: ~100 env steps plain, ~100-300 with a 0.2 s actuation delay.
+    "fast": {"algo": "lqr", "lqr": {}},
+    # Stable-Baselines3 defaults, named so recipes can say so.
+    "sb3-ppo": {"algo": "ppo", "hyperparams": {}},
+    "sb3-sac": {"algo": "sac", "hyperparams": {}},
+}
+
+
+class TrainConfig(BaseModel):
+    """Everything `motorlab train` needs; written to the run folder's config.toml."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    env: EnvConfig = Field(default_factory=EnvConfig)
+    algo: Algo = "ppo"
+    preset: str | None = None
+    timesteps: int = Field(100_000, gt=0, description="env-step budget")
+    seed: int = Field(0, ge=0)
+    lr: str | None = Field(None, description="learning-rate schedule, e.g. 3e-4 or linear:1e-3,0")
+    clip_range: str | None = Field(None, description="PPO clip-range schedule, e.g. linear:0.3,0.1")
+    until_solved: bool = False
+    solve_episodes: int = Field(10, gt=0, description="deterministic episodes that must all reach the max return")
+    solve_return: float | None = Field(None, description="return that counts as solved (default: the env's maximum)")
+    eval_every: int | None = Field(None, gt=0, description="env steps between evaluations (default: each PPO rollout / 1000 / each LQR refit)")
+    n_envs: int = Field(1, gt=0)
+    normalize: bool = Field(False, description="normalize observations with running statistics (VecNormalize)")
+    device: str = "auto"
+    progress: bool = True
+    hyperparams: dict[str, Any] = Field(default_factory=dict, description="extra keyword arguments for the SB3 algorithm")
+    lqr: LQRSettings = Field(default_factory=LQRSettings)
+
+    @field_validator("lr")
+    @classmethod
+    def _check_lr(cls, v):
+        if v is not None:
+            parse_schedule(v, "learning-rate")
+        return v
+
+    @field_validator("clip_range")
+    @classmethod
+    def _check_clip(cls, v):
+        if v is not None:
+            parse_schedule(v, "clip-range")
+        return v
+
+
+def resolve(settings: dict[str, Any]) -> TrainConfig:
+    """Apply the named preset (if any) under the given settings and validate.
+
+    Raises:
+        MotorlabError: unknown preset; pydantic.ValidationError for bad fields.
+    """
+    preset = settings.get("preset")
+    merged: dict[str, Any] = {}
+    if preset is not None:
+        if preset not in PRESETS:
+            raise MotorlabError(f"unknown preset {preset!r}{did_you_mean(preset, PRESETS)}; presets: {', '.join(PRESETS)}.")
+        merged = {k: (dict(v) if isinstance(v, dict) else v) for k, v in PRESETS[preset].items()}
+    for key, value in settings.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = {**merged[key], **value}
+        else:
+            merged[key] = value
+    return TrainConfig.model_validate(merged)

@@ -1,0 +1,56 @@
+"""Learning-rate and clip-range schedules from text.
+
+    "3e-4"                 constant
+    "linear:3e-4,1e-5"     linear from the first value at the start to the second at the end
+    "3e-4->1e-5"           the same, shorter
+
+SB3 calls a schedule with progress_remaining (1 at the start, 0 at the end of the
+budget); SB3's own picklable LinearSchedule / FloatSchedule classes are returned so
+saved models stay loadable.
+"""
+
+from __future__ import annotations
+
+import math
+
+from stable_baselines3.common.utils import FloatSchedule, LinearSchedule
+
+from motorlab.errors import MotorlabError
+
+Schedule = FloatSchedule | LinearSchedule
+
+
+def _number(text: str, what: str, spec: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise MotorlabError(f"{what} schedule {spec!r}: {text!r} is not a number; e.g. 3e-4 or linear:3e-4,1e-5.") from None
+    if not math.isfinite(value) or value < 0:
+        raise MotorlabError(f"{what} schedule {spec!r}: values must be finite and non-negative, got {value}.")
+    return value
+
+
+def parse_schedule(spec: str | float, what: str = "learning-rate") -> Schedule:
+    """Parse a schedule spec (see module doc).
+
+    Raises:
+        MotorlabError: unreadable spec or a negative value.
+    """
+    if isinstance(spec, (int, float)):
+        return FloatSchedule(_number(str(spec), what, str(spec)))
+    text = spec.strip()
+    if text.startswith("linear:"):
+        parts = text[len("linear:"):].split(",")
+    elif "->" in text:
+        parts = text.split("->")
+    else:
+        return FloatSchedule(_number(text, what, spec))
+    if len(parts) != 2:
+        raise MotorlabError(f"{what} schedule {spec!r} needs two values, start and end: linear:3e-4,1e-5.")
+    start, end = (_number(p.strip(), what, spec) for p in parts)
+    return LinearSchedule(start, end, 1.0)
+
+
+def schedule_value(schedule: Schedule, progress_done: float) -> float:
+    """Value after `progress_done` (0..1) of the budget."""
+    return float(schedule(1.0 - progress_done))

@@ -1,0 +1,78 @@
+"""What every training loop shares: periodic deterministic evaluation, the
+steps-to-success rule, metrics.csv rows and TensorBoard scalars.
+
+Steps-to-success: the env steps used to produce the first policy for which
+`solve_episodes` deterministic evaluation episodes all reach `solve_return`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+from torch.utils.tensorboard import SummaryWriter
+
+from motorlab.evaluate import Evaluator, Policy
+from motorlab.rl.config import TrainConfig
+from motorlab.runs import METRICS, MetricsWriter
+
+METRIC_FIELDS = ["timesteps", "wall_seconds", "episode_return", "episode_length",
+                 "eval_return_mean", "eval_return_min", "eval_success_rate"]
+
+EVAL_SEED_OFFSET = 10_000  # evaluation episodes never share seeds with training episodes
+
+
+class Tracker:
+    """Evaluates, logs and decides when a run is solved.
+
+    Args:
+        cfg: the training settings.
+        run_dir: where metrics.csv and tensorboard/ go.
+        solve_return: return every evaluation episode must reach (None: no target).
+    """
+
+    def __init__(self, cfg: TrainConfig, run_dir: Path, solve_return: float | None):
+        self.cfg = cfg
+        self.solve_return = solve_return
+        self.evaluator = Evaluator(cfg.env, cfg.solve_episodes, cfg.seed + EVAL_SEED_OFFSET)
+        self.metrics = MetricsWriter(Path(run_dir) / METRICS, METRIC_FIELDS)
+        self.tb = SummaryWriter(str(Path(run_dir) / "tensorboard" / "motorlab"))
+        self.t0 = time.perf_counter()
+        self.recent = deque(maxlen=100)
+        self.steps_to_success: int | None = None
+        self.last_eval_steps = -1
+        self.evaluations = 0
+
+    def wall(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def episode(self, steps: int, ret: float, length: int) -> None:
+        self.recent.append(ret)
+        self.metrics.write({"timesteps": steps, "wall_seconds": self.wall(), "episode_return": ret, "episode_length": length})
+        self.tb.add_scalar("train/episode_return", ret, steps)
+        self.tb.add_scalar("train/episode_return_mean100", float(np.mean(self.recent)), steps)
+
+    def evaluate(self, steps: int, policy: Policy) -> bool:
+        """Evaluate `policy` (trained on `steps` env steps); True when solved."""
+        stop_below = self.solve_return if self.cfg.until_solved else None
+        result = self.evaluator.run(policy, stop_below=stop_below)
+        self.last_eval_steps = steps
+        self.evaluations += 1
+        solved = (not result.aborted and self.solve_return is not None
+                  and bool(np.all(result.returns >= self.solve_return)))
+        s = result.summary()
+        self.metrics.write({"timesteps": steps, "wall_seconds": self.wall(), "eval_return_mean": s["return_mean"],
+                            "eval_return_min": s["return_min"], "eval_success_rate": 1.0 if solved else s["success_rate"]})
+        self.tb.add_scalar("eval/return_mean", s["return_mean"], steps)
+        self.tb.add_scalar("eval/return_min", s["return_min"], steps)
+        self.tb.add_scalar("eval/solved", float(solved), steps)
+        if solved and self.steps_to_success is None:
+            self.steps_to_success = int(steps)
+        return solved
+
+    def close(self) -> None:
+        self.metrics.close()
+        self.tb.close()
+        self.evaluator.close()

@@ -1,0 +1,103 @@
+"""`motorlab train`: one training run, one run folder.
+
+    run_dir/config.toml        resolved settings (preset applied)
+    run_dir/metrics.csv        training episodes and evaluations
+    run_dir/tensorboard/       SB3's scalars and motorlab's eval/ scalars
+    run_dir/policy.json (+ policy.safetensors)   the policy, pickle-free
+    run_dir/model.zip          SB3 model for continuing training (SB3 algorithms)
+    run_dir/summary.json       headline numbers, written last
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from rich.progress import Progress
+
+from motorlab.control.lqr import learn_lqr
+from motorlab.envs import make_env, max_return
+from motorlab.errors import MotorlabError
+from motorlab.policies import load_policy_files, save_controller
+from motorlab.rl.config import TrainConfig
+from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker
+from motorlab.runs import prepare_run_dir, write_config, write_summary
+
+
+def _train_lqr(cfg: TrainConfig, run_dir: Path, tracker: Tracker) -> int:
+    stop = {"solved": False}
+    best = {"policy": None}
+
+    def on_update(steps, policy, info):
+        tracker.tb.add_scalar("model/one_step_mse", info["model_mse"], steps)
+        best["policy"] = policy
+        if steps - max(tracker.last_eval_steps, 0) >= (cfg.eval_every or 0) or not cfg.eval_every:
+            stop["solved"] = tracker.evaluate(steps, policy)
+        return cfg.until_solved and stop["solved"]
+
+    with Progress(disable=not cfg.progress, transient=True) as bar:
+        task = bar.add_task(f"lqr on {cfg.env.id}", total=cfg.timesteps)
+        policy, steps = learn_lqr(cfg.env, cfg.lqr, cfg.timesteps, cfg.seed, on_update,
+                                  on_episode=tracker.episode,
+                                  on_steps=lambda s: bar.update(task, completed=s))
+    if policy is None:
+        raise MotorlabError(f"no linear model could be fitted in {steps} steps; raise --timesteps.")
+    if tracker.last_eval_steps < steps:
+        tracker.evaluate(steps, policy)
+    save_controller(run_dir, policy)
+    return steps
+
+
+def train(cfg: TrainConfig, out: Path | None = None) -> dict[str, Any]:
+    """Train one policy as `cfg` says and write its run folder.
+
+    Returns:
+        The summary (also in `run_dir/summary.json`): `steps_to_success` (int, or None
+        when the budget ran out first), `wall_seconds`, `timesteps`, final evaluation.
+
+    Raises:
+        MotorlabError: bad env id, delay, reward, or no solve target for --until-solved.
+    """
+    make_env(cfg.env).close()  # validate env id, delay and reward before anything is written
+    solve_return = cfg.solve_return if cfg.solve_return is not None else max_return(cfg.env.id)
+    if cfg.until_solved and solve_return is None:
+        raise MotorlabError(f"{cfg.env.id} has no known maximum return; give --solve-return for --until-solved.")
+    run_dir = prepare_run_dir(out, f"train-{cfg.algo}")
+    write_config(run_dir, cfg.model_dump())
+    tracker = Tracker(cfg, run_dir, solve_return)
+    t0 = time.perf_counter()
+    try:
+        if cfg.algo == "lqr":
+            steps = _train_lqr(cfg, run_dir, tracker)
+        else:
+            from motorlab.rl.sb3 import train_sb3
+
+            steps = train_sb3(cfg, run_dir, tracker)
+        wall = time.perf_counter() - t0
+        # Reload from disk, so the reported numbers are those of the saved files.
+        final = tracker.evaluator.run(load_policy_files(run_dir)).summary()
+    finally:
+        tracker.close()
+    summary = {
+        "env_id": cfg.env.id,
+        "algo": cfg.algo,
+        "preset": cfg.preset,
+        "seed": cfg.seed,
+        "delay": cfg.env.delay,
+        "history": cfg.env.history,
+        "timesteps": steps,
+        "budget": cfg.timesteps,
+        "until_solved": cfg.until_solved,
+        "solve_return": solve_return,
+        "steps_to_success": tracker.steps_to_success,
+        "solved": tracker.steps_to_success is not None,
+        "wall_seconds": round(wall, 3),
+        "evaluations": tracker.evaluations,
+        "eval_seed": cfg.seed + EVAL_SEED_OFFSET,
+        **{f"eval_{k}": v for k, v in final.items() if k != "episode_lengths"},
+        "eval_episode_lengths": final["episode_lengths"],
+    }
+    write_summary(run_dir, summary)
+    summary["run_dir"] = str(run_dir)
+    return summary

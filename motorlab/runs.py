@@ -1,0 +1,171 @@
+"""Run folders: one per step, written so that nothing is ever half-written.
+
+A run folder holds `config.toml` (resolved settings), `summary.json` (headline
+numbers, flat keys), `metrics.csv`, `tensorboard/`, artifacts, `plots/`.
+`summary.json` is written last: a folder without it is an unfinished run.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from motorlab.errors import MotorlabError
+
+SUMMARY = "summary.json"
+CONFIG = "config.toml"
+METRICS = "metrics.csv"
+
+
+def default_out(step: str) -> Path:
+    """`runs/<step>-<timestamp>` under the current directory."""
+    return Path("runs") / f"{step}-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write `data` to a temp file beside `path`, fsync, then rename over it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    atomic_write_bytes(path, text.encode())
+
+
+def _plain(value: Any) -> Any:
+    """JSON-safe value: numpy scalars to Python, NaN/Inf to null."""
+    if hasattr(value, "item") and getattr(value, "ndim", 1) == 0:
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if hasattr(value, "tolist"):
+        return _plain(value.tolist())
+    return value
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    atomic_write_text(Path(path), json.dumps(_plain(data), indent=2, sort_keys=False) + "\n")
+
+
+def read_json(path: Path) -> dict[str, Any]:
+    path = Path(path)
+    if not path.is_file():
+        raise MotorlabError(f"{path} is missing; run the step that writes it first.")
+    try:
+        return json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise MotorlabError(f"{path} is not valid JSON ({e}); re-run the step that wrote it.") from None
+
+
+def write_config(run_dir: Path, config: dict[str, Any]) -> None:
+    """Resolved settings as TOML (None values dropped: TOML has no null)."""
+
+    def drop_none(d: Any) -> Any:
+        if isinstance(d, dict):
+            return {k: drop_none(v) for k, v in d.items() if v is not None}
+        return d
+
+    atomic_write_text(Path(run_dir) / CONFIG, tomli_w.dumps(drop_none(_plain(config))))
+
+
+def read_config(run_dir: Path) -> dict[str, Any]:
+    import tomllib
+
+    path = Path(run_dir) / CONFIG
+    if not path.is_file():
+        raise MotorlabError(f"{path} is missing: {run_dir} is not a motorlab run folder.")
+    try:
+        return tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise MotorlabError(f"{path} is not valid TOML ({e}); re-run the step that wrote it.") from None
+
+
+def write_summary(run_dir: Path, summary: dict[str, Any]) -> None:
+    write_json(Path(run_dir) / SUMMARY, summary)
+
+
+def is_complete(run_dir: Path) -> bool:
+    return (Path(run_dir) / SUMMARY).is_file()
+
+
+def prepare_run_dir(out: Path | None, step: str, overwrite: bool = True) -> Path:
+    """Create the run folder; a stale summary.json is removed so the folder
+    does not look complete until this run finishes."""
+    run_dir = Path(out) if out is not None else default_out(step)
+    if run_dir.exists() and not run_dir.is_dir():
+        raise MotorlabError(f"--out {run_dir} is a file; choose a folder path.")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if overwrite:
+        (run_dir / SUMMARY).unlink(missing_ok=True)
+    return run_dir
+
+
+def require_run_dir(path: Path) -> Path:
+    """Check that `path` is a finished run folder."""
+    path = Path(path)
+    if not path.exists():
+        raise MotorlabError(f"run folder {path} does not exist; check the path or run `motorlab train` first.")
+    if not path.is_dir():
+        raise MotorlabError(f"{path} is not a folder; pass a run folder written by `motorlab train`.")
+    if not os.access(path, os.R_OK | os.X_OK):
+        raise MotorlabError(f"run folder {path} is not readable; check its permissions.")
+    if not is_complete(path):
+        raise MotorlabError(
+            f"{path} has no {SUMMARY}: the run did not finish (or this is not a run folder); re-run it."
+        )
+    return path
+
+
+class MetricsWriter:
+    """Append rows to metrics.csv, one whole line per write, flushed at once,
+    so an interrupted run never leaves a torn row."""
+
+    def __init__(self, path: Path, fields: list[str]):
+        self.path = Path(path)
+        self.fields = fields
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._f = open(self.path, "w", newline="")
+        self._writer = csv.DictWriter(self._f, fieldnames=fields, extrasaction="ignore")
+        self._writer.writeheader()
+        self._f.flush()
+
+    def write(self, row: dict[str, Any]) -> None:
+        self._writer.writerow({k: _plain(row.get(k)) for k in self.fields})
+        self._f.flush()
+
+    def close(self) -> None:
+        self._f.close()
+
+
+def read_metrics(run_dir: Path) -> list[dict[str, float]]:
+    """metrics.csv as a list of rows with float values (missing values as NaN)."""
+    path = Path(run_dir) / METRICS
+    if not path.is_file():
+        raise MotorlabError(f"{path} is missing; this run wrote no training metrics.")
+    rows = []
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            rows.append({k: (float(v) if v not in ("", None) else float("nan")) for k, v in row.items()})
+    return rows
