@@ -34,7 +34,8 @@ app = typer.Typer(
     rich_markup_mode="rich",
 )
 err = Console(stderr=True)
-stdout = Console()
+# Wide enough for study tables when output goes to a file or CI log.
+stdout = Console(width=None if sys.stdout.isatty() else 150)
 
 Out = Annotated[Optional[Path], typer.Option("--out", help="Run folder to write (default: runs/<step>-<timestamp>).")]
 Seed = Annotated[int, typer.Option("--seed", min=0, help="Random seed (training, env resets, evaluation).")]

@@ -121,6 +121,8 @@ def _explain(e: ValidationError, where: str, known: set[str]) -> str:
     if err["type"] == "extra_forbidden":
         name = loc[-1]
         return f"{where}: unknown field {name!r}{did_you_mean(name, known)}"
+    if err["type"] == "missing":
+        return f"{where}: missing field {field!r}"
     return f"{where}: field {field!r}: {err['msg']}"
 
 
@@ -172,18 +174,36 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
             unknown = [k for k in fields if k not in known]
             if unknown:
                 raise MotorlabError(f"{where}: unknown field {unknown[0]!r}{did_you_mean(unknown[0], known)}")
+            policy = str(fields.get("policy", ""))
+            settings = _split_env(fields)
+            if policy.startswith("@"):
+                ref = next((s for s in steps if s.name == policy[1:]), None)
+                if ref is None or ref.kind != "train":
+                    raise MotorlabError(f"{where}: policy {policy!r} names no earlier train step; "
+                                        f"train steps so far: {', '.join(s.name for s in steps if s.kind == 'train') or 'none'}.")
+                # by default, evaluate on the env the policy was trained on, without its reward shaping
+                trained_env = ref.train.env.model_dump(exclude={"reward"})
+                settings["env"] = {**trained_env, **settings.get("env", {})}
             try:
-                step = Step(name=name, kind="evaluate", evaluate=EvalStep.model_validate(_split_env(fields)))
+                step = Step(name=name, kind="evaluate", evaluate=EvalStep.model_validate(settings))
             except ValidationError as e:
                 raise MotorlabError(_explain(e, where, known)) from None
-            ref = step.policy_ref
-            if ref is not None and ref not in seen:
-                raise MotorlabError(f"{where}: policy '@{ref}' names no earlier step; steps so far: {', '.join(sorted(seen)) or 'none'}.")
         else:
             raise MotorlabError(f"{where}: unknown kind {kind!r}; use 'train' or 'evaluate'.")
+        _check_env(step.train.env if step.train else step.evaluate.env, where)
         seen.add(name)
         steps.append(step)
     return Recipe(name=raw.name, description=raw.description, source=source, steps=steps)
+
+
+def _check_env(env: EnvConfig, where: str) -> None:
+    """Build the env once, so a bad id, delay or reward fails before any step runs."""
+    from motorlab.envs import make_env
+
+    try:
+        make_env(env).close()
+    except MotorlabError as e:
+        raise MotorlabError(f"{where}: {e}") from None
 
 
 def load_recipe(name_or_path: str) -> Recipe:
