@@ -48,6 +48,8 @@ class TrainConfig(BaseModel):
     n_envs: int = Field(1, gt=0)
     normalize: bool = Field(False, description="normalize observations with running statistics (VecNormalize)")
     device: str = "auto"
+    # Small MLPs train fastest on one CPU thread; more threads contend with the envs.
+    torch_threads: int = Field(1, ge=1, description="CPU threads for PyTorch")
     progress: bool = True
     hyperparams: dict[str, Any] = Field(default_factory=dict, description="extra keyword arguments for the SB3 algorithm")
     lqr: LQRSettings = Field(default_factory=LQRSettings)

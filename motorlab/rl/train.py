@@ -63,6 +63,9 @@ def train(cfg: TrainConfig, out: Path | None = None) -> dict[str, Any]:
     solve_return = cfg.solve_return if cfg.solve_return is not None else max_return(cfg.env.id)
     if cfg.until_solved and solve_return is None:
         raise MotorlabError(f"{cfg.env.id} has no known maximum return; give --solve-return for --until-solved.")
+    import torch
+
+    torch.set_num_threads(cfg.torch_threads)
     run_dir = prepare_run_dir(out, f"train-{cfg.algo}")
     write_config(run_dir, cfg.model_dump())
     tracker = Tracker(cfg, run_dir, solve_return)
