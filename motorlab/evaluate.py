@@ -144,16 +144,15 @@ def resolve_env(policy_spec: str, overrides: dict) -> EnvConfig:
     from pathlib import Path
 
     from motorlab.errors import MotorlabError
+    from motorlab.policies import BUILTIN_POLICIES, unknown_policy_message
     from motorlab.runs import read_config, require_run_dir
 
     base: dict = {}
     if Path(policy_spec).exists():
         base = dict(read_config(require_run_dir(Path(policy_spec))).get("env", {}))
         base.pop("reward", None)  # evaluation reports the task's own return
-    elif policy_spec.split(":", 1)[0] not in ("pid", "zero", "random"):
-        from motorlab.policies import load_policy  # raises the clear "not a run folder" message
-
-        load_policy(policy_spec, None, "")
+    elif policy_spec.split(":", 1)[0] not in BUILTIN_POLICIES:
+        raise MotorlabError(unknown_policy_message(policy_spec))
     base.update({k: v for k, v in overrides.items() if v is not None})
     if "id" not in base:
         raise MotorlabError(f"no env for {policy_spec!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")

@@ -226,8 +226,13 @@ def load_policy(spec: str, env: gym.Env, env_id: str, seed: int = 0) -> Policy:
         return RandomPolicy(env.action_space, seed)
     path = Path(spec)
     if not path.exists():
-        raise MotorlabError(
-            f"policy {spec!r} is neither a run folder nor a built-in controller; "
-            "give a run folder from `motorlab train`, or pid, pid:kp=[...],kd=[...], zero, random."
-        )
+        raise MotorlabError(unknown_policy_message(spec))
     return load_run_policy(path)
+
+
+BUILTIN_POLICIES = ("pid", "zero", "random")
+
+
+def unknown_policy_message(spec: str) -> str:
+    return (f"policy {spec!r} is neither a run folder nor a built-in controller; "
+            "give a run folder from `motorlab train`, or pid, pid:kp=[...],kd=[...], zero, random.")
