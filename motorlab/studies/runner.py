@@ -25,11 +25,13 @@ from motorlab.runs import (atomic_write_text, is_complete, prepare_run_dir, read
 HEADLINE = ("return_mean", "return_std", "return_min", "success_rate", "steps_to_success", "timesteps", "wall_seconds")
 
 
-def _step_config(step: Step) -> dict[str, Any]:
+def _step_config(step: Step, study_dir: Path) -> dict[str, Any]:
+    """The settings a step's run folder records (as `motorlab train` / `evaluate` write them)."""
     if step.kind == "train":
         return step.train.model_dump()
-    return {"policy": step.evaluate.policy, "episodes": step.evaluate.episodes, "seed": step.evaluate.seed,
-            "env": step.evaluate.env.model_dump()}
+    ev = step.evaluate
+    policy = str(study_dir / step.policy_ref) if step.policy_ref else ev.policy
+    return {"policy": policy, "episodes": ev.episodes, "seed": ev.seed, "env": ev.env.model_dump()}
 
 
 def _same_settings(run_dir: Path, config: dict[str, Any]) -> bool:
@@ -45,9 +47,7 @@ def _same_settings(run_dir: Path, config: dict[str, Any]) -> bool:
 
     if not is_complete(run_dir):
         return False
-    written = read_config(run_dir)
-    written.pop("policy_dir", None)
-    return written == tomllib.loads(tomli_w.dumps(drop_none(_plain(config))))
+    return read_config(run_dir) == tomllib.loads(tomli_w.dumps(drop_none(_plain(config))))
 
 
 def _headline(step: Step, s: dict[str, Any]) -> dict[str, Any]:
@@ -81,12 +81,12 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
     console = console or Console(stderr=True)
     study_dir = prepare_run_dir(out, recipe.name)
     write_config(study_dir, {"recipe": recipe.name, "source": recipe.source,
-                             "steps": {s.name: _step_config(s) for s in recipe.steps}})
+                             "steps": {s.name: _step_config(s, study_dir) for s in recipe.steps}})
     t0 = time.perf_counter()
     results: dict[str, dict[str, Any]] = {}
     for i, step in enumerate(recipe.steps, 1):
         step_dir = study_dir / step.name
-        config = _step_config(step)
+        config = _step_config(step, study_dir)
         console.print(f"[bold][{i}/{len(recipe.steps)}][/bold] {step.name}: {_describe(step)}")
         if _same_settings(step_dir, config):
             console.print("      already done with these settings; kept")
@@ -94,10 +94,7 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
         elif step.kind == "train":
             summary = train(step.train, step_dir)
         else:
-            ev = step.evaluate
-            policy = str(study_dir / step.policy_ref) if step.policy_ref else ev.policy
-            summary = evaluate_step(policy, ev.env, ev.episodes, ev.seed, step_dir)
-            write_config(step_dir, {**config, "policy_dir": policy})
+            summary = evaluate_step(config["policy"], step.evaluate.env, config["episodes"], config["seed"], step_dir)
         plot_run(step_dir)
         results[step.name] = _headline(step, summary)
     study_summary: dict[str, Any] = {"recipe": recipe.name, "steps": [s.name for s in recipe.steps],
