@@ -1,5 +1,6 @@
 """Steps-to-success on InvertedPendulum-v5: Stable-Baselines3 PPO defaults vs motorlab's
-`fast` preset, plain and with a 0.2 s actuation delay, 5 seeds, one process.
+`fast` preset, plain and with 0.2 s actuation + perception delay (low-pass filters
+on both action and observation), 5 seeds, one process.
 
 "Solved" is the same rule for both: 10 deterministic evaluation episodes (fixed
 seeds) all reach the maximum return of 1000, checked after every PPO update
@@ -76,7 +77,7 @@ def main() -> None:
         "solve_rule": "10 deterministic episodes all at return 1000",
         "torch_threads": 1,
         "plain": plain,
-        "delayed_tau_0.2s_action": delay,
+        "delayed_tau_0.2s_action_and_observation": delay,
         "targets": TARGETS,
         "met": {
             "plain_median_steps": plain["motorlab_fast"]["median_steps"] <= TARGETS["plain_median_steps"],

@@ -42,7 +42,7 @@ Seed = Annotated[int, typer.Option("--seed", min=0, help="Random seed (training,
 Delay = Annotated[Optional[float], typer.Option(
     "--delay", help="Low-pass delay time constant TAU in seconds (alpha = dt/TAU must be in (0, 1)); e.g. 0.2.")]
 DelayOn = Annotated[Optional[str], typer.Option(
-    "--delay-on", help="What the delay filters: action (actuation delay), observation (perception) or both.")]
+    "--delay-on", help="What the delay filters: both (default: actuation and perception), action or observation.")]
 History = Annotated[Optional[int], typer.Option("--history", help="Stack the last K observations (K=1: none).")]
 
 

@@ -30,7 +30,8 @@ class EnvConfig(BaseModel):
 
     id: str = "InvertedPendulum-v5"
     delay: float | None = Field(None, description="low-pass time constant in seconds (None: no delay)")
-    delay_on: DelayOn = "action"
+    # Actuation and perception delay, as in the robust-policy workflow (DESIGN.md).
+    delay_on: DelayOn = "both"
     history: int = Field(1, ge=1, description="observation frames stacked (1: no history)")
     reward: str | None = Field(None, description="built-in reward name or module:function")
 

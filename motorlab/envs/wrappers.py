@@ -51,7 +51,7 @@ class LowPassDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         on: "action", "observation" or "both".
     """
 
-    def __init__(self, env: gym.Env, time_constant: float, on: DelayOn = "action"):
+    def __init__(self, env: gym.Env, time_constant: float, on: DelayOn = "both"):
         gym.utils.RecordConstructorArgs.__init__(self, time_constant=time_constant, on=on)
         super().__init__(env)
         if on not in ("action", "observation", "both"):

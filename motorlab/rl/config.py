@@ -21,7 +21,7 @@ ALGOS = ("ppo", "sac", "td3", "lqr")
 PRESETS: dict[str, dict[str, Any]] = {
     # motorlab's most sample-efficient configuration for balance/regulation tasks:
     # least-squares linear model + LQR, refitted every 100 steps (see control/lqr.py).
-    # InvertedPendulum: ~100 env steps plain, ~100-300 with a 0.2 s actuation delay.
+    # InvertedPendulum: ~100 env steps plain, ~100-300 with 0.2 s actuation + perception delay.
     "fast": {"algo": "lqr", "lqr": {}},
     # Stable-Baselines3 defaults, named so recipes can say so.
     "sb3-ppo": {"algo": "ppo", "hyperparams": {}},
