@@ -17,6 +17,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering works without a
 
 import typer  # noqa: E402
 from rich.console import Console  # noqa: E402
+from rich.markup import escape  # noqa: E402
 
 from motorlab.errors import MotorlabError  # noqa: E402
 
@@ -226,7 +227,7 @@ def main() -> None:
     try:
         app()
     except MotorlabError as e:
-        err.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+        err.print(f"[red]error:[/red] {escape(str(e))}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
         err.print("[yellow]interrupted[/yellow]: the run folder has no summary.json, so it stays marked unfinished.")

@@ -69,14 +69,19 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     atomic_write_text(Path(path), json.dumps(_plain(data), indent=2, sort_keys=False) + "\n")
 
 
-def read_json(path: Path) -> dict[str, Any]:
+def _read_text_file(path: Path, parse, fmt: str, fix: str) -> dict[str, Any]:
+    """Parse a file a step wrote; a missing or corrupt file gives one clear error."""
     path = Path(path)
     if not path.is_file():
-        raise MotorlabError(f"{path} is missing; run the step that writes it first.")
+        raise MotorlabError(f"{path} is missing; {fix}")
     try:
-        return json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise MotorlabError(f"{path} is not valid JSON ({e}); re-run the step that wrote it.") from None
+        return parse(path.read_text())
+    except (ValueError, UnicodeDecodeError) as e:  # JSONDecodeError and TOMLDecodeError are ValueErrors
+        raise MotorlabError(f"{path} is not valid {fmt} ({e}); re-run the step that wrote it.") from None
+
+
+def read_json(path: Path) -> dict[str, Any]:
+    return _read_text_file(path, json.loads, "JSON", "run the step that writes it first.")
 
 
 def write_config(run_dir: Path, config: dict[str, Any]) -> None:
@@ -93,13 +98,8 @@ def write_config(run_dir: Path, config: dict[str, Any]) -> None:
 def read_config(run_dir: Path) -> dict[str, Any]:
     import tomllib
 
-    path = Path(run_dir) / CONFIG
-    if not path.is_file():
-        raise MotorlabError(f"{path} is missing: {run_dir} is not a motorlab run folder.")
-    try:
-        return tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise MotorlabError(f"{path} is not valid TOML ({e}); re-run the step that wrote it.") from None
+    return _read_text_file(Path(run_dir) / CONFIG, tomllib.loads, "TOML",
+                           f"{run_dir} is not a motorlab run folder.")
 
 
 def write_summary(run_dir: Path, summary: dict[str, Any]) -> None:
@@ -110,15 +110,21 @@ def is_complete(run_dir: Path) -> bool:
     return (Path(run_dir) / SUMMARY).is_file()
 
 
-def prepare_run_dir(out: Path | None, step: str, overwrite: bool = True) -> Path:
-    """Create the run folder; a stale summary.json is removed so the folder
-    does not look complete until this run finishes."""
+def run_path(out: Path | None, step: str) -> Path:
+    """The run folder to use: `out`, or runs/<step>-<timestamp>."""
     run_dir = Path(out) if out is not None else default_out(step)
     if run_dir.exists() and not run_dir.is_dir():
         raise MotorlabError(f"--out {run_dir} is a file; choose a folder path.")
+    return run_dir
+
+
+def prepare_run_dir(out: Path | None, step: str) -> Path:
+    """Create the run folder; a stale summary.json is removed so the folder
+    does not look complete until this run finishes. Call it only once the
+    settings are known to be valid, so a mistake never spoils a finished run."""
+    run_dir = run_path(out, step)
     run_dir.mkdir(parents=True, exist_ok=True)
-    if overwrite:
-        (run_dir / SUMMARY).unlink(missing_ok=True)
+    (run_dir / SUMMARY).unlink(missing_ok=True)
     return run_dir
 
 

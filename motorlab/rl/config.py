@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from motorlab.control.lqr import LQRSettings
 from motorlab.envs import EnvConfig
@@ -54,19 +54,19 @@ class TrainConfig(BaseModel):
     hyperparams: dict[str, Any] = Field(default_factory=dict, description="extra keyword arguments for the SB3 algorithm")
     lqr: LQRSettings = Field(default_factory=LQRSettings)
 
-    @field_validator("lr")
+    @field_validator("lr", "clip_range")
     @classmethod
-    def _check_lr(cls, v):
+    def _check_schedule(cls, v, info):
         if v is not None:
-            parse_schedule(v, "learning-rate")
+            parse_schedule(v, "learning-rate" if info.field_name == "lr" else "clip-range")
         return v
 
-    @field_validator("clip_range")
-    @classmethod
-    def _check_clip(cls, v):
-        if v is not None:
-            parse_schedule(v, "clip-range")
-        return v
+
+    @model_validator(mode="after")
+    def _clip_range_is_ppo_only(self):
+        if self.clip_range is not None and self.algo != "ppo":
+            raise MotorlabError(f"--clip-range applies to PPO only, not {self.algo}; drop it or use --algo ppo.")
+        return self
 
 
 def resolve(settings: dict[str, Any]) -> TrainConfig:

@@ -11,7 +11,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 from motorlab.envs import make_env
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.policies import SB3Policy, save_sb3_policy
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.schedules import parse_schedule
@@ -67,23 +67,58 @@ def build_model(cfg: TrainConfig, run_dir: Path) -> BaseAlgorithm:
     venv = make_vec_env(lambda: make_env(env_cfg), n_envs=cfg.n_envs, seed=cfg.seed, vec_env_cls=vec_cls)
     if cfg.normalize:
         venv = VecNormalize(venv, norm_obs=True, norm_reward=False, clip_obs=10.0)
-    kwargs = dict(cfg.hyperparams)
+    kwargs = check_hyperparams(cfg.algo, cfg.hyperparams)
     if cfg.lr is not None:
         kwargs["learning_rate"] = parse_schedule(cfg.lr, "learning-rate")
     if cfg.clip_range is not None:
-        if cfg.algo != "ppo":
-            raise MotorlabError(f"--clip-range applies to PPO only, not {cfg.algo}; drop it or use --algo ppo.")
         kwargs["clip_range"] = parse_schedule(cfg.clip_range, "clip-range")
+    name = cfg.algo.upper()
     try:
         return ALGORITHMS[cfg.algo]("MlpPolicy", venv, seed=cfg.seed, device=cfg.device, verbose=0,
                                     tensorboard_log=str(run_dir / "tensorboard"), **kwargs)
-    except TypeError as e:
-        raise MotorlabError(f"bad hyperparameter for {cfg.algo.upper()}: {e}; see the SB3 documentation of {cfg.algo.upper()}.") from None
+    except (TypeError, ValueError, AssertionError) as e:  # SB3 checks its arguments with asserts
+        venv.close()
+        raise MotorlabError(f"bad hyperparameters for {name} ({e or type(e).__name__}); "
+                            f"see the Stable-Baselines3 documentation of {name}.") from None
 
 
-def train_sb3(cfg: TrainConfig, run_dir: Path, tracker: Tracker) -> int:
-    """Train, save model.zip (for continuing) and the pickle-free policy. Returns env steps used."""
-    model = build_model(cfg, run_dir)
+def check_hyperparams(algo: str, params: dict) -> dict:
+    """Unknown names and wrongly typed values, judged by the SB3 class's own signature.
+
+    Returns:
+        The values converted to the annotated types (TOML/JSON lists become tuples, 1e3 an int).
+
+    Raises:
+        MotorlabError: naming the parameter, what it should be and close matches.
+    """
+    import inspect
+
+    from pydantic import TypeAdapter, ValidationError
+    from pydantic.errors import PydanticSchemaGenerationError
+
+    cls = ALGORITHMS[algo]
+    fixed = {"self", "policy", "env", "seed", "device", "verbose", "tensorboard_log", "_init_setup_model"}
+    allowed = [p for p in inspect.signature(cls.__init__).parameters if p not in fixed]
+    hints = _init_annotations(cls)
+    checked = dict(params)
+    for key, value in params.items():
+        if key not in allowed:
+            raise MotorlabError(f"unknown hyperparameter {key!r} for {algo.upper()}{did_you_mean(key, allowed)}.")
+        if key not in hints:
+            continue
+        try:
+            checked[key] = TypeAdapter(hints[key]).validate_python(value)
+        except PydanticSchemaGenerationError:
+            continue  # a type pydantic cannot check (e.g. a class); SB3 checks it
+        except ValidationError:
+            hint = getattr(hints[key], "__name__", str(hints[key]).replace("typing.", ""))
+            raise MotorlabError(f"hyperparameter {key}={value!r} for {algo.upper()} should be {hint}.") from None
+    return checked
+
+
+def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, tracker: Tracker) -> int:
+    """Train `model` (from build_model), save model.zip (for continuing) and the
+    pickle-free policy. Returns env steps used."""
     on_policy = cfg.algo == "ppo"
     eval_every = cfg.eval_every or (model.n_steps * cfg.n_envs if on_policy else 1000)
     callback = TrackingCallback(tracker, eval_every, on_policy, cfg.until_solved)
@@ -110,3 +145,20 @@ def _save_model(model: BaseAlgorithm, run_dir: Path) -> None:
     buf = io.BytesIO()
     model.save(buf)
     atomic_write_bytes(run_dir / "model.zip", buf.getvalue())
+
+
+def _init_annotations(cls: type) -> dict:
+    """Resolved annotations of `cls.__init__` and its bases (SB3 annotates with strings).
+    Names SB3 imports only for type checking do not resolve and are left to SB3."""
+    import sys
+
+    hints: dict = {}
+    for base in reversed(cls.__mro__):
+        init = base.__dict__.get("__init__")
+        namespace = vars(sys.modules[base.__module__])
+        for name, ann in getattr(init, "__annotations__", {}).items():
+            try:
+                hints[name] = eval(ann, namespace) if isinstance(ann, str) else ann  # library code, not user input
+            except Exception:
+                hints.pop(name, None)
+    return hints

@@ -22,7 +22,7 @@ from motorlab.errors import MotorlabError
 from motorlab.policies import load_policy_files, save_controller
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker
-from motorlab.runs import prepare_run_dir, write_config, write_summary
+from motorlab.runs import prepare_run_dir, run_path, write_config, write_summary
 
 
 def _train_lqr(cfg: TrainConfig, run_dir: Path, tracker: Tracker) -> int:
@@ -66,17 +66,21 @@ def train(cfg: TrainConfig, out: Path | None = None) -> dict[str, Any]:
     import torch
 
     torch.set_num_threads(cfg.torch_threads)
-    run_dir = prepare_run_dir(out, f"train-{cfg.algo}")
+    run_dir = run_path(out, f"train-{cfg.algo}")
+    t0 = time.perf_counter()
+    model = None
+    if cfg.algo != "lqr":
+        from motorlab.rl.sb3 import build_model, train_sb3
+
+        model = build_model(cfg, run_dir)  # SB3 checks its settings here, before the folder is touched
+    prepare_run_dir(run_dir, f"train-{cfg.algo}")
     write_config(run_dir, cfg.model_dump())
     tracker = Tracker(cfg, run_dir, solve_return)
-    t0 = time.perf_counter()
     try:
-        if cfg.algo == "lqr":
+        if model is None:
             steps = _train_lqr(cfg, run_dir, tracker)
         else:
-            from motorlab.rl.sb3 import train_sb3
-
-            steps = train_sb3(cfg, run_dir, tracker)
+            steps = train_sb3(cfg, model, run_dir, tracker)
         wall = time.perf_counter() - t0
         # Reload from disk, so the reported numbers are those of the saved files.
         final = tracker.evaluator.run(load_policy_files(run_dir)).summary()

@@ -1,0 +1,65 @@
+"""Helpers shared by the tests: run the CLI in a subprocess and check its outcome."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ENV_ID = "InvertedPendulum-v5"
+
+# The tiny PPO budget every SB3 test uses: two rollouts of 128 steps.
+TINY_PPO = ["--algo", "ppo", "--timesteps", "256", "--set", "n_steps=128", "--set", "batch_size=64"]
+
+
+def run_cli(*args: str | os.PathLike, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
+    """`python -m motorlab ARGS` in a fresh process, as a user would run it."""
+    return subprocess.run(
+        [sys.executable, "-m", "motorlab", *map(str, args)],
+        capture_output=True, text=True, cwd=cwd, timeout=timeout,
+        env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
+    )
+
+
+def assert_ok(proc: subprocess.CompletedProcess) -> None:
+    """The command succeeded; on failure show what it printed."""
+    assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) -> str:
+    """Exit code 2, stderr is one line starting with 'error:', no traceback anywhere,
+    and the message contains every fragment. Returns the message."""
+    shown = f"exit {proc.returncode}\nstdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
+    assert proc.returncode == 2, shown
+    assert "Traceback" not in proc.stderr and "Traceback" not in proc.stdout, shown
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, shown
+    assert lines[0].startswith("error:"), shown
+    for fragment in fragments:
+        assert fragment in lines[0], f"{fragment!r} not in the message\n{shown}"
+    return lines[0]
+
+
+def read_summary(run_dir: Path) -> dict:
+    return json.loads((Path(run_dir) / "summary.json").read_text())
+
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def assert_png(path: Path, min_side: int = 100) -> None:
+    """`path` is a readable PNG image of a real figure (not an empty canvas)."""
+    import matplotlib.image
+    import numpy as np
+
+    path = Path(path)
+    assert path.is_file(), f"{path} was not written"
+    data = path.read_bytes()
+    assert data[:8] == PNG_SIGNATURE, f"{path} is not a PNG"
+    assert len(data) > 2000, f"{path} is suspiciously small ({len(data)} bytes)"
+    image = matplotlib.image.imread(path)
+    assert image.ndim == 3 and image.shape[2] in (3, 4), image.shape
+    assert min(image.shape[:2]) >= min_side, image.shape
+    assert np.ptp(image[..., :3]) > 0.5, f"{path} is blank"  # something was drawn

@@ -1,0 +1,354 @@
+"""Recipes: the bundled pendulum study parses; recipe validation; a small study runs
+end to end from the CLI, and re-running it keeps the steps that already finished."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from helpers import assert_ok, assert_png, read_summary, run_cli
+from motorlab.errors import MotorlabError
+from motorlab.recipes import bundled, load_recipe, parse_recipe
+
+# ---- the bundled recipe ------------------------------------------------------------
+
+
+def test_pendulum_recipe_is_bundled():
+    assert "pendulum" in bundled()
+    assert bundled()["pendulum"].is_file()
+
+
+def test_pendulum_recipe_parses():
+    raw = tomllib.loads(bundled()["pendulum"].read_text())
+    recipe = load_recipe("pendulum")
+    assert recipe.name == "pendulum"
+    assert len(recipe.steps) >= 7
+    # Every [[steps]] table became one validated step, in order, of the kind it names.
+    assert [(s.name, s.kind) for s in recipe.steps] == [(r["name"], r["kind"]) for r in raw["steps"]]
+    kinds = {s.kind for s in recipe.steps}
+    assert kinds == {"train", "evaluate"}
+    by_name = {s.name: s for s in recipe.steps}
+    for r, step in zip(raw["steps"], recipe.steps):
+        # [defaults] reach every step unless the step sets the field itself.
+        env = step.train.env if step.train else step.evaluate.env
+        assert env.id == r.get("env", raw["defaults"]["env"])
+        assert env.delay == r.get("delay")
+        assert env.history == r.get("history", 1)
+        assert (step.train or step.evaluate).seed == r.get("seed", raw["defaults"]["seed"])
+        if step.kind == "train":
+            assert step.train.timesteps == r["timesteps"]
+            assert step.train.until_solved == r.get("until_solved", False)
+            assert step.train.preset == r.get("preset")
+            if r.get("preset") == "fast":
+                assert step.train.algo == "lqr"
+            elif r.get("preset") == "sb3-ppo":
+                assert step.train.algo == "ppo"
+        else:
+            assert step.evaluate.episodes == r.get("episodes", raw["defaults"]["episodes"])
+            if r["policy"].startswith("@"):
+                # A reference names an earlier train step; evaluation starts from its env.
+                ref = by_name[step.policy_ref]
+                assert ref.kind == "train"
+                assert recipe.steps.index(ref) < recipe.steps.index(step)
+                assert step.evaluate.env.history == ref.train.env.history
+            else:
+                assert step.evaluate.policy == r["policy"]
+    # The study compares PID, PPO and the fast preset, with and without delay.
+    assert any(s.kind == "evaluate" and s.evaluate.policy == "pid" for s in recipe.steps)
+    trained = [s.train for s in recipe.steps if s.kind == "train"]
+    assert {"ppo", "lqr"} <= {t.algo for t in trained}
+    assert any(t.env.delay for t in trained) and any(t.env.history > 1 for t in trained)
+
+
+def test_load_recipe_by_path(tmp_path):
+    path = tmp_path / "copy.toml"
+    path.write_text(bundled()["pendulum"].read_text())
+    recipe = load_recipe(str(path))
+    assert recipe.source == str(path)
+    assert [s.name for s in recipe.steps] == [s.name for s in load_recipe("pendulum").steps]
+
+
+# ---- validation (in-process; the CLI's exit code is covered in test_cli_errors.py) ----
+
+def test_defaults_and_references_resolve():
+    recipe = parse_recipe(textwrap.dedent("""
+        name = "r"
+        [defaults]
+        env = "InvertedPendulum-v5"
+        seed = 4
+        episodes = 2
+        reward = "alive"
+        [[steps]]
+        name = "train"
+        kind = "train"
+        preset = "fast"
+        history = 2
+        [[steps]]
+        name = "eval"
+        kind = "evaluate"
+        policy = "@train"
+        delay = 0.2
+        """), "r.toml")
+    train, ev = recipe.steps
+    assert train.train.seed == 4 and train.train.env.reward == "alive" and train.train.env.history == 2
+    assert train.train.preset == "fast" and train.train.algo == "lqr"  # the preset was applied
+    assert ev.evaluate.seed == 4 and ev.evaluate.episodes == 2
+    # The evaluation uses the trained policy's env (history 2), without its reward shaping, plus the delay.
+    assert ev.evaluate.env.history == 2 and ev.evaluate.env.reward is None and ev.evaluate.env.delay == 0.2
+
+
+RECIPE_ERRORS = {
+    "typo-eval-field": ("""
+        [[steps]]
+        name = "a"
+        kind = "evaluate"
+        policy = "pid"
+        env = "InvertedPendulum-v5"
+        episode = 3
+        """, ["'episode'", "episodes"]),
+    "typo-lqr-table": ("""
+        [[steps]]
+        name = "a"
+        kind = "train"
+        preset = "fast"
+        lqr = {obs_lag = 3}
+        """, ["obs_lag"]),
+    "typo-top-level": ("""
+        descripton = "x"
+        [[steps]]
+        name = "a"
+        kind = "evaluate"
+        policy = "pid"
+        env = "InvertedPendulum-v5"
+        """, ["descripton", "description"]),
+    "negative-value": ("""
+        [[steps]]
+        name = "a"
+        kind = "train"
+        preset = "fast"
+        timesteps = -3
+        """, ["timesteps"]),
+    "bad-schedule": ("""
+        [[steps]]
+        name = "a"
+        kind = "train"
+        lr = "linear:1"
+        """, ["linear:1"]),
+    "unknown-preset": ("""
+        [[steps]]
+        name = "a"
+        kind = "train"
+        preset = "fats"
+        """, ["fats", "fast"]),
+    "bad-delay": ("""
+        [[steps]]
+        name = "a"
+        kind = "train"
+        preset = "fast"
+        delay = 0.01
+        """, ["0.01"]),
+    "bad-env": ("""
+        [[steps]]
+        name = "a"
+        kind = "evaluate"
+        policy = "pid"
+        env = "InvertedPendulm-v5"
+        """, ["InvertedPendulum-v5"]),
+    "bad-reward": ("""
+        [[steps]]
+        name = "a"
+        kind = "train"
+        reward = "quadratik"
+        """, ["quadratic"]),
+    "later-step": ("""
+        [[steps]]
+        name = "b"
+        kind = "evaluate"
+        policy = "@a"
+        [[steps]]
+        name = "a"
+        kind = "train"
+        preset = "fast"
+        """, ["@a"]),
+    "reference-to-evaluate-step": ("""
+        [[steps]]
+        name = "a"
+        kind = "evaluate"
+        policy = "pid"
+        env = "InvertedPendulum-v5"
+        [[steps]]
+        name = "b"
+        kind = "evaluate"
+        policy = "@a"
+        """, ["@a"]),
+    "unknown-kind": ("""
+        [[steps]]
+        name = "a"
+        kind = "trian"
+        """, ["trian"]),
+    "duplicate-names": ("""
+        [[steps]]
+        name = "a"
+        kind = "evaluate"
+        policy = "pid"
+        env = "InvertedPendulum-v5"
+        [[steps]]
+        name = "a"
+        kind = "evaluate"
+        policy = "zero"
+        env = "InvertedPendulum-v5"
+        """, ["'a'"]),
+    "no-steps": ("""
+        steps = []
+        """, ["steps"]),
+    "no-name": ("""
+        description = "the recipe's name is missing"
+        [[steps]]
+        kind = "evaluate"
+        policy = "pid"
+        env = "InvertedPendulum-v5"
+        """, ["'name'"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(RECIPE_ERRORS))
+def test_recipe_validation_errors(case):
+    text, fragments = RECIPE_ERRORS[case]
+    text = textwrap.dedent(text)
+    if case != "no-name":
+        text = 'name = "t"\n' + text
+    with pytest.raises(MotorlabError) as info:
+        parse_recipe(text, f"{case}.toml")
+    message = str(info.value)
+    assert message.startswith(f"{case}.toml"), message  # names the file
+    assert "\n" not in message
+    for fragment in fragments:
+        assert fragment in message, message
+
+
+def test_unknown_recipe_name_suggests_close_match():
+    with pytest.raises(MotorlabError, match="pendulum"):
+        load_recipe("pendulm")
+
+
+# ---- running a study from the CLI ---------------------------------------------------
+
+STUDY = """
+name = "small"
+description = "tiny study for the tests"
+
+[defaults]
+env = "InvertedPendulum-v5"
+seed = 0
+episodes = 3
+progress = false
+
+[[steps]]
+name = "pid"
+kind = "evaluate"
+policy = "pid"
+
+[[steps]]
+name = "fast"
+kind = "train"
+preset = "fast"
+timesteps = 2000
+until_solved = true
+
+[[steps]]
+name = "fast-on-delay"
+kind = "evaluate"
+policy = "@fast"
+delay = 0.2
+
+[[steps]]
+name = "ppo"
+kind = "train"
+algo = "ppo"
+timesteps = 256
+hyperparams = {n_steps = 128, batch_size = 64}
+"""
+
+
+def check_study_outputs(out, step_names: list[str]) -> dict:
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["steps"] == step_names
+    assert summary["pid.return_mean"] == 1000.0 and summary["pid.success_rate"] == 1.0
+    assert isinstance(summary["fast.steps_to_success"], int)
+    assert summary["fast.steps_to_success"] == summary["fast.timesteps"] <= 2000
+    assert "ppo.steps_to_success" in summary and summary["ppo.steps_to_success"] is None  # not solved
+    assert summary["ppo.timesteps"] == 256
+    table = (out / "table.txt").read_text().splitlines()
+    assert len(table) == 1 + len(step_names)
+    for name, line in zip(step_names, table[1:]):
+        assert line.startswith(name)
+    assert_png(out / "plots" / "returns.png")
+    assert_png(out / "plots" / "steps_to_success.png")
+    for name in step_names:
+        step_summary = read_summary(out / name)
+        assert step_summary, name
+        assert_png(out / name / "plots" / "observation_trace.png")
+    for name in ("fast", "ppo"):
+        assert_png(out / name / "plots" / "learning_curve.png")
+    return summary
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    """The brief's small study, run once from the CLI: evaluate pid; train the fast preset
+    until solved; evaluate '@fast' on a 0.2 s delay; a tiny PPO run."""
+    folder = tmp_path_factory.mktemp("study")
+    path = folder / "small.toml"
+    path.write_text(STUDY)
+    out = folder / "out"
+    proc = run_cli("run", path, "--out", out)
+    assert_ok(proc)
+    return path, out, proc
+
+
+STEPS = ["pid", "fast", "fast-on-delay", "ppo"]
+
+
+def step_mtimes(out) -> dict[str, int]:
+    return {name: (out / name / "summary.json").stat().st_mtime_ns for name in STEPS}
+
+
+def test_study_writes_summary_table_plots_and_step_folders(study):
+    _, out, proc = study
+    summary = check_study_outputs(out, STEPS)
+    assert "already done" not in proc.stdout
+    # '@fast' was evaluated from the study's own fast folder, on the delayed env.
+    assert "fast-on-delay.return_mean" in summary
+    step = read_summary(out / "fast-on-delay")
+    assert step["delay"] == 0.2 and step["episodes"] == 3
+    policy = tomllib.loads((out / "fast-on-delay" / "config.toml").read_text())["policy"]
+    assert Path(policy).resolve() == (out / "fast").resolve()
+
+
+def test_study_rerun_keeps_finished_steps(study):
+    path, out, _ = study
+    before = step_mtimes(out)
+    proc = run_cli("run", path, "--out", out)
+    assert_ok(proc)
+    assert proc.stdout.count("already done") == len(STEPS)
+    assert step_mtimes(out) == before
+    check_study_outputs(out, STEPS)
+
+
+def test_study_rerun_redoes_only_changed_steps(study, tmp_path):
+    path, out, _ = study
+    before = step_mtimes(out)
+    changed = tmp_path / "small.toml"
+    changed.write_text(path.read_text().replace('policy = "pid"', 'policy = "pid"\nepisodes = 2'))
+    proc = run_cli("run", changed, "--out", out)
+    assert_ok(proc)
+    after = step_mtimes(out)
+    assert after["pid"] != before["pid"]  # its settings changed: run again
+    kept = [name for name in STEPS if name != "pid"]
+    assert {k: after[k] for k in kept} == {k: before[k] for k in kept}
+    assert read_summary(out / "pid")["episodes"] == 2
+    assert proc.stdout.count("already done") == len(kept)

@@ -1,0 +1,109 @@
+"""Run folders: atomic writes, JSON-safe summaries, finished vs unfinished folders."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from motorlab.errors import MotorlabError
+from motorlab.runs import (MetricsWriter, atomic_write_text, is_complete, prepare_run_dir, read_config, read_json,
+                           read_metrics, require_run_dir, write_config, write_json, write_summary)
+
+
+def test_write_json_is_plain_json(tmp_path):
+    path = tmp_path / "s.json"
+    write_json(path, {"a": np.float32(1.5), "b": np.int64(3), "nan": math.nan, "inf": np.inf,
+                      "arr": np.arange(3), "nested": {"x": (np.float64(2.0), None)}})
+    text = path.read_text()
+    data = json.loads(text)  # strict JSON: NaN/Infinity would not be valid
+    assert "NaN" not in text and "Infinity" not in text
+    assert data == {"a": 1.5, "b": 3, "nan": None, "inf": None, "arr": [0, 1, 2], "nested": {"x": [2.0, None]}}
+
+
+def test_atomic_write_replaces_whole_file_and_leaves_no_temp(tmp_path):
+    path = tmp_path / "deep" / "file.txt"
+    atomic_write_text(path, "first")
+    atomic_write_text(path, "second")
+    assert path.read_text() == "second"
+    assert [p.name for p in path.parent.iterdir()] == ["file.txt"]
+
+
+def test_config_round_trip_drops_none(tmp_path):
+    write_config(tmp_path, {"algo": "ppo", "lr": None, "env": {"id": "X", "delay": None, "history": 2}})
+    assert read_config(tmp_path) == {"algo": "ppo", "env": {"id": "X", "history": 2}}
+
+
+@pytest.mark.parametrize("content, fragment", [(None, "missing"), ('{"a": ', "JSON")])
+def test_read_json_errors(tmp_path, content, fragment):
+    path = tmp_path / "x.json"
+    if content is not None:
+        path.write_text(content)
+    with pytest.raises(MotorlabError, match=fragment):
+        read_json(path)
+
+
+def test_read_config_errors(tmp_path):
+    with pytest.raises(MotorlabError, match="config.toml"):
+        read_config(tmp_path)
+    (tmp_path / "config.toml").write_text("a = [")
+    with pytest.raises(MotorlabError, match="TOML"):
+        read_config(tmp_path)
+
+
+def test_prepare_run_dir_marks_folder_unfinished(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    write_summary(run, {"x": 1})
+    (run / "artifact.bin").write_bytes(b"keep")
+    assert is_complete(run)
+    assert prepare_run_dir(run, "train") == run
+    assert not is_complete(run)  # a stale summary would make a half-written run look finished
+    assert (run / "artifact.bin").read_bytes() == b"keep"
+
+
+def test_prepare_run_dir_rejects_a_file(tmp_path):
+    path = tmp_path / "file"
+    path.write_text("x")
+    with pytest.raises(MotorlabError, match="file"):
+        prepare_run_dir(path, "train")
+
+
+def test_require_run_dir(tmp_path, monkeypatch):
+    with pytest.raises(MotorlabError, match="does not exist"):
+        require_run_dir(tmp_path / "missing")
+    (tmp_path / "a-file").write_text("x")
+    with pytest.raises(MotorlabError, match="not a folder"):
+        require_run_dir(tmp_path / "a-file")
+    run = tmp_path / "run"
+    run.mkdir()
+    with pytest.raises(MotorlabError, match="summary.json"):
+        require_run_dir(run)
+    write_summary(run, {})
+    assert require_run_dir(run) == run
+    # Permissions cannot be taken from root (the tests may run as root): simulate them.
+    import motorlab.runs
+
+    monkeypatch.setattr(motorlab.runs.os, "access", lambda path, mode: False)
+    with pytest.raises(MotorlabError, match="not readable"):
+        require_run_dir(run)
+
+
+def test_metrics_round_trip(tmp_path):
+    writer = MetricsWriter(tmp_path / "metrics.csv", ["timesteps", "episode_return", "eval_return_mean"])
+    writer.write({"timesteps": 10, "episode_return": np.float32(9.0)})
+    writer.write({"timesteps": 20, "eval_return_mean": 12.5, "ignored": 1})
+    # Each row is flushed as it is written: readable before close (an interrupted run keeps its rows).
+    rows = read_metrics(tmp_path)
+    writer.close()
+    assert len(rows) == 2
+    assert rows[0]["timesteps"] == 10 and rows[0]["episode_return"] == 9.0 and math.isnan(rows[0]["eval_return_mean"])
+    assert rows[1]["eval_return_mean"] == 12.5 and math.isnan(rows[1]["episode_return"])
+    assert "ignored" not in rows[1]
+
+
+def test_read_metrics_missing(tmp_path):
+    with pytest.raises(MotorlabError, match="metrics.csv"):
+        read_metrics(tmp_path)
