@@ -53,8 +53,6 @@ class EvalStep(BaseModel):
 class Step(BaseModel):
     """One validated step: its name, kind and settings."""
 
-    model_config = ConfigDict(arbitrary_types_allowed=True)
-
     name: str
     kind: Literal["train", "evaluate"]
     train: TrainConfig | None = None

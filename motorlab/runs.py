@@ -84,15 +84,27 @@ def read_json(path: Path) -> dict[str, Any]:
     return _read_text_file(path, json.loads, "JSON", "run the step that writes it first.")
 
 
-def write_config(run_dir: Path, config: dict[str, Any]) -> None:
-    """Resolved settings as TOML (None values dropped: TOML has no null)."""
+def _config_toml(config: dict[str, Any]) -> str:
+    """Settings as TOML text (None values dropped: TOML has no null)."""
 
     def drop_none(d: Any) -> Any:
         if isinstance(d, dict):
             return {k: drop_none(v) for k, v in d.items() if v is not None}
         return d
 
-    atomic_write_text(Path(run_dir) / CONFIG, tomli_w.dumps(drop_none(_plain(config))))
+    return tomli_w.dumps(drop_none(_plain(config)))
+
+
+def write_config(run_dir: Path, config: dict[str, Any]) -> None:
+    """Resolved settings as config.toml."""
+    atomic_write_text(Path(run_dir) / CONFIG, _config_toml(config))
+
+
+def finished_with(run_dir: Path, config: dict[str, Any]) -> bool:
+    """True when run_dir finished (summary.json) with exactly these settings, as written to TOML."""
+    import tomllib
+
+    return is_complete(run_dir) and read_config(run_dir) == tomllib.loads(_config_toml(config))
 
 
 def read_config(run_dir: Path) -> dict[str, Any]:

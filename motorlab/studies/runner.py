@@ -18,8 +18,7 @@ from motorlab.recipes import Recipe, Step
 from motorlab.report.plots import comparison_bars
 from motorlab.report.run import plot_run
 from motorlab.rl.train import train
-from motorlab.runs import (atomic_write_text, is_complete, prepare_run_dir, read_config, read_json,
-                           write_config, write_summary)
+from motorlab.runs import atomic_write_text, finished_with, prepare_run_dir, read_json, write_config, write_summary
 
 # Headline keys copied from each step into the study's summary.json as "<step>.<key>".
 HEADLINE = ("return_mean", "return_std", "return_min", "success_rate", "steps_to_success", "timesteps", "wall_seconds")
@@ -32,22 +31,6 @@ def _step_config(step: Step, study_dir: Path) -> dict[str, Any]:
     ev = step.evaluate
     policy = str(study_dir / step.policy_ref) if step.policy_ref else ev.policy
     return {"policy": policy, "episodes": ev.episodes, "seed": ev.seed, "env": ev.env.model_dump()}
-
-
-def _same_settings(run_dir: Path, config: dict[str, Any]) -> bool:
-    """True when run_dir finished with exactly these settings (compared as written to TOML)."""
-    import tomllib
-
-    import tomli_w
-
-    from motorlab.runs import _plain
-
-    def drop_none(d):
-        return {k: drop_none(v) for k, v in d.items() if v is not None} if isinstance(d, dict) else d
-
-    if not is_complete(run_dir):
-        return False
-    return read_config(run_dir) == tomllib.loads(tomli_w.dumps(drop_none(_plain(config))))
 
 
 def _headline(step: Step, s: dict[str, Any]) -> dict[str, Any]:
@@ -88,7 +71,7 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
         step_dir = study_dir / step.name
         config = _step_config(step, study_dir)
         console.print(f"[bold][{i}/{len(recipe.steps)}][/bold] {step.name}: {_describe(step)}")
-        if _same_settings(step_dir, config):
+        if finished_with(step_dir, config):
             console.print("      already done with these settings; kept")
             summary = read_json(step_dir / "summary.json")
         elif step.kind == "train":
