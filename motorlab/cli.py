@@ -47,8 +47,9 @@ DelayOn = Annotated[Optional[str], typer.Option(
 History = Annotated[Optional[int], typer.Option("--history", help="Stack the last K observations (K=1: none).")]
 
 
-def _env_overrides(env: str | None, delay, delay_on, history, reward=None) -> dict:
-    given = {"id": env, "delay": delay, "delay_on": delay_on, "history": history, "reward": reward}
+def _env_overrides(env: str | None, delay, delay_on, history, reward=None, sar=None, phi=None) -> dict:
+    given = {"id": env, "delay": delay, "delay_on": delay_on, "history": history, "reward": reward,
+             "sar": str(sar) if sar else None, "phi": phi}
     return {k: v for k, v in given.items() if v is not None}
 
 
@@ -74,7 +75,8 @@ def train(
     algo: Annotated[Optional[str], typer.Option(
         help="ppo | sac | td3 (Stable-Baselines3) | lqr (model-based: linear model + LQR).")] = None,
     preset: Annotated[Optional[str], typer.Option(
-        help="Named settings: fast (motorlab's most sample-efficient), sb3-ppo, sb3-sac. Flags override it.")] = None,
+        help="Named settings: fast (motorlab's most sample-efficient for balancing), sb3-ppo, sb3-sac, "
+             "sar-sac (the SAR study's SAC), sar-sac-synergy. Flags override it.")] = None,
     timesteps: Annotated[Optional[int], typer.Option(help="Env-step budget (default 100000).")] = None,
     seed: Seed = 0,
     out: Out = None,
@@ -99,6 +101,11 @@ def train(
     normalize: Annotated[Optional[bool], typer.Option(
         "--normalize/--no-normalize", help="Normalize observations with running statistics.")] = None,
     device: Annotated[Optional[str], typer.Option(help="auto (CUDA when present) | cpu | cuda.")] = None,
+    sar: Annotated[Optional[Path], typer.Option(
+        help="Act in synergy space: a sar.npz from `motorlab synergies fit` or `import-sklearn`.")] = None,
+    phi: Annotated[Optional[float], typer.Option(
+        help="With --sar: 1 = synergies only; <1 = action is [synergies, raw muscles] blended "
+             "phi*decode(syn) + (1-phi)*raw (the reference used 0.66).")] = None,
     hp: Annotated[Optional[list[str]], typer.Option(
         "--set", help="Extra SB3 hyperparameter KEY=VALUE (VALUE as JSON), repeatable: --set n_steps=1024.")] = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
@@ -118,7 +125,7 @@ def train(
         "algo": algo, "preset": preset, "timesteps": timesteps, "seed": seed, "lr": lr, "clip_range": clip_range,
         "until_solved": until_solved or None, "solve_episodes": solve_episodes, "solve_return": solve_return,
         "eval_every": eval_every, "n_envs": n_envs, "normalize": normalize, "device": device, "progress": progress,
-        "env": _env_overrides(env_id, delay, delay_on, history, reward),
+        "env": _env_overrides(env_id, delay, delay_on, history, reward, sar, phi),
     }
     if hp:
         settings["hyperparams"] = _parse_sets(hp)
@@ -210,6 +217,131 @@ def run(
 
     summary = run_study(load_recipe(recipe), out, console=stdout)
     stdout.print(f"\n[bold]Results:[/bold] {summary['study_dir']}  (table.txt, summary.json, plots/*.png, one folder per step)")
+
+
+@app.command(epilog="Example:\n\n  motorlab zeroshot runs/sar-rl runs/rl-e2e --envs myoHandReorientID-v0 myoHandReorientOOD-v0 --episodes 500")
+def zeroshot(
+    run_dirs: Annotated[list[Path], typer.Argument(help="Training run folders to compare.")],
+    envs: Annotated[list[str], typer.Option("--envs", help="Env ids the policies never trained on (repeat or list).")],
+    episodes: Annotated[int, typer.Option(help="Episodes per run and env.")] = 500,
+    seed: Seed = 0,
+    out: Out = None,
+):
+    """Zero-shot success of trained policies on unseen envs; table, summary.json, grouped bar chart."""
+    from motorlab.envs import register_myosuite
+    from motorlab.zeroshot import zeroshot as run_zeroshot
+
+    # `--envs A B`: click gives B to RUN_DIRS; an env id that is not a path belongs to --envs.
+    import gymnasium as gym
+
+    register_myosuite()
+    moved = [r for r in run_dirs if not r.exists() and str(r) in gym.registry]
+    run_dirs = [r for r in run_dirs if r not in moved]
+    envs = [e for item in [*envs, *map(str, moved)] for e in item.split(",") if e]
+    s = run_zeroshot(run_dirs, envs, episodes, seed, out, console=stdout)
+    stdout.print(f"written: {s['run_dir']}/summary.json, {s['run_dir']}/plots/zeroshot.png")
+
+
+@app.command(epilog="Example:\n\n  MUJOCO_GL=egl motorlab video runs/play --episodes 5 --camera hand_side_inter")
+def video(
+    run_dir: Annotated[Path, typer.Argument(help="A training run folder.")],
+    episodes: Annotated[int, typer.Option(help="Episodes to render, one MP4 each.")] = 5,
+    camera: Annotated[Optional[str], typer.Option(help="Camera name or index (default: the model's first; -1: free camera).")] = None,
+    width: Annotated[int, typer.Option(min=16, max=4096)] = 640,
+    height: Annotated[int, typer.Option(min=16, max=4096)] = 480,
+    seed: Seed = 0,
+    out: Annotated[Optional[Path], typer.Option("--out", help="Folder for the videos (default RUN_DIR/videos).")] = None,
+):
+    """Render episodes of a run's policy offscreen to H.264 MP4 (MUJOCO_GL=egl works without a display)."""
+    from motorlab.report.video import render_video
+
+    s = render_video(run_dir, episodes, seed, camera, width, height, out)
+    for path, ret in zip(s["videos"], s["returns"]):
+        stdout.print(f"written: {path}  (return {ret:.1f})")
+
+
+synergies = typer.Typer(help="Muscle synergies: collect activations, VAF, fit or import a SAR.",
+                        no_args_is_help=True, rich_markup_mode="rich")
+app.add_typer(synergies, name="synergies")
+
+
+@synergies.command("collect", epilog="Example:\n\n  motorlab synergies collect runs/play --episodes 1000 --percentile 80 --preview 100")
+def synergies_collect(
+    run_dir: Annotated[Path, typer.Argument(help="A training run folder (the play policy).")],
+    episodes: Annotated[int, typer.Option(help="Episodes to keep (those at or above the threshold).")] = 100,
+    percentile: Annotated[float, typer.Option(help="Return threshold: this percentile of the preview returns.")] = 80.0,
+    preview: Annotated[int, typer.Option(help="Preview episodes that set the threshold.")] = 50,
+    deterministic: Annotated[bool, typer.Option("--deterministic/--stochastic", help="Policy mean or samples (default).")] = False,
+    workers: Annotated[Optional[int], typer.Option(help="Processes (default: all cores).")] = None,
+    seed: Seed = 0,
+    out: Out = None,
+):
+    """Record muscle activations (MuJoCo data.act) of a policy's good episodes to activations.npz."""
+    from motorlab.synergy.collect import collect
+
+    s = collect(run_dir, episodes, percentile, preview, seed, deterministic, workers, out=out)
+    stdout.print(f"kept {s['episodes_kept']} episodes (return >= {s['threshold']:.3g}), {s['samples']:,} samples "
+                 f"x {s['n_muscles']} muscles -> {s['run_dir']}/activations.npz")
+
+
+@synergies.command("vaf", epilog="Example:\n\n  motorlab synergies vaf runs/collect/activations.npz --threshold 0.8")
+def synergies_vaf(
+    activations: Annotated[Path, typer.Argument(help="activations.npz (or its folder).")],
+    threshold: Annotated[float, typer.Option(help="Report the smallest N whose VAF reaches this.")] = 0.8,
+    method: Annotated[str, typer.Option(help="pca (also pca-ica: same VAF) or nmf (classic, uncentered).")] = "pca",
+    max_n: Annotated[Optional[int], typer.Option(help="Largest N (saves time with nmf).")] = None,
+    out: Out = None,
+):
+    """Variance accounted for by N = 1..n_muscles synergies: table, vaf.png, smallest N reaching --threshold."""
+    from rich.table import Table
+
+    from motorlab.synergy.steps import vaf_step
+
+    s = vaf_step(activations, threshold, method, max_n, out)
+    table = Table(title=f"VAF ({method}), {s['samples']:,} samples x {s['n_muscles']} muscles")
+    table.add_column("N", justify="right")
+    table.add_column("VAF", justify="right")
+    for n, v in enumerate(s["vaf"], 1):
+        table.add_row(str(n), f"{v:.1%}" + (" <-" if n == s["n_for_threshold"] else ""))
+    stdout.print(table)
+    need = s["n_for_threshold"]
+    stdout.print(f"smallest N with VAF >= {threshold:.0%}: {need if need is not None else 'none'}; "
+                 f"written: {s['run_dir']}/vaf.png")
+
+
+@synergies.command("fit", epilog="Examples:\n\n  motorlab synergies fit activations.npz --vaf 0.8\n\n"
+                                 "  motorlab synergies fit activations.npz --n 20 --method nmf")
+def synergies_fit(
+    activations: Annotated[Path, typer.Argument(help="activations.npz (or its folder).")],
+    n: Annotated[Optional[int], typer.Option("--n", "--n-synergies", help="Number of synergies N.")] = None,
+    vaf: Annotated[Optional[float], typer.Option(help="Or: the smallest N whose VAF reaches this, e.g. 0.8.")] = None,
+    method: Annotated[str, typer.Option(
+        help="pca-ica (PCA -> FastICA -> scale to [-1,1], the reference), pca, or nmf.")] = "pca-ica",
+    seed: Seed = 0,
+    out: Out = None,
+):
+    """Fit a Synergistic Action Representation; writes sar.npz (plain arrays + JSON metadata, no pickle)."""
+    from motorlab.synergy.steps import fit_step
+
+    s = fit_step(activations, n, vaf, method, seed, out)
+    stdout.print(f"{s['n_synergies']} synergies ({method}) for {s['n_muscles']} muscles, VAF {s['vaf']:.1%} "
+                 f"-> {s['sar']}")
+
+
+@synergies.command("import-sklearn", epilog="Example:\n\n  motorlab synergies import-sklearn "
+                                            "published/manipulation --trust --out sar-hand.npz")
+def synergies_import(
+    folder: Annotated[Path, typer.Argument(help="Folder with pca.pkl, ica.pkl, normalizer.pkl (joblib).")],
+    out: Annotated[Path, typer.Option("--out", help="The sar.npz to write.")],
+    trust: Annotated[bool, typer.Option("--trust", help="Allow unpickling these files (they can run code).")] = False,
+):
+    """Convert a published scikit-learn SAR (joblib pickles) to sar.npz, checked against sklearn's own inverse chain."""
+    from motorlab.synergy.sklearn_import import import_sklearn
+
+    sar = import_sklearn(folder, trust=trust, out=out)
+    err_max = sar.metadata.get("import_check_max_abs_error")
+    stdout.print(f"{sar.n_synergies} synergies x {sar.n_muscles} muscles -> {out}"
+                 + (f" (decode matches scikit-learn, max abs error {err_max:.1e})" if err_max is not None else ""))
 
 
 @app.command()

@@ -12,7 +12,7 @@ from typing import Protocol
 import gymnasium as gym
 import numpy as np
 
-from motorlab.envs import EnvConfig, make_env, max_return
+from motorlab.envs import EnvConfig, env_dt, make_env, max_return
 
 
 class Policy(Protocol):
@@ -31,6 +31,7 @@ class Rollouts:
     lengths: np.ndarray
     success: np.ndarray
     aborted: bool = False
+    faults: int = 0  # episodes ended by a numerical fault (NaN/Inf, diverging simulation)
     observations: list[np.ndarray] = field(default_factory=list)  # per episode, when recorded
     actions: list[np.ndarray] = field(default_factory=list)
     dt: float = 0.0
@@ -46,14 +47,47 @@ class Rollouts:
             "success_rate": float(np.mean(self.success)) if len(r) else None,
             "episode_length_mean": float(np.mean(self.lengths)) if len(r) else None,
             "episode_lengths": [int(x) for x in self.lengths],
+            "numerical_faults": int(self.faults),
         }
 
 
-def _success(info: dict, ret: float, target: float | None) -> bool:
-    for key in ("success", "solved", "is_success"):
+SUCCESS_KEYS = ("solved", "success", "is_success")
+
+
+def step_success(info: dict) -> bool | None:
+    """The env's own success flag for this step (MyoSuite: info["solved"]), or None."""
+    for key in SUCCESS_KEYS:
         if key in info:
             return bool(info[key])
-    return target is not None and ret >= target
+    return None
+
+
+class EpisodeSuccess:
+    """Per-episode "solved at any step", for a batch of episodes.
+
+    Envs without a success flag count an episode as a success when its return
+    reaches the task's maximum (InvertedPendulum: 1000).
+    """
+
+    def __init__(self, n: int, target: float | None):
+        self.target = target
+        self.any = np.zeros(n, dtype=bool)
+        self.flagged = np.zeros(n, dtype=bool)
+
+    def step(self, i: int, info: dict) -> None:
+        flag = step_success(info)
+        if flag is not None:
+            self.flagged[i] = True
+            self.any[i] |= flag
+
+    def end(self, i: int, ret: float) -> bool | None:
+        """Outcome of row i's finished episode (None: unknowable), and restart the row."""
+        if self.flagged[i]:
+            result = bool(self.any[i])
+        else:
+            result = None if self.target is None else bool(ret >= self.target)
+        self.any[i] = self.flagged[i] = False
+        return result
 
 
 class Evaluator:
@@ -71,7 +105,7 @@ class Evaluator:
         self.seed = seed
         self.envs = [make_env(env_cfg, shaped=False) for _ in range(episodes)]
         self.target = max_return(env_cfg.id)
-        self.dt = float(getattr(self.envs[0].unwrapped, "dt", 0.0))
+        self.dt = env_dt(self.envs[0]) or 0.0
 
     @property
     def observation_space(self) -> gym.Space:
@@ -97,6 +131,8 @@ class Evaluator:
         returns = np.zeros(n)
         lengths = np.zeros(n, dtype=int)
         success = np.zeros(n, dtype=bool)
+        outcome = EpisodeSuccess(n, self.target)
+        faults = 0
         traces_o = [[o] for o in obs] if record else []
         traces_a: list[list] = [[] for _ in range(n)] if record else []
         while active.any():
@@ -106,17 +142,20 @@ class Evaluator:
                 obs[i] = o
                 returns[i] += r
                 lengths[i] += 1
+                outcome.step(i, info)
                 if record:
                     traces_o[i].append(o)
                     traces_a[i].append(actions[i])
                 if terminated or truncated:
                     active[i] = False
-                    success[i] = _success(info, returns[i], self.target)
+                    success[i] = bool(outcome.end(i, returns[i]))
+                    faults += "numerical_fault" in info
                     if stop_below is not None and returns[i] < stop_below:
                         done = ~active
-                        return Rollouts(returns[done], lengths[done], success[done], aborted=True, dt=self.dt)
+                        return Rollouts(returns[done], lengths[done], success[done], aborted=True, faults=faults,
+                                        dt=self.dt)
         return Rollouts(
-            returns, lengths, success, dt=self.dt,
+            returns, lengths, success, faults=faults, dt=self.dt,
             observations=[np.array(t) for t in traces_o], actions=[np.array(t) for t in traces_a],
         )
 
@@ -125,13 +164,26 @@ class Evaluator:
             env.close()
 
 
-def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, record: bool = False) -> Rollouts:
-    """Evaluate `policy` for `episodes` episodes on the env `env_cfg` describes."""
-    ev = Evaluator(env_cfg, episodes, seed)
-    try:
-        return ev.run(policy, record=record)
-    finally:
-        ev.close()
+def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, record: bool = False,
+             batch: int = 50) -> Rollouts:
+    """Evaluate `policy` for `episodes` episodes on the env `env_cfg` describes.
+
+    Episodes run `batch` at a time (episode i always starts from seed + i), so
+    hundreds of episodes of a large model do not hold hundreds of envs at once.
+    """
+    parts = []
+    for start in range(0, episodes, batch):
+        ev = Evaluator(env_cfg, min(batch, episodes - start), seed + start)
+        try:
+            parts.append(ev.run(policy, record=record))
+        finally:
+            ev.close()
+    if len(parts) == 1:
+        return parts[0]
+    return Rollouts(np.concatenate([p.returns for p in parts]), np.concatenate([p.lengths for p in parts]),
+                    np.concatenate([p.success for p in parts]), faults=sum(p.faults for p in parts),
+                    observations=[o for p in parts for o in p.observations],
+                    actions=[a for p in parts for a in p.actions], dt=parts[0].dt)
 
 
 def resolve_env(policy_spec: str, overrides: dict) -> EnvConfig:
@@ -172,16 +224,17 @@ def evaluate_step(policy_spec: str, env_cfg: EnvConfig, episodes: int, seed: int
         from motorlab.errors import MotorlabError
 
         raise MotorlabError(f"--episodes must be positive, got {episodes}.")
-    ev = Evaluator(env_cfg, episodes, seed)
+    probe = make_env(env_cfg, shaped=False)
     try:
-        policy = load_policy(policy_spec, ev.envs[0], env_cfg.id, seed)
-        result = ev.run(policy)
+        policy = load_policy(policy_spec, probe, env_cfg.id, seed)
+        target = max_return(env_cfg.id)
     finally:
-        ev.close()
+        probe.close()
+    result = evaluate(policy, env_cfg, episodes, seed)
     run_dir = prepare_run_dir(out, "evaluate")
     write_config(run_dir, {"policy": policy_spec, "episodes": episodes, "seed": seed, "env": env_cfg.model_dump()})
     summary = {"policy": policy_spec, "env_id": env_cfg.id, "delay": env_cfg.delay, "history": env_cfg.history,
-               "seed": seed, "max_return": ev.target, **result.summary()}
+               "seed": seed, "max_return": target, **result.summary()}
     write_summary(run_dir, summary)
     summary["run_dir"] = str(run_dir)
     return summary

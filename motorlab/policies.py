@@ -102,8 +102,10 @@ def _unbox(d: dict) -> gym.spaces.Box:
 class SB3Policy:
     """An SB3 policy network with optional observation normalization; deterministic actions."""
 
-    def __init__(self, policy, obs_mean=None, obs_var=None, clip_obs: float = 10.0, epsilon: float = 1e-8):
+    def __init__(self, policy, obs_mean=None, obs_var=None, clip_obs: float = 10.0, epsilon: float = 1e-8,
+                 deterministic: bool = True):
         self.policy = policy
+        self.deterministic = deterministic  # False: sample from the policy (uses torch's RNG)
         self.policy.set_training_mode(False)
         self.obs_mean, self.obs_var = obs_mean, obs_var
         self.clip_obs, self.epsilon = clip_obs, epsilon
@@ -122,7 +124,7 @@ class SB3Policy:
         if self.obs_mean is not None:
             obs = np.clip((obs - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon), -self.clip_obs, self.clip_obs)
             obs = obs.astype(np.float32)
-        action, _ = self.policy.predict(obs, deterministic=True)
+        action, _ = self.policy.predict(obs, deterministic=self.deterministic)
         return action
 
 

@@ -38,7 +38,8 @@ from motorlab.envs import EnvConfig
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.rl.config import TrainConfig, resolve
 
-ENV_KEYS = {"env": "id", "delay": "delay", "delay_on": "delay_on", "history": "history", "reward": "reward"}
+ENV_KEYS = {"env": "id", "delay": "delay", "delay_on": "delay_on", "history": "history", "reward": "reward",
+            "sar": "sar", "phi": "phi"}
 
 
 class EvalStep(BaseModel):

@@ -1,6 +1,6 @@
 """Make environments by id, with motorlab's wrappers applied in a fixed order:
 
-    base env -> reward shaping -> low-pass delay -> observation history
+    base env -> numerical guard -> reward shaping -> low-pass delay -> synergy actions -> observation history
 
 Reward shaping sees the true state; the policy sees delayed, stacked observations.
 """
@@ -11,13 +11,16 @@ import warnings
 from typing import Any
 
 import gymnasium as gym
-from pydantic import BaseModel, ConfigDict, Field
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from motorlab.envs.rewards import resolve_reward
-from motorlab.envs.wrappers import DelayOn, LowPassDelay, RewardShaping, delay_alpha
+from motorlab.envs.wrappers import DelayOn, LowPassDelay, NumericalGuard, RewardShaping, delay_alpha, env_dt_of
 from motorlab.errors import MotorlabError, did_you_mean
 
-__all__ = ["EnvConfig", "make_env", "check_env_id", "max_return", "LowPassDelay", "RewardShaping", "delay_alpha"]
+__all__ = ["EnvConfig", "make_env", "check_env_id", "max_return", "env_dt", "LowPassDelay", "RewardShaping",
+           "delay_alpha", "register_myosuite"]
 
 # Envs whose reward is +1 per step alive: the maximum return is the time limit.
 _ALIVE_REWARD_PREFIXES = ("InvertedPendulum-",)
@@ -34,11 +37,46 @@ class EnvConfig(BaseModel):
     delay_on: DelayOn = "both"
     history: int = Field(1, ge=1, description="observation frames stacked (1: no history)")
     reward: str | None = Field(None, description="built-in reward name or module:function")
+    sar: str | None = Field(None, description="sar.npz: act in synergy space (SynergyActionWrapper)")
+    phi: float = Field(1.0, gt=0, le=1, description="synergy weight: 1 = synergies only, <1 = blend with raw actions")
+
+    @field_validator("sar")
+    @classmethod
+    def _absolute(cls, v):
+        # run folders record where the SAR is, wherever the run is evaluated from
+        return str(Path(v).resolve()) if v else v
+
+
+def register_myosuite() -> bool:
+    """Import MyoSuite, which registers its env ids (myoHandReorient8-v0, myoLegWalk-v0, ...).
+
+    Returns:
+        False when MyoSuite is not installed.
+    """
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            import myosuite  # noqa: F401  (import registers the envs)
+    except ImportError:
+        return False
+    return True
 
 
 def check_env_id(env_id: str) -> None:
-    """Raise a clear error for an env id Gymnasium does not know, with close matches."""
+    """Raise a clear error for an env id Gymnasium does not know, with close matches.
+
+    MyoSuite ids (`myo...`) are registered on first use; without MyoSuite installed
+    they get a message saying how to install it.
+    """
     if env_id not in gym.registry:
+        installed = register_myosuite()
+        if env_id in gym.registry:
+            return
+        if env_id.startswith("myo") and not installed:
+            raise MotorlabError(
+                f"{env_id} is a MyoSuite env, and MyoSuite is not installed: "
+                "`pip install myosuite==3.0.0` (make demo / make test install it)."
+            )
         raise MotorlabError(
             f"unknown env id {env_id!r}{did_you_mean(env_id, gym.registry.keys())}; "
             "`python -c \"import gymnasium; gymnasium.pprint_registry()\"` lists the ids."
@@ -60,14 +98,25 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # -v4 deprecation notices are noise here
         env = gym.make(cfg.id, render_mode=render_mode, **kwargs)
+    env = NumericalGuard(env)
     if shaped and cfg.reward and cfg.reward != "task":
         env = RewardShaping(env, resolve_reward(cfg.reward), name=cfg.reward)
     if cfg.delay:
         env = LowPassDelay(env, cfg.delay, on=cfg.delay_on)
+    if cfg.sar:
+        from motorlab.synergy.wrapper import SynergyActionWrapper
+
+        env = SynergyActionWrapper(env, cfg.sar, cfg.phi)  # outside the delay: muscles are what lags
     if cfg.history > 1:
         env = gym.wrappers.FrameStackObservation(env, cfg.history, padding_type="reset")
         env = gym.wrappers.FlattenObservation(env)
     return env
+
+
+def env_dt(env: gym.Env) -> float | None:
+    """Seconds per env step: `dt` where the env has one (Gymnasium MuJoCo envs), else
+    MuJoCo's timestep times the frame skip (MyoSuite)."""
+    return env_dt_of(env.unwrapped)
 
 
 def max_return(env_id: str) -> float | None:

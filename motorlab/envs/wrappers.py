@@ -20,6 +20,17 @@ DelayOn = Literal["action", "observation", "both"]
 RewardFn = Callable[[np.ndarray, np.ndarray, float, bool, dict], float]
 
 
+def env_dt_of(base_env) -> float | None:
+    """Seconds per step of an unwrapped env: its `dt`, else MuJoCo timestep x frame skip."""
+    dt = getattr(base_env, "dt", None)
+    if dt is None:
+        model = getattr(base_env, "mj_model", None) or getattr(base_env, "model", None)
+        skip = getattr(base_env, "frame_skip", None)
+        if model is not None and skip is not None and hasattr(model, "opt"):
+            dt = float(model.opt.timestep) * int(skip)
+    return float(dt) if dt is not None else None
+
+
 def delay_alpha(dt: float, time_constant: float) -> float:
     """Filter coefficient of a first-order low-pass: alpha = dt / time_constant.
 
@@ -56,7 +67,7 @@ class LowPassDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         super().__init__(env)
         if on not in ("action", "observation", "both"):
             raise MotorlabError(f"delay must act on 'action', 'observation' or 'both', got {on!r}.")
-        dt = getattr(env.unwrapped, "dt", None)
+        dt = env_dt_of(env.unwrapped)
         if dt is None:
             raise MotorlabError(f"{env.spec.id if env.spec else env} has no step dt; delay needs one.")
         if not isinstance(env.action_space, gym.spaces.Box):
@@ -114,3 +125,52 @@ class RewardShaping(gym.Wrapper, gym.utils.RecordConstructorArgs):
         info["task_reward"] = float(reward)
         shaped = float(self.fn(obs, np.asarray(action), float(reward), bool(terminated), info))
         return obs, shaped, terminated, truncated, info
+
+
+class NumericalGuard(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """End an episode whose simulation went numerically bad, instead of crashing the run.
+
+    A step whose observation or reward is NaN/Inf, or after which MuJoCo reports a
+    new instability warning (bad accelerations; MyoSuite's hand can blow up), is
+    made terminal: the observation is zeroed where not finite, the reward is 0,
+    and `info["numerical_fault"]` names the cause so the run can count it.
+    """
+
+    def __init__(self, env: gym.Env):
+        gym.utils.RecordConstructorArgs.__init__(self)
+        super().__init__(env)
+        self._data = getattr(env.unwrapped, "mj_data", None) or getattr(env.unwrapped, "data", None)
+        self._warnings = self._warning_count()
+
+    def _warning_count(self) -> int:
+        # MuJoCo reports divergence as BADQPOS/BADQVEL/BADQACC warnings (and resets the state itself).
+        try:
+            import mujoco
+
+            w = mujoco.mjtWarning
+            return sum(int(self._data.warning[k].number) for k in (w.mjWARN_BADQPOS, w.mjWARN_BADQVEL, w.mjWARN_BADQACC))
+        except (AttributeError, TypeError, IndexError, ImportError):
+            return 0
+
+    def reset(self, **kwargs: Any):
+        obs, info = self.env.reset(**kwargs)
+        self._warnings = self._warning_count()
+        return obs, info
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        fault = None
+        if not np.all(np.isfinite(obs)):
+            fault = "non-finite observation"
+        elif not np.isfinite(reward):
+            fault = "non-finite reward"
+        else:
+            count = self._warning_count()
+            if count > self._warnings:
+                fault = "simulation instability (MuJoCo reset a diverging state)"
+            self._warnings = count
+        if fault is None:
+            return obs, reward, terminated, truncated, info
+        info["numerical_fault"] = fault
+        obs = np.where(np.isfinite(obs), obs, 0.0).astype(np.asarray(obs).dtype)
+        return obs, 0.0, True, truncated, info

@@ -6,6 +6,7 @@ import io
 from pathlib import Path
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")  # files only, never a window
 import matplotlib.pyplot as plt  # noqa: E402
@@ -100,4 +101,47 @@ def comparison_bars(names: list[str], values: list[float | None], ylabel: str, p
         ax.set_xticks(xs, names, rotation=25, ha="right", fontsize=8)
         ax.set_ylabel(ylabel)
         ax.set_title(title)
+        return _save(fig, path)
+
+
+def grouped_bars(groups: list[str], series: dict[str, list[float | None]], ylabel: str, path: Path, title: str,
+                 percent: bool = False) -> Path:
+    """Bars grouped by `groups` (e.g. envs), one colour per series (e.g. runs)."""
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(max(5, 1.6 * len(groups) * max(1, len(series)) / 2), 4))
+        xs = np.arange(len(groups))
+        width = 0.8 / max(1, len(series))
+        for k, (name, values) in enumerate(series.items()):
+            heights = [v if v is not None else 0.0 for v in values]
+            bars = ax.bar(xs + (k - (len(series) - 1) / 2) * width, heights, width, label=name)
+            for b, v in zip(bars, values):
+                label = "-" if v is None else (f"{v:.0%}" if percent else f"{v:.3g}")
+                ax.annotate(label, (b.get_x() + b.get_width() / 2, b.get_height()), ha="center", va="bottom", fontsize=7)
+        ax.set_xticks(xs, groups, fontsize=8)
+        ax.set_ylabel(ylabel)
+        if percent:
+            ax.set_ylim(0, 1.05)
+            ax.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
+        ax.set_title(title)
+        ax.legend(fontsize=8)
+        return _save(fig, path)
+
+
+def vaf_plot(vaf: np.ndarray, threshold: float | None, n_needed: int | None, path: Path, title: str) -> Path:
+    """VAF against the number of synergies, with the threshold and the N that reaches it."""
+    vaf = np.asarray(vaf)
+    n = np.arange(1, len(vaf) + 1)
+    with plt.rc_context(STYLE):
+        fig, ax = plt.subplots(figsize=(7, 4))
+        ax.plot(n, vaf, "o-", ms=3)
+        if threshold is not None:
+            ax.axhline(threshold, color="gray", ls="--", lw=1, label=f"threshold {threshold:.0%}")
+        if n_needed is not None:
+            ax.axvline(n_needed, color="tab:green", lw=1, label=f"N = {n_needed}")
+        ax.set_xlabel("number of synergies N")
+        ax.set_ylabel("variance accounted for")
+        ax.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
+        ax.set_ylim(min(0.0, float(vaf.min())), 1.02)
+        ax.set_title(title)
+        ax.legend(loc="lower right", fontsize=8)
         return _save(fig, path)

@@ -23,6 +23,17 @@ PRESETS: dict[str, dict[str, Any]] = {
     # least-squares linear model + LQR, refitted every 100 steps (see control/lqr.py).
     # InvertedPendulum: ~100 env steps plain, ~100-300 with 0.2 s actuation + perception delay.
     "fast": {"algo": "lqr", "lqr": {}},
+    # The reference SAC settings of the SAR study (MyoSuite, Berg et al. 2023): play phase.
+    "sar-sac": {
+        "algo": "sac",
+        "lr": "linear:1e-3,0",
+        "normalize": True,  # VecNormalize observations, clip 10
+        "hyperparams": {
+            "policy_kwargs": {"net_arch": {"pi": [400, 300], "qf": [400, 300]}},
+            "buffer_size": 300_000, "learning_starts": 1000, "batch_size": 256, "tau": 0.02, "gamma": 0.98,
+            "train_freq": [1, "episode"], "gradient_steps": -1,
+        },
+    },
     # Stable-Baselines3 defaults, named so recipes can say so.
     "sb3-ppo": {"algo": "ppo", "hyperparams": {}},
     "sb3-sac": {"algo": "sac", "hyperparams": {}},
@@ -67,6 +78,11 @@ class TrainConfig(BaseModel):
         if self.clip_range is not None and self.algo != "ppo":
             raise MotorlabError(f"--clip-range applies to PPO only, not {self.algo}; drop it or use --algo ppo.")
         return self
+
+
+# Training in synergy space uses the same settings with a longer warm-up.
+PRESETS["sar-sac-synergy"] = {**PRESETS["sar-sac"],
+                              "hyperparams": {**PRESETS["sar-sac"]["hyperparams"], "learning_starts": 5000}}
 
 
 def resolve(settings: dict[str, Any]) -> TrainConfig:

@@ -11,6 +11,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 from motorlab.envs import make_env
+from motorlab.evaluate import EpisodeSuccess
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.policies import SB3Policy, save_sb3_policy
 from motorlab.rl.config import TrainConfig
@@ -35,6 +36,9 @@ class TrackingCallback(BaseCallback):
         self.next_eval = eval_every
         self.solved = False
 
+    def _on_training_start(self) -> None:
+        self.outcome = EpisodeSuccess(self.training_env.num_envs, self.tracker.solve_return)
+
     def policy_now(self) -> SB3Policy:
         # SB3Policy switches the network to eval mode; SB3 switches it back in train().
         venv = self.model.get_env()
@@ -52,9 +56,12 @@ class TrackingCallback(BaseCallback):
             self._maybe_evaluate()
 
     def _on_step(self) -> bool:
-        for info in self.locals.get("infos", []):
+        for i, info in enumerate(self.locals.get("infos", [])):
+            self.outcome.step(i, info)
             if "episode" in info:
-                self.tracker.episode(self.num_timesteps, float(info["episode"]["r"]), int(info["episode"]["l"]))
+                ret = float(info["episode"]["r"])
+                self.tracker.episode(self.num_timesteps, ret, int(info["episode"]["l"]),
+                                     success=self.outcome.end(i, ret), fault=info.get("numerical_fault"))
         if not self.on_policy:
             self._maybe_evaluate()
         return not (self.until_solved and self.solved)

@@ -18,8 +18,8 @@ from motorlab.evaluate import Evaluator, Policy
 from motorlab.rl.config import TrainConfig
 from motorlab.runs import METRICS, MetricsWriter
 
-METRIC_FIELDS = ["timesteps", "wall_seconds", "episode_return", "episode_length",
-                 "eval_return_mean", "eval_return_min", "eval_success_rate"]
+METRIC_FIELDS = ["timesteps", "wall_seconds", "episode_return", "episode_length", "episode_success",
+                 "success_rate_100", "eval_return_mean", "eval_return_min", "eval_success_rate", "numerical_fault"]
 
 EVAL_SEED_OFFSET = 10_000  # evaluation episodes never share seeds with training episodes
 
@@ -41,6 +41,9 @@ class Tracker:
         self.tb = SummaryWriter(str(Path(run_dir) / "tensorboard" / "motorlab"))
         self.t0 = time.perf_counter()
         self.recent = deque(maxlen=100)
+        self.recent_success: deque[bool] = deque(maxlen=100)
+        self.episodes = 0
+        self.faults = 0
         self.steps_to_success: int | None = None
         self.last_eval_steps = -1
         self.evaluations = 0
@@ -48,11 +51,27 @@ class Tracker:
     def wall(self) -> float:
         return time.perf_counter() - self.t0
 
-    def episode(self, steps: int, ret: float, length: int) -> None:
+    def episode(self, steps: int, ret: float, length: int, success: bool | None = None, fault: str | None = None) -> None:
+        """A finished training episode; `success` is "solved at any step" where the env says."""
+        self.episodes += 1
         self.recent.append(ret)
-        self.metrics.write({"timesteps": steps, "wall_seconds": self.wall(), "episode_return": ret, "episode_length": length})
+        row = {"timesteps": steps, "wall_seconds": self.wall(), "episode_return": ret, "episode_length": length}
         self.tb.add_scalar("train/episode_return", ret, steps)
         self.tb.add_scalar("train/episode_return_mean100", float(np.mean(self.recent)), steps)
+        if success is not None:
+            self.recent_success.append(bool(success))
+            row["episode_success"] = int(success)
+            row["success_rate_100"] = self.success_rate()
+            self.tb.add_scalar("train/success_rate_100", row["success_rate_100"], steps)
+        if fault:
+            self.faults += 1
+            row["numerical_fault"] = fault
+            self.tb.add_scalar("train/numerical_faults", self.faults, steps)
+        self.metrics.write(row)
+
+    def success_rate(self) -> float | None:
+        """Success rate over the last 100 training episodes (None if the env reports none)."""
+        return float(np.mean(self.recent_success)) if self.recent_success else None
 
     def evaluate(self, steps: int, policy: Policy) -> bool:
         """Evaluate `policy` (trained on `steps` env steps); True when solved."""

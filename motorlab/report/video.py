@@ -1,0 +1,117 @@
+"""`motorlab video RUN_DIR`: episodes of a run's policy as H.264 MP4, rendered offscreen.
+
+Rendering uses MuJoCo's own offscreen renderer on the unwrapped env's model and
+data, so it works for Gymnasium's MuJoCo envs and MyoSuite alike; set
+MUJOCO_GL=egl (the CLI does) to render without a display, on a CPU with Mesa.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from motorlab.envs import EnvConfig, env_dt, make_env
+from motorlab.errors import MotorlabError
+from motorlab.policies import load_policy
+from motorlab.runs import read_config, require_run_dir, write_json
+
+MAX_FPS = 50  # browsers and players want at most this; faster envs are subsampled
+
+
+def _renderer(env, width: int, height: int, camera: str | int | None):
+    import mujoco
+
+    base = env.unwrapped
+    model = getattr(base, "mj_model", None) or getattr(base, "model", None)
+    data = getattr(base, "mj_data", None) or getattr(base, "data", None)
+    if not isinstance(model, mujoco.MjModel):
+        raise MotorlabError("video needs a MuJoCo env (Gymnasium MuJoCo or MyoSuite).")
+    model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
+    model.vis.global_.offheight = max(model.vis.global_.offheight, height)
+    if camera is None:
+        camera = 0 if model.ncam else -1  # the model's first camera, else the free camera
+    elif isinstance(camera, str) and camera.lstrip("-").isdigit():
+        camera = int(camera)
+    names = [model.camera(i).name for i in range(model.ncam)]
+    if isinstance(camera, str) and camera not in names:
+        raise MotorlabError(f"no camera {camera!r} in this model; cameras: {', '.join(names) or 'none (use -1, the free camera)'}.")
+    try:
+        renderer = mujoco.Renderer(model, height, width)
+    except Exception as e:  # no usable OpenGL: say how to get one
+        raise MotorlabError(f"offscreen rendering failed ({e}); set MUJOCO_GL=egl and install "
+                            "libegl1 libegl-mesa0 libgl1-mesa-dri (make demo does).") from None
+    return renderer, data, camera
+
+
+def render_video(run_dir: Path, episodes: int = 5, seed: int = 0, camera: str | None = None,
+                 width: int = 640, height: int = 480, out: Path | None = None) -> dict[str, Any]:
+    """Render `episodes` deterministic episodes of the run's policy to `videos/episode_<k>.mp4`.
+
+    Returns:
+        A summary with the files, frame counts, fps and episode returns.
+    """
+    import imageio.v3 as iio
+
+    if episodes <= 0:
+        raise MotorlabError(f"--episodes must be positive, got {episodes}.")
+    run_dir = require_run_dir(Path(run_dir))
+    config = read_config(run_dir)
+    env_cfg = EnvConfig.model_validate({k: v for k, v in config.get("env", {}).items() if k != "reward"})
+    env = make_env(env_cfg, shaped=False)
+    policy = load_policy(config.get("policy", str(run_dir)), env, env_cfg.id, seed)
+    renderer, data, cam = _renderer(env, width, height, camera)
+    dt = env_dt(env) or 1.0 / MAX_FPS
+    every = max(1, math.ceil((1.0 / dt) / MAX_FPS))
+    fps = (1.0 / dt) / every
+    folder = Path(out) if out else run_dir / "videos"
+    files, returns, frames_per = [], [], []
+    for k in range(episodes):
+        obs, _ = env.reset(seed=seed + k)
+        policy.reset(1)
+        frames, ret, done, t = [], 0.0, False, 0
+        while not done:
+            if t % every == 0:
+                renderer.update_scene(data, camera=cam)
+                frames.append(renderer.render().copy())
+            obs, r, terminated, truncated, _ = env.step(policy.act(obs[None])[0])
+            ret += float(r)
+            done = terminated or truncated
+            t += 1
+        renderer.update_scene(data, camera=cam)
+        frames.append(renderer.render().copy())
+        path = folder / f"episode_{k}.mp4"
+        write_mp4(path, frames, fps)
+        files.append(str(path))
+        returns.append(ret)
+        frames_per.append(len(frames))
+    renderer.close()
+    env.close()
+    summary = {"videos": files, "frames": frames_per, "fps": fps, "returns": returns, "camera": cam,
+               "width": width, "height": height}
+    # the run's own summary.json stays as it is; the videos get their own index
+    write_json(folder / "videos.json", summary)
+    return summary
+
+
+def write_mp4(path: Path, frames: list[np.ndarray], fps: float) -> None:
+    """H.264 (yuv420p, what browsers play) via imageio's ffmpeg, to a temp file renamed into place."""
+    import os
+    import tempfile
+
+    import imageio.v2 as imageio
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".mp4")
+    os.close(fd)
+    try:
+        with imageio.get_writer(tmp, format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p",
+                                macro_block_size=8, ffmpeg_log_level="error") as writer:
+            for frame in frames:
+                writer.append_data(frame)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
