@@ -11,14 +11,17 @@ $(STAMP): pyproject.toml requirements.lock scripts/setup.sh
 
 setup: $(STAMP)
 
-demo: $(STAMP)  ## the pendulum study: PID, PPO, delay, history, motorlab's fast preset
+demo: $(STAMP)  ## the pendulum study, then the SAR pipeline on the MyoSuite hand in miniature (~3 min)
 	$(VENV)/bin/motorlab run pendulum --out runs/demo-pendulum
+	$(VENV)/bin/motorlab run sar-hand-quick --out runs/demo-sar-hand-quick
+	@echo "Results: runs/demo-pendulum and runs/demo-sar-hand-quick (table.txt, summary.json, plots/, one folder per step)"
 
 test: $(STAMP)  ## the test suite (a few minutes on 2 cores)
 	$(VENV)/bin/python -m pytest -q
 
 bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/pendulum_steps_to_success.py
+	$(VENV)/bin/python benchmarks/sar_decode.py
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

@@ -260,6 +260,29 @@ def video(
         stdout.print(f"written: {path}  (return {ret:.1f})")
 
 
+@app.command(epilog="Example:\n\n  motorlab compare --group SAR-RL=runs/sar-s0,runs/sar-s1 --group RL-E2E=runs/e2e-s0,runs/e2e-s1")
+def compare(
+    group: Annotated[list[str], typer.Option("--group", help="LABEL=RUN_DIR[,RUN_DIR...]: one setting, its seeds.")],
+    title: Annotated[str, typer.Option(help="Figure title.")] = "Learning curves",
+    out: Out = None,
+):
+    """Learning curves (return and success vs env steps) of settings across seeds: mean and 95% band, PNG."""
+    from motorlab.report.compare import compare_curves
+    from motorlab.runs import prepare_run_dir, write_config, write_summary
+
+    groups = {}
+    for item in group:
+        label, sep, runs = item.partition("=")
+        if not sep or not label or not runs:
+            raise MotorlabError(f"--group {item!r}: write LABEL=RUN_DIR[,RUN_DIR...], e.g. --group SAR-RL=runs/a,runs/b.")
+        groups[label] = [Path(r) for r in runs.split(",") if r]
+    run_dir = prepare_run_dir(out, "compare")
+    result = compare_curves(groups, run_dir / "plots" / "learning_curves.png", title)
+    write_config(run_dir, {"groups": {k: [str(r) for r in v] for k, v in groups.items()}, "title": title})
+    write_summary(run_dir, {f"{label}.{k}": v for label, r in result.items() for k, v in r.items()})
+    stdout.print(f"written: {run_dir}/plots/learning_curves.png")
+
+
 synergies = typer.Typer(help="Muscle synergies: collect activations, VAF, fit or import a SAR.",
                         no_args_is_help=True, rich_markup_mode="rich")
 app.add_typer(synergies, name="synergies")

@@ -115,7 +115,8 @@ class Evaluator:
     def action_space(self) -> gym.Space:
         return self.envs[0].action_space
 
-    def run(self, policy: Policy, stop_below: float | None = None, record: bool = False) -> Rollouts:
+    def run(self, policy: Policy, stop_below: float | None = None, record: bool = False,
+            first_seed: int | None = None, count: int | None = None) -> Rollouts:
         """Run one episode per env.
 
         Args:
@@ -123,9 +124,13 @@ class Evaluator:
             stop_below: abort as soon as any episode ends with a return below this
                 (used by --until-solved: one failure already means "not solved").
             record: keep observation and action traces.
+            first_seed, count: run only the first `count` envs, episode i from
+                first_seed + i (default: all envs from the evaluator's seed).
         """
-        n = self.episodes
-        obs = np.stack([env.reset(seed=self.seed + i)[0] for i, env in enumerate(self.envs)])
+        n = self.episodes if count is None else count
+        first = self.seed if first_seed is None else first_seed
+        envs = self.envs[:n]
+        obs = np.stack([env.reset(seed=first + i)[0] for i, env in enumerate(envs)])
         policy.reset(n)
         active = np.ones(n, dtype=bool)
         returns = np.zeros(n)
@@ -138,7 +143,7 @@ class Evaluator:
         while active.any():
             actions = np.asarray(policy.act(obs), dtype=np.float32)
             for i in np.flatnonzero(active):
-                o, r, terminated, truncated, info = self.envs[i].step(actions[i])
+                o, r, terminated, truncated, info = envs[i].step(actions[i])
                 obs[i] = o
                 returns[i] += r
                 lengths[i] += 1
@@ -168,16 +173,16 @@ def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, recor
              batch: int = 50) -> Rollouts:
     """Evaluate `policy` for `episodes` episodes on the env `env_cfg` describes.
 
-    Episodes run `batch` at a time (episode i always starts from seed + i), so
-    hundreds of episodes of a large model do not hold hundreds of envs at once.
+    Episodes run `batch` at a time on the same `batch` envs (episode i always
+    starts from seed + i), so hundreds of episodes of a large model neither hold
+    nor build hundreds of envs.
     """
-    parts = []
-    for start in range(0, episodes, batch):
-        ev = Evaluator(env_cfg, min(batch, episodes - start), seed + start)
-        try:
-            parts.append(ev.run(policy, record=record))
-        finally:
-            ev.close()
+    ev = Evaluator(env_cfg, min(batch, episodes), seed)  # envs are made once and reused batch after batch
+    try:
+        parts = [ev.run(policy, record=record, first_seed=seed + start, count=min(batch, episodes - start))
+                 for start in range(0, episodes, batch)]
+    finally:
+        ev.close()
     if len(parts) == 1:
         return parts[0]
     return Rollouts(np.concatenate([p.returns for p in parts]), np.concatenate([p.lengths for p in parts]),

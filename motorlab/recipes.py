@@ -3,14 +3,15 @@
     name = "pendulum"
     description = "..."
 
-    [defaults]                 # fields every step gets unless it sets them
+    [defaults]                 # fields every step gets unless it sets them (where its kind has them)
     env = "InvertedPendulum-v5"
 
     [[steps]]
-    name = "ppo"               # the step's run folder: <study>/<name>/
-    kind = "train"             # train | evaluate
+    name = "ppo"               # the step's run folder: <study>/<name>/ (<name>/seed<k>/ with several seeds)
+    kind = "train"
     algo = "ppo"
     timesteps = 100000
+    seeds = [0, 1, 2]          # optional: one run per seed
     until_solved = true
 
     [[steps]]
@@ -19,9 +20,16 @@
     policy = "@ppo"            # the policy trained by an earlier step (or pid, pid:kp=..., a folder)
     delay = 0.2
 
-Train steps take every `motorlab train` setting (env, delay, delay_on, history,
-reward, algo, preset, timesteps, seed, lr, clip_range, until_solved, ...);
-evaluate steps take policy, env, delay, delay_on, history, episodes, seed.
+Kinds and their fields ("@step" names an earlier step's output):
+    train      every `motorlab train` setting (env, delay, delay_on, history, reward, sar, phi,
+               algo, preset, timesteps, seed, seeds, lr, clip_range, until_solved, ...);
+               sar = "@fit-step" trains in that step's synergy space
+    evaluate   policy, env, delay, delay_on, history, sar, phi, episodes, seed
+    collect    run = "@train-step", episodes, percentile, preview, deterministic, workers, seed
+    vaf        activations = "@collect-step", threshold, method, max_n
+    fit        activations = "@collect-step", n_synergies | vaf, method, seed
+    zeroshot   runs = ["@train-step", ...], envs = [...], episodes, seed
+    compare    groups = { "LABEL" = ["@train-step", ...] }, title
 Bundled recipes live in motorlab/recipes/ and are addressed by name.
 """
 
@@ -42,22 +50,75 @@ ENV_KEYS = {"env": "id", "delay": "delay", "delay_on": "delay_on", "history": "h
             "sar": "sar", "phi": "phi"}
 
 
-class EvalStep(BaseModel):
+class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
+
+class EvalStep(_Strict):
     policy: str
     env: EnvConfig
     episodes: int = Field(10, gt=0)
     seed: int = Field(0, ge=0)
 
 
+class CollectStep(_Strict):
+    run: str
+    episodes: int = Field(100, gt=0)
+    percentile: float = Field(80.0, ge=0, le=100)
+    preview: int = Field(50, gt=0)
+    deterministic: bool = False
+    workers: int | None = Field(None, gt=0)
+    seed: int = Field(0, ge=0)
+
+
+class VafStep(_Strict):
+    activations: str
+    threshold: float = Field(0.8, gt=0, le=1)
+    method: Literal["pca", "pca-ica", "nmf"] = "pca"
+    max_n: int | None = Field(None, gt=0)
+
+
+class FitStep(_Strict):
+    activations: str
+    n_synergies: int | None = Field(None, gt=0)
+    vaf: float | None = Field(None, gt=0, le=1)
+    method: Literal["pca-ica", "pca", "nmf"] = "pca-ica"
+    seed: int = Field(0, ge=0)
+
+
+class ZeroshotStep(_Strict):
+    runs: list[str] = Field(min_length=1)
+    envs: list[str] = Field(min_length=1)
+    episodes: int = Field(500, gt=0)
+    seed: int = Field(0, ge=0)
+
+
+class CompareStep(_Strict):
+    groups: dict[str, list[str]] = Field(min_length=1)
+    title: str = "Learning curves"
+
+
+KINDS: dict[str, type[BaseModel]] = {"evaluate": EvalStep, "collect": CollectStep, "vaf": VafStep, "fit": FitStep,
+                                     "zeroshot": ZeroshotStep, "compare": CompareStep}
+# Which kind of earlier step each reference field must name.
+REFERENCES = {("evaluate", "policy"): "train", ("collect", "run"): "train", ("vaf", "activations"): "collect",
+              ("fit", "activations"): "collect", ("zeroshot", "runs"): "train", ("compare", "groups"): "train",
+              ("train", "sar"): "fit"}
+
+
 class Step(BaseModel):
-    """One validated step: its name, kind and settings."""
+    """One validated step: its name, kind and settings (`train` for training, else `settings`)."""
 
     name: str
-    kind: Literal["train", "evaluate"]
+    kind: Literal["train", "evaluate", "collect", "vaf", "fit", "zeroshot", "compare"]
     train: TrainConfig | None = None
-    evaluate: EvalStep | None = None
+    seeds: list[int] | None = None
+    sar_ref: str | None = None  # train: "@fit" resolved when the study runs
+    settings: Any = None
+
+    @property
+    def evaluate(self) -> EvalStep | None:
+        return self.settings if self.kind == "evaluate" else None
 
     @property
     def policy_ref(self) -> str | None:
@@ -125,8 +186,30 @@ def _explain(e: ValidationError, where: str, known: set[str]) -> str:
     return f"{where}: field {field!r}: {err['msg']}"
 
 
-TRAIN_FIELDS = (set(TrainConfig.model_fields) - {"env"}) | set(ENV_KEYS)
+TRAIN_FIELDS = (set(TrainConfig.model_fields) - {"env"}) | set(ENV_KEYS) | {"seeds"}
 EVAL_FIELDS = (set(EvalStep.model_fields) - {"env"}) | set(ENV_KEYS) - {"reward"}
+FIELDS = {"train": TRAIN_FIELDS, "evaluate": EVAL_FIELDS,
+          **{k: set(m.model_fields) for k, m in KINDS.items() if k != "evaluate"}}
+ALL_FIELDS = set().union(*FIELDS.values())
+
+
+def _refs(value: Any) -> list[str]:
+    """Step names referenced ("@name") in a field value (a string, a list, or a dict of lists)."""
+    items = value if isinstance(value, list) else list(value.values()) if isinstance(value, dict) else [value]
+    flat = [x for item in items for x in (item if isinstance(item, list) else [item])]
+    return [x[1:] for x in flat if isinstance(x, str) and x.startswith("@")]
+
+
+def _check_refs(kind: str, fields: dict, steps: list[Step], where: str) -> None:
+    for (k, field), wanted in REFERENCES.items():
+        if k != kind or field not in fields:
+            continue
+        for ref in _refs(fields[field]):
+            target = next((s for s in steps if s.name == ref), None)
+            if target is None or target.kind != wanted:
+                names = ", ".join(s.name for s in steps if s.kind == wanted) or "none"
+                raise MotorlabError(f"{where}: {field} '@{ref}' names no earlier {wanted} step; "
+                                    f"{wanted} steps so far: {names}.")
 
 
 def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
@@ -144,55 +227,62 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
         raw = _RecipeFile.model_validate(data)
     except ValidationError as e:
         raise MotorlabError(_explain(e, source, set(_RecipeFile.model_fields))) from None
-    unknown_defaults = [k for k in raw.defaults if k not in TRAIN_FIELDS | EVAL_FIELDS]
+    unknown_defaults = [k for k in raw.defaults if k not in ALL_FIELDS]
     if unknown_defaults:
         k = unknown_defaults[0]
-        raise MotorlabError(f"{source}: [defaults]: unknown field {k!r}{did_you_mean(k, TRAIN_FIELDS | EVAL_FIELDS)}")
+        raise MotorlabError(f"{source}: [defaults]: unknown field {k!r}{did_you_mean(k, ALL_FIELDS)}")
     steps: list[Step] = []
-    seen: set[str] = set()
     for i, fields in enumerate(raw.steps):
         kind = fields.get("kind", "train")
-        known = TRAIN_FIELDS if kind == "train" else EVAL_FIELDS
-        fields = {**{k: v for k, v in raw.defaults.items() if k in known}, **fields}
-        name = str(fields.pop("name", f"step{i + 1}"))
-        fields.pop("kind", None)
+        name = str(fields.get("name", f"step{i + 1}"))
         where = f"{source}: steps[{i}] ({name})"
-        if name in seen:
+        if kind not in FIELDS:
+            raise MotorlabError(f"{where}: unknown kind {kind!r}{did_you_mean(str(kind), FIELDS)}; "
+                                f"kinds: {', '.join(FIELDS)}.")
+        known = FIELDS[kind]
+        fields = {**{k: v for k, v in raw.defaults.items() if k in known},
+                  **{k: v for k, v in fields.items() if k not in ("name", "kind")}}
+        if any(s.name == name for s in steps):
             raise MotorlabError(f"{where}: another step is already named {name!r}; step names must be unique.")
-        if kind == "train":
-            unknown = [k for k in fields if k not in known]
-            if unknown:
-                raise MotorlabError(f"{where}: unknown field {unknown[0]!r}{did_you_mean(unknown[0], known)}")
-            try:
-                step = Step(name=name, kind="train", train=resolve(_split_env(fields)))
-            except ValidationError as e:
-                raise MotorlabError(_explain(e, where, known)) from None
-            except MotorlabError as e:
-                raise MotorlabError(f"{where}: {e}") from None
-        elif kind == "evaluate":
-            unknown = [k for k in fields if k not in known]
-            if unknown:
-                raise MotorlabError(f"{where}: unknown field {unknown[0]!r}{did_you_mean(unknown[0], known)}")
-            policy = str(fields.get("policy", ""))
-            settings = _split_env(fields)
-            if policy.startswith("@"):
-                ref = next((s for s in steps if s.name == policy[1:]), None)
-                if ref is None or ref.kind != "train":
-                    raise MotorlabError(f"{where}: policy {policy!r} names no earlier train step; "
-                                        f"train steps so far: {', '.join(s.name for s in steps if s.kind == 'train') or 'none'}.")
-                # by default, evaluate on the env the policy was trained on, without its reward shaping
-                trained_env = ref.train.env.model_dump(exclude={"reward"})
-                settings["env"] = {**trained_env, **settings.get("env", {})}
-            try:
-                step = Step(name=name, kind="evaluate", evaluate=EvalStep.model_validate(settings))
-            except ValidationError as e:
-                raise MotorlabError(_explain(e, where, known)) from None
-        else:
-            raise MotorlabError(f"{where}: unknown kind {kind!r}; use 'train' or 'evaluate'.")
-        _check_env(step.train.env if step.train else step.evaluate.env, where)
-        seen.add(name)
+        unknown = [k for k in fields if k not in known]
+        if unknown:
+            raise MotorlabError(f"{where}: unknown field {unknown[0]!r}{did_you_mean(unknown[0], known)}")
+        _check_refs(kind, fields, steps, where)
+        try:
+            step = _make_step(name, kind, fields, steps)
+        except ValidationError as e:
+            raise MotorlabError(_explain(e, where, known)) from None
+        except MotorlabError as e:
+            raise MotorlabError(f"{where}: {e}") from None
+        env = step.train.env if step.train else step.evaluate.env if step.evaluate else None
+        if env is not None:
+            _check_env(env, where)
         steps.append(step)
     return Recipe(name=raw.name, description=raw.description, source=source, steps=steps)
+
+
+def _make_step(name: str, kind: str, fields: dict, steps: list[Step]) -> Step:
+    if kind == "train":
+        fields = dict(fields)
+        seeds = fields.pop("seeds", None)
+        if seeds is not None and (not isinstance(seeds, list) or not seeds
+                                  or not all(isinstance(x, int) and x >= 0 for x in seeds)):
+            raise MotorlabError("seeds must be a non-empty list of non-negative integers, e.g. seeds = [0, 1, 2].")
+        sar = fields.get("sar")
+        sar_ref = sar if isinstance(sar, str) and sar.startswith("@") else None
+        if sar_ref:
+            fields.pop("sar")  # the fit step's sar.npz exists only once the study runs
+        return Step(name=name, kind="train", train=resolve(_split_env(fields)), seeds=seeds, sar_ref=sar_ref)
+    if kind == "evaluate":
+        settings = _split_env(fields)
+        policy = str(fields.get("policy", ""))
+        if policy.startswith("@"):
+            ref = next(s for s in steps if s.name == policy[1:])
+            # by default, evaluate on the env the policy was trained on, without its reward shaping
+            trained_env = ref.train.env.model_dump(exclude={"reward"})
+            settings["env"] = {**trained_env, **settings.get("env", {})}
+        return Step(name=name, kind="evaluate", settings=EvalStep.model_validate(settings))
+    return Step(name=name, kind=kind, settings=KINDS[kind].model_validate(fields))
 
 
 def _check_env(env: EnvConfig, where: str) -> None:

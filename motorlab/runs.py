@@ -100,11 +100,22 @@ def write_config(run_dir: Path, config: dict[str, Any]) -> None:
     atomic_write_text(Path(run_dir) / CONFIG, _config_toml(config))
 
 
-def finished_with(run_dir: Path, config: dict[str, Any]) -> bool:
-    """True when run_dir finished (summary.json) with exactly these settings, as written to TOML."""
+def finished_with(run_dir: Path, config: dict[str, Any], filename: str = CONFIG) -> bool:
+    """True when run_dir finished (summary.json) with exactly these settings, as written to TOML
+    in `filename` (config.toml by default)."""
     import tomllib
 
-    return is_complete(run_dir) and read_config(run_dir) == tomllib.loads(_config_toml(config))
+    path = Path(run_dir) / filename
+    if not is_complete(run_dir) or not path.is_file():
+        return False
+    try:
+        return tomllib.loads(path.read_text()) == tomllib.loads(_config_toml(config))
+    except (ValueError, UnicodeDecodeError):
+        return False  # damaged: run the step again
+
+
+def write_toml(path: Path, config: dict[str, Any]) -> None:
+    atomic_write_text(Path(path), _config_toml(config))
 
 
 def read_config(run_dir: Path) -> dict[str, Any]:
@@ -184,6 +195,10 @@ def read_metrics(run_dir: Path) -> list[dict[str, float]]:
         raise MotorlabError(f"{path} is missing; this run wrote no training metrics.")
     rows = []
     with open(path, newline="") as f:
-        for row in csv.DictReader(f):
-            rows.append({k: (float(v) if v not in ("", None) else float("nan")) for k, v in row.items()})
+        for line, row in enumerate(csv.DictReader(f), start=2):
+            try:
+                rows.append({k: (float(v) if v not in ("", None) else float("nan")) for k, v in row.items()})
+            except (TypeError, ValueError):
+                raise MotorlabError(f"{path} line {line} holds a value that is not a number; "
+                                    "the file is damaged: re-run the step.") from None
     return rows

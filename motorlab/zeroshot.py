@@ -13,7 +13,7 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from motorlab.envs import EnvConfig, check_env_id, make_env
+from motorlab.envs import EnvConfig, check_env_id
 from motorlab.evaluate import evaluate
 from motorlab.errors import MotorlabError
 from motorlab.policies import load_run_policy
@@ -22,7 +22,8 @@ from motorlab.runs import prepare_run_dir, read_config, require_run_dir, write_c
 
 
 def zeroshot(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: int = 0,
-             out: Path | None = None, console: Console | None = None) -> dict[str, Any]:
+             out: Path | None = None, console: Console | None = None,
+             labels: list[str] | None = None) -> dict[str, Any]:
     """Evaluate every run on every env; write summary.json, table.txt and zeroshot.png.
 
     Returns:
@@ -39,7 +40,7 @@ def zeroshot(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: i
     for env_id in envs:
         check_env_id(env_id)
     runs = [require_run_dir(Path(r)) for r in run_dirs]
-    names = [r.name for r in runs]
+    names = list(labels) if labels else [r.name for r in runs]
     if len(set(names)) < len(names):
         names = [str(r) for r in runs]
     results: dict[str, dict[str, dict]] = {}
@@ -49,8 +50,6 @@ def zeroshot(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: i
         results[name] = {}
         for env_id in envs:
             cfg = EnvConfig.model_validate({**base, "id": env_id})
-            probe = make_env(cfg)
-            probe.close()
             results[name][env_id] = evaluate(policy, cfg, episodes, seed).summary()
     out_dir = prepare_run_dir(out, "zeroshot")
     write_config(out_dir, {"runs": [str(r) for r in runs], "envs": envs, "episodes": episodes, "seed": seed})

@@ -69,10 +69,13 @@ def learning_curve(run_dir: Path, path: Path, title: str = "", solve_return: flo
 
 def observation_trace(observations: np.ndarray, actions: np.ndarray, dt: float, labels: list[str],
                       path: Path, title: str = "") -> Path:
-    """Each observation element (and the action) against time for one episode."""
+    """Each observation element (and the action) against time for one episode; above
+    MAX_TRACE_LINES elements (MyoSuite: hundreds), heatmaps of the standardized values."""
     observations = np.asarray(observations)
     n = observations.shape[1]
     t = np.arange(len(observations)) * dt
+    if n > MAX_TRACE_LINES:
+        return _trace_heatmaps(observations, np.asarray(actions), t, path, title)
     with plt.rc_context(STYLE):
         fig, axes = plt.subplots(n + 1, 1, figsize=(7, 1.6 * (n + 1)), sharex=True)
         for i in range(n):
@@ -84,6 +87,30 @@ def observation_trace(observations: np.ndarray, actions: np.ndarray, dt: float, 
         axes[n].set_xlabel("time (s)")
         fig.suptitle(title or "Observation trace", fontsize=11)
         fig.align_ylabels(axes)
+        return _save(fig, path)
+
+
+MAX_TRACE_LINES = 8
+
+
+def _trace_heatmaps(observations: np.ndarray, actions: np.ndarray, t: np.ndarray, path: Path, title: str) -> Path:
+    def standardize(x: np.ndarray) -> np.ndarray:
+        x = x.reshape(len(x), -1).astype(np.float64)
+        std = x.std(axis=0)
+        return ((x - x.mean(axis=0)) / np.where(std > 0, std, 1.0)).T
+
+    panels = [("observation element", observations)] + ([("action element", actions)] if len(actions) else [])
+    with plt.rc_context(STYLE):
+        fig, axes = plt.subplots(len(panels), 1, figsize=(8, 3.2 * len(panels)), sharex=True, squeeze=False)
+        for ax, (label, values) in zip(axes[:, 0], panels):
+            tt = t if len(values) == len(t) else t[1:]
+            image = ax.imshow(standardize(values), aspect="auto", cmap="RdBu_r", vmin=-3, vmax=3, interpolation="nearest",
+                              extent=(tt[0], tt[-1] if len(tt) > 1 else tt[0] + 1e-9, values.reshape(len(values), -1).shape[1], 0))
+            ax.set_ylabel(label)
+            ax.grid(False)
+            fig.colorbar(image, ax=ax, label="standardized value")
+        axes[-1, 0].set_xlabel("time (s)")
+        fig.suptitle(title or "Observation trace", fontsize=11)
         return _save(fig, path)
 
 

@@ -38,6 +38,8 @@ class Tracker:
         self.solve_return = solve_return
         self.evaluator = Evaluator(cfg.env, cfg.solve_episodes, cfg.seed + EVAL_SEED_OFFSET)
         self.metrics = MetricsWriter(Path(run_dir) / METRICS, METRIC_FIELDS)
+        self.faults_log = Path(run_dir) / "faults.log"
+        self.faults_log.unlink(missing_ok=True)
         self.tb = SummaryWriter(str(Path(run_dir) / "tensorboard" / "motorlab"))
         self.t0 = time.perf_counter()
         self.recent = deque(maxlen=100)
@@ -65,8 +67,10 @@ class Tracker:
             self.tb.add_scalar("train/success_rate_100", row["success_rate_100"], steps)
         if fault:
             self.faults += 1
-            row["numerical_fault"] = fault
+            row["numerical_fault"] = 1
             self.tb.add_scalar("train/numerical_faults", self.faults, steps)
+            with open(self.faults_log, "a") as f:  # the reason, one line per faulted episode
+                f.write(f"timesteps={steps} episode_return={ret:.6g} length={length}: {fault}\n")
         self.metrics.write(row)
 
     def success_rate(self) -> float | None:

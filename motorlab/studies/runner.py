@@ -1,11 +1,17 @@
 """`motorlab run RECIPE`: each step writes its own run folder inside the study folder.
 
-Re-running a study into the same folder skips steps that finished with the same
+    <study>/<step>/            one folder per step (train steps with several seeds: <step>/seed<k>/)
+    <study>/table.txt          the printed table
+    <study>/summary.json       "<step>.<key>" headline numbers
+    <study>/plots/*.png        returns and steps-to-success of every step
+
+Re-running a study into the same folder keeps steps that finished with the same
 settings, so an interrupted study resumes where it stopped.
 """
 
 from __future__ import annotations
 
+import statistics
 import time
 from pathlib import Path
 from typing import Any
@@ -13,45 +19,203 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from motorlab.evaluate import evaluate_step
 from motorlab.recipes import Recipe, Step
 from motorlab.report.plots import comparison_bars
 from motorlab.report.run import plot_run
-from motorlab.rl.train import train
-from motorlab.runs import atomic_write_text, finished_with, prepare_run_dir, read_json, write_config, write_summary
+from motorlab.runs import (atomic_write_text, finished_with, prepare_run_dir, read_json, write_config, write_summary,
+                           write_toml)
 
-# Headline keys copied from each step into the study's summary.json as "<step>.<key>".
+STEP_FILE = "recipe_step.toml"  # what the study asked of a step, for resuming
 HEADLINE = ("return_mean", "return_std", "return_min", "success_rate", "steps_to_success", "timesteps", "wall_seconds")
 
 
-def _step_config(step: Step, study_dir: Path) -> dict[str, Any]:
-    """The settings a step's run folder records (as `motorlab train` / `evaluate` write them)."""
+class _Outputs:
+    """Run folders each finished step produced, for "@step" references."""
+
+    def __init__(self, study_dir: Path):
+        self.study_dir = study_dir
+        self.dirs: dict[str, list[Path]] = {}
+
+    def one(self, ref: str) -> Path:
+        return self.dirs[ref[1:]][0] if ref.startswith("@") else Path(ref)
+
+    def many(self, refs: list[str]) -> list[tuple[str, Path]]:
+        """(label, run folder) for each referenced run, all seeds of a train step."""
+        out = []
+        for ref in refs:
+            if not ref.startswith("@"):
+                out.append((Path(ref).name, Path(ref)))
+                continue
+            dirs = self.dirs[ref[1:]]
+            out += [(ref[1:] if len(dirs) == 1 else f"{ref[1:]}/{d.name}", d) for d in dirs]
+        return out
+
+
+def _train_configs(step: Step, study_dir: Path, outputs: _Outputs) -> list[tuple[Path, Any]]:
+    cfg = step.train
+    if step.sar_ref:
+        cfg = cfg.model_copy(update={"env": cfg.env.model_copy(
+            update={"sar": str((outputs.one(step.sar_ref) / "sar.npz").resolve())})})
+    if not step.seeds:
+        return [(study_dir / step.name, cfg)]
+    return [(study_dir / step.name / f"seed{s}", cfg.model_copy(update={"seed": s})) for s in step.seeds]
+
+
+def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console) -> dict[str, Any]:
+    """Run one step (or keep its finished result); returns its headline numbers."""
+    from motorlab.rl.train import train
+
+    step_dir = study_dir / step.name
     if step.kind == "train":
-        return step.train.model_dump()
-    ev = step.evaluate
-    policy = str(study_dir / step.policy_ref) if step.policy_ref else ev.policy
-    return {"policy": policy, "episodes": ev.episodes, "seed": ev.seed, "env": ev.env.model_dump()}
+        summaries = []
+        for run_dir, cfg in _train_configs(step, study_dir, outputs):
+            if finished_with(run_dir, cfg.model_dump()):
+                console.print(f"      {run_dir.name}: already done with these settings; kept")
+                summaries.append(read_json(run_dir / "summary.json"))
+            else:
+                summaries.append(train(cfg, run_dir))
+            plot_run(run_dir)
+        outputs.dirs[step.name] = [d for d, _ in _train_configs(step, study_dir, outputs)]
+        return _train_headline(summaries)
+    config = _step_config(step, outputs)
+    outputs.dirs[step.name] = [step_dir]
+    if finished_with(step_dir, config, STEP_FILE):
+        console.print("      already done with these settings; kept")
+        summary = read_json(step_dir / "summary.json")
+    else:
+        summary = _execute(step, config, step_dir, console)
+        write_toml(step_dir / STEP_FILE, config)
+    if step.kind == "evaluate":
+        plot_run(step_dir)
+        return {k: summary.get(k) for k in HEADLINE if summary.get(k) is not None}
+    return _other_headline(step, summary)
 
 
-def _headline(step: Step, s: dict[str, Any]) -> dict[str, Any]:
-    """Flat headline numbers of one step (training steps report their final evaluation)."""
-    get = (lambda k: s.get(f"eval_{k}", s.get(k))) if step.kind == "train" else s.get
-    return {k: get(k) for k in HEADLINE if get(k) is not None or k == "steps_to_success" and step.kind == "train"}
+def _step_config(step: Step, outputs: _Outputs) -> dict[str, Any]:
+    """A non-train step's settings with its references resolved to run folders."""
+    s = step.settings
+    if step.kind == "evaluate":
+        return {"policy": str(outputs.one(s.policy)), "episodes": s.episodes, "seed": s.seed, "env": s.env.model_dump()}
+    config = s.model_dump()
+    if step.kind == "collect":
+        config["run"] = str(outputs.one(s.run))
+    elif step.kind in ("vaf", "fit"):
+        config["activations"] = str(outputs.one(s.activations) / "activations.npz")
+    elif step.kind == "zeroshot":
+        config["runs"] = {label: str(d) for label, d in outputs.many(s.runs)}
+    elif step.kind == "compare":
+        config["groups"] = {g: [str(d) for _, d in outputs.many(refs)] for g, refs in s.groups.items()}
+    return config
+
+
+def _execute(step: Step, c: dict[str, Any], step_dir: Path, console: Console) -> dict[str, Any]:
+    if step.kind == "evaluate":
+        from motorlab.evaluate import evaluate_step
+
+        return evaluate_step(c["policy"], step.settings.env, c["episodes"], c["seed"], step_dir)
+    if step.kind == "collect":
+        from motorlab.synergy.collect import collect
+
+        return collect(Path(c["run"]), c["episodes"], c["percentile"], c["preview"], c["seed"], c["deterministic"],
+                       c["workers"], out=step_dir)
+    if step.kind == "vaf":
+        from motorlab.synergy.steps import vaf_step
+
+        return vaf_step(Path(c["activations"]), c["threshold"], c["method"], c["max_n"], step_dir)
+    if step.kind == "fit":
+        from motorlab.synergy.steps import fit_step
+
+        return fit_step(Path(c["activations"]), c["n_synergies"], c["vaf"], c["method"], c["seed"], step_dir)
+    if step.kind == "zeroshot":
+        from motorlab.zeroshot import zeroshot
+
+        return zeroshot([Path(d) for d in c["runs"].values()], c["envs"], c["episodes"], c["seed"], step_dir,
+                        console=console, labels=list(c["runs"]))
+    if step.kind == "compare":
+        from motorlab.report.compare import compare_curves
+
+        run = prepare_run_dir(step_dir, "compare")
+        result = compare_curves({g: [Path(d) for d in ds] for g, ds in c["groups"].items()},
+                                run / "plots" / "learning_curves.png", c["title"])
+        write_config(run, c)
+        summary = {f"{label}.{k}": v for label, r in result.items() for k, v in r.items()}
+        write_summary(run, summary)
+        return summary
+    raise AssertionError(step.kind)  # recipes.py admits no other kind
+
+
+def _train_headline(summaries: list[dict[str, Any]]) -> dict[str, Any]:
+    """Final evaluation of a train step; with several seeds, the mean over seeds (std across seeds)."""
+    if len(summaries) == 1:
+        s = summaries[0]
+        head = {k: s.get(f"eval_{k}", s.get(k)) for k in HEADLINE}
+        head["train_success_rate_last100"] = s.get("train_success_rate_last100")
+        return {k: v for k, v in head.items() if v is not None or k == "steps_to_success"}
+    means = [s["eval_return_mean"] for s in summaries]
+    solved = [s["steps_to_success"] for s in summaries]
+    rates = [s.get("train_success_rate_last100") for s in summaries]
+    return {
+        "seeds": len(summaries),
+        "return_mean": statistics.fmean(means),
+        "return_std": statistics.stdev(means),
+        "return_min": min(s["eval_return_min"] for s in summaries),
+        "success_rate": statistics.fmean(s["eval_success_rate"] for s in summaries),
+        "train_success_rate_last100": statistics.fmean(rates) if None not in rates else None,
+        # a seed that never solved makes the median unknowable, not smaller
+        "steps_to_success": statistics.median(solved) if None not in solved else None,
+        "timesteps": sum(s["timesteps"] for s in summaries),
+        "wall_seconds": sum(s["wall_seconds"] for s in summaries),
+    }
+
+
+def _other_headline(step: Step, s: dict[str, Any]) -> dict[str, Any]:
+    if step.kind == "collect":
+        keys = ("samples", "n_muscles", "episodes_kept", "threshold", "kept_success_rate")
+    elif step.kind == "vaf":
+        keys = ("n_for_threshold", "threshold", "n_muscles")
+    elif step.kind == "fit":
+        keys = ("n_synergies", "n_muscles", "vaf")
+    elif step.kind == "zeroshot":
+        return {**{k: v for k, v in s.items() if "." in k}, **_zeroshot_means(s)}
+    else:
+        return {k: v for k, v in s.items() if "." in k}  # compare: already "<group>.<key>"
+    return {k: s.get(k) for k in keys}
+
+
+def _zeroshot_means(s: dict[str, Any]) -> dict[str, float]:
+    """"<step>.<env>.success_rate_mean": the mean over a train step's seeds."""
+    groups: dict[str, list[float]] = {}
+    for key, value in s.items():
+        if key.endswith(".success_rate") and value is not None:
+            label, env_id, _ = key.rsplit(".", 2)
+            groups.setdefault(f"{label.split('/')[0]}.{env_id}", []).append(value)
+    return {f"{k}.success_rate_mean": statistics.fmean(v) for k, v in groups.items()}
 
 
 def _describe(step: Step) -> str:
     if step.kind == "train":
         c = step.train
         what = f"{c.preset or c.algo}" + (" until solved" if c.until_solved else f" {c.timesteps:,} steps")
+        if step.seeds:
+            what += f" × {len(step.seeds)} seeds"
         env = c.env
+    elif step.kind == "evaluate":
+        what, env = f"evaluate {step.evaluate.policy}", step.evaluate.env
     else:
-        what = f"evaluate {step.evaluate.policy}"
-        env = step.evaluate.env
+        s = step.settings
+        return {"collect": lambda: f"collect {s.episodes} episodes from {s.run} (≥ {s.percentile:g}th pct.)",
+                "vaf": lambda: f"VAF of {s.activations} ({s.method})",
+                "fit": lambda: f"fit {s.method} to {s.activations}"
+                               + (f", N = {s.n_synergies}" if s.n_synergies else f", VAF ≥ {s.vaf}"),
+                "zeroshot": lambda: f"zero-shot {', '.join(s.runs)} on {', '.join(s.envs)}",
+                "compare": lambda: f"compare {', '.join(s.groups)}"}[step.kind]()
     tags = [env.id]
     if env.delay:
         tags.append(f"delay {env.delay:g} s")
     if env.history > 1:
         tags.append(f"history {env.history}")
+    if env.sar or step.sar_ref:
+        tags.append(f"synergies {step.sar_ref or Path(env.sar).name}, phi {env.phi:g}")
     return f"{what} · {', '.join(tags)}"
 
 
@@ -63,23 +227,15 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
     """
     console = console or Console(stderr=True)
     study_dir = prepare_run_dir(out, recipe.name)
-    write_config(study_dir, {"recipe": recipe.name, "source": recipe.source,
-                             "steps": {s.name: _step_config(s, study_dir) for s in recipe.steps}})
+    write_config(study_dir, {"recipe": recipe.name, "source": recipe.source, "steps": [s.name for s in recipe.steps]})
     t0 = time.perf_counter()
+    outputs = _Outputs(study_dir)
     results: dict[str, dict[str, Any]] = {}
     for i, step in enumerate(recipe.steps, 1):
-        step_dir = study_dir / step.name
-        config = _step_config(step, study_dir)
         console.print(f"[bold][{i}/{len(recipe.steps)}][/bold] {step.name}: {_describe(step)}")
-        if finished_with(step_dir, config):
-            console.print("      already done with these settings; kept")
-            summary = read_json(step_dir / "summary.json")
-        elif step.kind == "train":
-            summary = train(step.train, step_dir)
-        else:
-            summary = evaluate_step(config["policy"], step.evaluate.env, config["episodes"], config["seed"], step_dir)
-        plot_run(step_dir)
-        results[step.name] = _headline(step, summary)
+        t_step = time.perf_counter()
+        results[step.name] = _run_step(step, study_dir, outputs, console)
+        console.print(f"      done in {time.perf_counter() - t_step:.1f} s")
     study_summary: dict[str, Any] = {"recipe": recipe.name, "steps": [s.name for s in recipe.steps],
                                      "wall_seconds": round(time.perf_counter() - t0, 2)}
     for name, head in results.items():
@@ -97,20 +253,38 @@ def _cells(step: Step, r: dict[str, Any]) -> list[str]:
     def fmt(v, f="{:,.1f}"):
         return "-" if v is None else f.format(v)
 
+    if step.kind not in ("train", "evaluate"):
+        return [step.name, _describe(step), "-", "-", "-", "n/a", "-", _note(step, r)]
     sts = r.get("steps_to_success", "n/a" if step.kind == "evaluate" else None)
+    rate = r.get("train_success_rate_last100")
     return [step.name, _describe(step), f"{fmt(r.get('return_mean'))} ± {fmt(r.get('return_std'))}",
             fmt(r.get("return_min"), "{:,.0f}"), fmt(r.get("success_rate"), "{:.0%}"),
-            sts if isinstance(sts, str) else ("not solved" if sts is None else f"{sts:,}"),
-            fmt(r.get("wall_seconds"), "{:.1f}")]
+            sts if isinstance(sts, str) else ("not solved" if sts is None else f"{sts:,.0f}"),
+            fmt(r.get("wall_seconds"), "{:.1f}"),
+            f"training success (last 100 episodes) {rate:.0%}" if rate is not None else ""]
 
 
-COLUMNS = ["step", "what", "return (mean ± std)", "min return", "success", "steps to success", "train s"]
+def _note(step: Step, r: dict[str, Any]) -> str:
+    if step.kind == "collect":
+        return f"kept {r['episodes_kept']} episodes, {r['samples']:,} samples x {r['n_muscles']} muscles"
+    if step.kind == "vaf":
+        n = r["n_for_threshold"]
+        return f"N = {n} reaches VAF {r['threshold']:.0%}" if n else f"no N reaches VAF {r['threshold']:.0%}"
+    if step.kind == "fit":
+        return f"{r['n_synergies']} synergies, VAF {r['vaf']:.1%}"
+    if step.kind == "zeroshot":
+        means = {k[: -len(".success_rate_mean")]: v for k, v in r.items() if k.endswith(".success_rate_mean")}
+        return "; ".join(f"{k}: {v:.0%}" for k, v in means.items()) + " (success, mean over seeds)"
+    return "plots/learning_curves.png"
+
+
+COLUMNS = ["step", "what", "return (mean ± std)", "min return", "success", "steps to success", "train s", "notes"]
 
 
 def _table(recipe: Recipe, rows: list[list[str]]) -> Table:
     table = Table(title=f"{recipe.name}: {recipe.description}" if recipe.description else recipe.name)
     for c in COLUMNS:
-        table.add_column(c, justify="left" if c in ("step", "what") else "right")
+        table.add_column(c, justify="left" if c in ("step", "what", "notes") else "right")
     for row in rows:
         table.add_row(*row)
     return table
@@ -119,13 +293,14 @@ def _table(recipe: Recipe, rows: list[list[str]]) -> Table:
 def _plain_table(rows: list[list[str]]) -> str:
     rows = [COLUMNS, *rows]
     widths = [max(len(str(r[i])) for r in rows) for i in range(len(COLUMNS))]
-    return "\n".join("  ".join(str(c).ljust(w) for c, w in zip(r, widths)) for r in rows) + "\n"
+    return "\n".join("  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows) + "\n"
 
 
 def _figures(recipe: Recipe, results: dict[str, dict[str, Any]], study_dir: Path) -> None:
-    names = [s.name for s in recipe.steps]
-    comparison_bars(names, [results[n].get("return_mean") for n in names], "evaluation return (mean)",
-                    study_dir / "plots" / "returns.png", f"{recipe.name}: return of each step")
+    scored = [s.name for s in recipe.steps if s.kind in ("train", "evaluate")]
+    if scored:
+        comparison_bars(scored, [results[n].get("return_mean") for n in scored], "evaluation return (mean)",
+                        study_dir / "plots" / "returns.png", f"{recipe.name}: return of each step")
     trained = [s.name for s in recipe.steps if s.kind == "train"]
     if trained:
         comparison_bars(trained, [results[n].get("steps_to_success") for n in trained], "environment steps",

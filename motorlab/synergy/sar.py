@@ -84,6 +84,8 @@ class SAR:
     metadata: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise MotorlabError(f"unknown SAR method {self.method!r}; expected one of {', '.join(METHODS)}.")
         weight = np.ascontiguousarray(self.weight, dtype=np.float64)
         bias = np.ascontiguousarray(self.bias, dtype=np.float64)
         if weight.ndim != 2 or bias.shape != (weight.shape[1],):
@@ -419,7 +421,7 @@ def smallest_n(vaf_values: Any, threshold: float) -> int:
 
     Args:
         vaf_values: VAF for N = 1, 2, ... (as from `vaf_curve`).
-        threshold: in (0, 1].
+        threshold: in (0, 1]; met when VAF >= threshold - 1e-12 (float rounding).
 
     Returns:
         N (1-based).
@@ -429,11 +431,12 @@ def smallest_n(vaf_values: Any, threshold: float) -> int:
     """
     _validate_threshold(threshold)
     values = np.asarray(vaf_values, dtype=np.float64).ravel()
-    hits = np.nonzero(values >= threshold)[0]
+    # A 1e-12 slack so that e.g. --vaf 1.0 is met where the curve is 1 up to rounding.
+    hits = np.nonzero(values >= threshold - 1e-12)[0]
     if hits.size == 0:
         best = float(np.max(values)) if values.size else float("nan")
         raise MotorlabError(
-            f"no number of synergies up to {values.size} reaches VAF {threshold} (best: {best:.4f}); "
+            f"no number of synergies up to {values.size} reaches VAF {threshold} (best: {best:.6f}); "
             "lower the --vaf threshold or pass --n-synergies."
         )
     return int(hits[0]) + 1
