@@ -77,6 +77,19 @@ def main() -> None:
     def blended():
         return PHI * decode(z) + (1 - PHI) * raw
 
+    # The real per-step action mapping: SynergyActionWrapper.action on an env with M muscle actions.
+    import gymnasium as gym
+
+    from motorlab.synergy import SynergyActionWrapper
+
+    class Muscles(gym.Env):
+        observation_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+        action_space = gym.spaces.Box(-1.0, 1.0, (sar.n_muscles,), np.float32)
+
+    wrapped = {phi: SynergyActionWrapper(Muscles(), sar, phi) for phi in (PHI, 1.0)}
+    actions = {phi: w.action_space.sample() for phi, w in wrapped.items()}
+    wrapper_us = {phi: median_us(lambda w=w, a=actions[phi]: w.action(a), 20000, args.runs) for phi, w in wrapped.items()}
+
     max_err = float(np.max(np.abs(decode(z) - sk_step())))
     ours = median_us(lambda: decode(z), 20000, args.runs)
     batched = median_us(lambda: decode(zb), 500, args.runs, per=BATCH)
@@ -91,12 +104,16 @@ def main() -> None:
         "motorlab_us_per_step": round(ours, 3),
         "motorlab_batched_us_per_sample": round(batched, 4),
         "motorlab_blend_phi_0.66_us_per_step": round(blend, 3),
+        "wrapper_action_phi_0.66_us_per_step": round(wrapper_us[PHI], 3),
+        "wrapper_action_phi_1_us_per_step": round(wrapper_us[1.0], 3),
         "sklearn_chain_us_per_step": round(theirs, 3),
         "sklearn_chain_batched_us_per_sample": round(sk_batched, 4),
         "ratio_sklearn_over_motorlab": round(theirs / ours, 2),
+        "ratio_sklearn_over_wrapper_phi_0.66": round(theirs / wrapper_us[PHI], 2),
         "max_abs_diff_vs_sklearn": max_err,
         "target_us_per_step": TARGET_US_PER_STEP,
-        "met": bool(ours <= TARGET_US_PER_STEP),
+        # the target is the whole per-step mapping, so the blended wrapper step must meet it
+        "met": bool(max(ours, wrapper_us[PHI], wrapper_us[1.0]) <= TARGET_US_PER_STEP),
         "timing": f"timeit, median of {args.runs} runs, 1 BLAS thread",
         "machine": {"python": platform.python_version(), "numpy": np.__version__, "sklearn": sklearn.__version__,
                     "cpus": os.cpu_count(), "processor": platform.processor() or platform.machine()},

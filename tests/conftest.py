@@ -28,3 +28,50 @@ def fast_run(tmp_path_factory) -> Path:
     assert_ok(run_cli("train", ENV_ID, "--preset", "fast", "--until-solved", "--timesteps", "3000",
                       "--no-progress", "--out", out))
     return out
+
+
+# ---- SAR workflow (MyoSuite hand) ----------------------------------------------------
+
+@pytest.fixture(scope="session")
+def hand_play_run(tmp_path_factory) -> Path:
+    """A finished tiny SAC run on the MyoSuite hand (myoHandReorient8-v0), written by the CLI."""
+    from helpers import HAND_ID, TINY_HAND_SAC
+
+    out = tmp_path_factory.mktemp("runs") / "play"
+    assert_ok(run_cli("train", HAND_ID, *TINY_HAND_SAC, "--seed", "0", "--no-progress", "--out", out))
+    return out
+
+
+@pytest.fixture(scope="session")
+def hand_activations(hand_play_run, tmp_path_factory) -> Path:
+    """activations.npz collected by `motorlab synergies collect` (1 worker) from the hand play run:
+    4 episodes at or above the median of 4 preview episodes."""
+    from helpers import COLLECT_ARGS
+
+    out = tmp_path_factory.mktemp("collect") / "w1"
+    proc = run_cli("synergies", "collect", hand_play_run, *COLLECT_ARGS, "--workers", "1", "--out", out)
+    assert_ok(proc)
+    assert "kept 4 episodes" in proc.stdout
+    return out / "activations.npz"
+
+
+@pytest.fixture(scope="session")
+def hand_sar(tmp_path_factory) -> Path:
+    """The SAR published with MyoSuite for the hand (20 synergies x 39 muscles), imported to sar.npz."""
+    from helpers import PUBLISHED_SAR
+    from motorlab.synergy import import_sklearn
+
+    out = tmp_path_factory.mktemp("sar") / "hand.npz"
+    import_sklearn(PUBLISHED_SAR / "manipulation", trust=True, out=out)
+    return out
+
+
+@pytest.fixture(scope="session")
+def legs_sar(tmp_path_factory) -> Path:
+    """The SAR published with MyoSuite for the legs (20 synergies x 80 muscles), imported to sar.npz."""
+    from helpers import PUBLISHED_SAR
+    from motorlab.synergy import import_sklearn
+
+    out = tmp_path_factory.mktemp("sar") / "legs.npz"
+    import_sklearn(PUBLISHED_SAR / "locomotion", trust=True, out=out)
+    return out

@@ -63,3 +63,48 @@ def assert_png(path: Path, min_side: int = 100) -> None:
     assert image.ndim == 3 and image.shape[2] in (3, 4), image.shape
     assert min(image.shape[:2]) >= min_side, image.shape
     assert np.ptp(image[..., :3]) > 0.5, f"{path} is blank"  # something was drawn
+
+
+# ---- SAR workflow helpers ----------------------------------------------------------
+
+HAND_ID = "myoHandReorient8-v0"
+HAND_MUSCLES = 39
+# Published MyoSuite SAR pickles: reference data beside the repo, never copied into it.
+PUBLISHED_SAR = Path(__file__).resolve().parents[2] / "shared/data/myosuite_sar_pretrained"
+
+# A tiny SAC "play" run on the MyoSuite hand: ~400 env steps, small nets, few updates.
+TINY_HAND_SAC = ["--preset", "sar-sac", "--timesteps", "400", "--set", "learning_starts=100",
+                 "--set", "gradient_steps=4", "--set", 'policy_kwargs={"net_arch":{"pi":[32,32],"qf":[32,32]}}']
+
+# MuJoCo's C library prints this to stderr whenever MyoSuite builds a hand model; it is not
+# motorlab's message (see test_myosuite.py::test_cli_error_for_a_myosuite_env_is_one_line).
+MUJOCO_SPEC_WARNING = "WARNING: Attaching a spec with an empty prefix may prevent the model from being saved correctly."
+
+
+def assert_cli_error(proc: subprocess.CompletedProcess, *fragments: str) -> str:
+    """As `assert_one_line_error`, but MuJoCo's own C-level spec warning (printed by
+    MyoSuite model building, not by motorlab) and blank lines around it are ignored."""
+    stderr = "\n".join(line for line in proc.stderr.splitlines()
+                       if line.strip() and line.strip() != MUJOCO_SPEC_WARNING)
+    cleaned = subprocess.CompletedProcess(proc.args, proc.returncode, proc.stdout, stderr + "\n")
+    return assert_one_line_error(cleaned, *fragments)
+
+
+def read_metrics_rows(run_dir: Path) -> tuple[list[str], list[dict[str, str]]]:
+    """metrics.csv as (header, rows of strings)."""
+    import csv
+
+    with open(Path(run_dir) / "metrics.csv", newline="") as f:
+        reader = csv.DictReader(f)
+        rows = list(reader)
+    return list(reader.fieldnames or []), rows
+
+
+def episode_rows(rows: list[dict[str, str]]) -> list[dict[str, str]]:
+    """The training-episode rows of metrics.csv (evaluation rows have no episode_return)."""
+    return [r for r in rows if r["episode_return"] != ""]
+
+# What the shared collection asked for (tests/conftest.py::hand_activations).
+COLLECT_EPISODES, COLLECT_PERCENTILE, COLLECT_PREVIEW, COLLECT_SEED = 4, 50.0, 4, 0
+COLLECT_ARGS = ["--episodes", str(COLLECT_EPISODES), "--percentile", str(COLLECT_PERCENTILE),
+                "--preview", str(COLLECT_PREVIEW), "--seed", str(COLLECT_SEED)]

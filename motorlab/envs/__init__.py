@@ -7,6 +7,7 @@ Reward shaping sees the true state; the policy sees delayed, stacked observation
 
 from __future__ import annotations
 
+import logging
 import warnings
 from typing import Any
 
@@ -21,6 +22,18 @@ from motorlab.errors import MotorlabError, did_you_mean
 
 __all__ = ["EnvConfig", "make_env", "check_env_id", "max_return", "env_dt", "LowPassDelay", "RewardShaping",
            "delay_alpha", "register_myosuite"]
+
+def _route_mujoco_warnings() -> None:
+    """Send MuJoCo's C-level warnings to Python logging instead of stderr and a
+    MUJOCO_LOG.TXT in the working directory. MyoSuite models warn on every load;
+    instabilities are still counted from mjData.warning by NumericalGuard."""
+    import mujoco
+
+    log = logging.getLogger("motorlab.mujoco")
+    mujoco.set_mju_user_warning(lambda message: log.debug("MuJoCo: %s", message.strip()))
+
+
+_route_mujoco_warnings()
 
 # Envs whose reward is +1 per step alive: the maximum return is the time limit.
 _ALIVE_REWARD_PREFIXES = ("InvertedPendulum-",)

@@ -61,23 +61,46 @@ def _train_configs(step: Step, study_dir: Path, outputs: _Outputs) -> list[tuple
     return [(study_dir / step.name / f"seed{s}", cfg.model_copy(update={"seed": s})) for s in step.seeds]
 
 
+def _upstream(step: Step, outputs: _Outputs) -> dict[str, str]:
+    """A fingerprint of every run folder this step reads ("@step" references): the hash of
+    its summary.json, which is rewritten whenever that step runs again. A step whose
+    inputs were redone is redone too, even when its own settings did not change."""
+    import hashlib
+
+    refs = [step.sar_ref] if step.sar_ref else []
+    if step.settings is not None:
+        for value in step.settings.model_dump().values():
+            refs += [f"@{r}" for r in _refs_in(value)]
+    dirs = [d for ref in refs for d in outputs.dirs[ref[1:]]]
+    return {str(d): hashlib.sha256((d / "summary.json").read_bytes()).hexdigest()[:16] for d in dirs}
+
+
+def _refs_in(value: Any) -> list[str]:
+    from motorlab.recipes import _refs
+
+    return _refs(value) if isinstance(value, (str, list, dict)) else []
+
+
 def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console) -> dict[str, Any]:
     """Run one step (or keep its finished result); returns its headline numbers."""
     from motorlab.rl.train import train
 
     step_dir = study_dir / step.name
+    upstream = _upstream(step, outputs)
     if step.kind == "train":
         summaries = []
         for run_dir, cfg in _train_configs(step, study_dir, outputs):
-            if finished_with(run_dir, cfg.model_dump()):
+            asked = {"train": cfg.model_dump(), "upstream": upstream}
+            if finished_with(run_dir, asked, STEP_FILE):
                 console.print(f"      {run_dir.name}: already done with these settings; kept")
                 summaries.append(read_json(run_dir / "summary.json"))
             else:
                 summaries.append(train(cfg, run_dir))
+                write_toml(run_dir / STEP_FILE, asked)
             plot_run(run_dir)
         outputs.dirs[step.name] = [d for d, _ in _train_configs(step, study_dir, outputs)]
         return _train_headline(summaries)
-    config = _step_config(step, outputs)
+    config = {**_step_config(step, outputs), "upstream": upstream}
     outputs.dirs[step.name] = [step_dir]
     if finished_with(step_dir, config, STEP_FILE):
         console.print("      already done with these settings; kept")

@@ -28,7 +28,11 @@ def load_activations(path: Path) -> tuple[np.ndarray, dict]:
     if not path.is_file():
         raise MotorlabError(f"{path} does not exist; write it with `motorlab synergies collect RUN_DIR`.")
     try:
-        with np.load(path, allow_pickle=False) as data:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):  # a plain .npy array
+            raise MotorlabError(f"{path} is a single array, not an .npz archive; write it with "
+                                "`motorlab synergies collect` (activations.npz).")
+        with loaded as data:
             if "activations" not in data.files:
                 raise MotorlabError(f"{path} has no 'activations' array; it holds {', '.join(data.files) or 'nothing'}.")
             acts = np.asarray(data["activations"], dtype=np.float64)
@@ -50,6 +54,8 @@ def vaf_step(activations: Path, threshold: float = 0.8, method: str = "pca", max
     from motorlab.report.plots import vaf_plot
     from motorlab.synergy.sar import smallest_n, vaf_curve
 
+    if not 0.0 < threshold <= 1.0:
+        raise MotorlabError(f"--threshold must be a fraction in (0, 1], e.g. 0.8; got {threshold}.")
     acts, meta = load_activations(activations)
     curve = vaf_curve(acts, method=method, max_n=max_n)
     try:

@@ -48,11 +48,18 @@ class SynergyActionWrapper(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         if self.phi < 1.0:  # synergy coordinates, then the env's own actions
             low, high = np.concatenate([low, inner.low]), np.concatenate([high, inner.high])
         self.action_space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        # The blend is affine too: [z, raw] @ [[phi W], [(1 - phi) I]] + phi b, precomputed so
+        # that a step is one small matmul and one add.
+        m = self.sar.n_muscles
+        blend = [self.phi * self.sar.weight] + ([(1.0 - self.phi) * np.eye(m)] if self.phi < 1.0 else [])
+        self._matrix = np.ascontiguousarray(np.vstack(blend))
+        self._bias = self.phi * self.sar.bias
+        self._dtype = inner.dtype
 
     def action(self, action):
         a = np.asarray(action, dtype=np.float64)
-        n = self.sar.n_synergies
-        muscles = self.sar.decode(a[:n])
-        if self.phi < 1.0:
-            muscles = self.phi * muscles + (1.0 - self.phi) * a[n:]
-        return muscles.astype(self.env.action_space.dtype)
+        if a.shape != self.action_space.shape:
+            raise MotorlabError(f"synergy action has shape {a.shape}, expected {self.action_space.shape}.")
+        muscles = np.dot(a, self._matrix)
+        muscles += self._bias
+        return muscles.astype(self._dtype)

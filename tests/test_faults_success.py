@@ -1,0 +1,232 @@
+"""Numerical faults end an episode instead of a run, and are counted; success is
+"solved at any step"; the training success rate is over the last 100 episodes."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from helpers import episode_rows, read_metrics_rows, read_summary
+from motorlab.envs import EnvConfig, make_env
+from motorlab.evaluate import EpisodeSuccess, Evaluator, evaluate
+from motorlab.policies import ZeroPolicy
+from motorlab.rl.config import TrainConfig
+from motorlab.rl.tracking import Tracker
+from motorlab.rl.train import train
+
+FAULTY_ID = "MotorlabTestFaulty-v0"
+SOLVED_ONCE_ID = "MotorlabTestSolvedOnce-v0"
+EPISODE_STEPS = 8
+FAULT_STEP = 4  # a faulty episode's observation is NaN at this step
+SOLVED_STEP = 3  # a solvable episode reports solved=True at this step only
+
+
+class FaultyEnv(gym.Env):
+    """Reward 1 per step; in about half of the episodes (decided at reset from the env's
+    seeded RNG, or always / never with options={"faulty": ...}) the observation of step
+    FAULT_STEP holds a NaN (or, with options={"what": "reward"}, its reward is NaN)."""
+
+    def __init__(self, render_mode=None):
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (3,), dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+        self.t = 0
+        self.faulty = False
+        self.what = "observation"
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        self.faulty = bool(self.np_random.integers(2))
+        options = options or {}
+        self.faulty = bool(options.get("faulty", self.faulty))
+        self.what = options.get("what", "observation")
+        return np.zeros(3, np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        obs, reward = np.full(3, self.t / EPISODE_STEPS, np.float32), 1.0
+        if self.faulty and self.t == FAULT_STEP:
+            if self.what == "reward":
+                reward = float("nan")
+            else:
+                obs[1] = np.nan
+        return obs, reward, False, False, {}
+
+
+class SolvedOnceEnv(gym.Env):
+    """info["solved"] is True at step SOLVED_STEP only, in episodes reset with an even seed."""
+
+    def __init__(self, render_mode=None):
+        self.observation_space = gym.spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), dtype=np.float32)
+        self.t = 0
+        self.solvable = False
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        self.solvable = seed is not None and seed % 2 == 0
+        return np.zeros(2, np.float32), {"solved": False}
+
+    def step(self, action):
+        self.t += 1
+        return np.zeros(2, np.float32), 0.0, False, False, {"solved": self.solvable and self.t == SOLVED_STEP}
+
+
+for _id, _cls in ((FAULTY_ID, FaultyEnv), (SOLVED_ONCE_ID, SolvedOnceEnv)):
+    if _id not in gym.registry:
+        gym.register(_id, entry_point=_cls, max_episode_steps=EPISODE_STEPS, disable_env_checker=True)
+
+
+# ---- NumericalGuard --------------------------------------------------------------------
+
+def test_guard_ends_a_nan_episode_with_zero_reward():
+    env = make_env(EnvConfig(id=FAULTY_ID))
+    env.reset(seed=0, options={"faulty": True})
+    for t in range(1, FAULT_STEP):
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        assert reward == 1.0 and not terminated and "numerical_fault" not in info
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+    assert terminated and reward == 0.0
+    assert "non-finite observation" in info["numerical_fault"]
+    assert np.all(np.isfinite(obs)) and obs[1] == 0.0  # the NaN is zeroed, the rest kept
+    assert obs[0] == pytest.approx(FAULT_STEP / EPISODE_STEPS)
+    assert obs.dtype == np.float32
+
+
+def test_guard_ends_an_episode_with_a_nan_reward():
+    env = make_env(EnvConfig(id=FAULTY_ID))
+    env.reset(seed=0, options={"faulty": True, "what": "reward"})
+    rewards = []
+    for t in range(1, FAULT_STEP + 1):
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        rewards.append(reward)
+    assert terminated and "non-finite reward" in info["numerical_fault"]
+    assert rewards == [1.0] * (FAULT_STEP - 1) + [0.0]
+    assert obs[1] == pytest.approx(FAULT_STEP / EPISODE_STEPS)  # a finite observation is kept as it is
+
+
+def test_guard_leaves_healthy_episodes_alone():
+    env = make_env(EnvConfig(id=FAULTY_ID))
+    env.reset(seed=0, options={"faulty": False})
+    for t in range(1, EPISODE_STEPS + 1):
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        assert reward == 1.0 and not terminated and "numerical_fault" not in info
+    assert truncated
+
+
+def expected_faults(seeds) -> list[bool]:
+    """Which reset seeds give a faulty episode, read from the env itself."""
+    env = FaultyEnv()
+    return [env.reset(seed=s) is not None and env.faulty for s in seeds]
+
+
+def test_evaluate_counts_faulted_episodes():
+    episodes = 12
+    faulty = np.array(expected_faults(range(episodes)))
+    assert 0 < faulty.sum() < episodes  # the seeds give both kinds
+    env = make_env(EnvConfig(id=FAULTY_ID))
+    result = evaluate(ZeroPolicy(env.action_space), EnvConfig(id=FAULTY_ID), episodes, seed=0, batch=5)
+    assert result.faults == int(faulty.sum())
+    np.testing.assert_array_equal(result.lengths, np.where(faulty, FAULT_STEP, EPISODE_STEPS))
+    np.testing.assert_array_equal(result.returns, np.where(faulty, FAULT_STEP - 1, EPISODE_STEPS))
+    assert result.summary()["numerical_faults"] == int(faulty.sum())
+
+
+def test_evaluator_counts_faults_per_run():
+    ev = Evaluator(EnvConfig(id=FAULTY_ID), episodes=6, seed=100)
+    try:
+        result = ev.run(ZeroPolicy(ev.action_space))
+    finally:
+        ev.close()
+    assert result.faults == sum(expected_faults(range(100, 106)))
+
+
+def test_training_survives_numerical_faults(tmp_path):
+    cfg = TrainConfig(env=EnvConfig(id=FAULTY_ID), algo="ppo", timesteps=256, seed=0, progress=False,
+                      solve_episodes=2, hyperparams={"n_steps": 64, "batch_size": 32})
+    summary = train(cfg, tmp_path / "run")
+    run = tmp_path / "run"
+    assert read_summary(run)["numerical_faults"] == summary["numerical_faults"] > 0
+    header, rows = read_metrics_rows(run)
+    assert "numerical_fault" in header
+    eps = episode_rows(rows)
+    faulted = [r for r in eps if r["numerical_fault"] == "1"]
+    healthy = [r for r in eps if r["numerical_fault"] == ""]
+    assert len(faulted) + len(healthy) == len(eps) == summary["train_episodes"]
+    assert len(faulted) == summary["numerical_faults"] and healthy
+    for r in faulted:  # ended at the faulty step, which paid 0
+        assert int(r["episode_length"]) == FAULT_STEP
+        assert float(r["episode_return"]) == FAULT_STEP - 1
+    for r in healthy:
+        assert (int(r["episode_length"]), float(r["episode_return"])) == (EPISODE_STEPS, EPISODE_STEPS)
+    log = (run / "faults.log").read_text().splitlines()
+    assert len(log) == len(faulted)
+    for line, r in zip(log, faulted):
+        assert f"timesteps={r['timesteps']} " in line and "non-finite observation" in line
+    assert (run / "policy.safetensors").is_file()
+
+
+# ---- success: solved at any step -------------------------------------------------------
+
+def test_episode_success_is_solved_at_any_step():
+    outcome = EpisodeSuccess(2, target=None)
+    for flag in (False, True, False, False):  # row 0: solved once, mid-episode
+        outcome.step(0, {"solved": flag})
+    for _ in range(4):
+        outcome.step(1, {"solved": False})
+    assert outcome.end(0, ret=0.0) is True
+    assert outcome.end(1, ret=0.0) is False
+    # a row restarts with its next episode
+    outcome.step(0, {"solved": False})
+    assert outcome.end(0, ret=0.0) is False
+    # no flag from the env: the return decides where the task has a maximum, else unknowable
+    assert EpisodeSuccess(1, target=10.0).end(0, ret=10.0) is True
+    assert EpisodeSuccess(1, target=10.0).end(0, ret=9.0) is False
+    assert EpisodeSuccess(1, target=None).end(0, ret=1e9) is None
+
+
+def test_evaluate_success_counts_a_mid_episode_solve():
+    env = make_env(EnvConfig(id=SOLVED_ONCE_ID))
+    result = evaluate(ZeroPolicy(env.action_space), EnvConfig(id=SOLVED_ONCE_ID), 6, seed=0)
+    assert np.all(result.lengths == EPISODE_STEPS)  # solved=False at the last step of every episode
+    np.testing.assert_array_equal(result.success, [s % 2 == 0 for s in range(6)])
+    assert result.summary()["success_rate"] == pytest.approx(0.5)
+
+
+def test_tracker_success_rate_is_over_the_last_100_episodes(tmp_path):
+    cfg = TrainConfig(env=EnvConfig(id=SOLVED_ONCE_ID), algo="ppo", solve_episodes=1, progress=False)
+    tracker = Tracker(cfg, tmp_path, solve_return=None)
+    outcomes = np.random.default_rng(0).random(150) < np.linspace(0.1, 0.9, 150)
+    try:
+        assert tracker.success_rate() is None  # nothing reported yet
+        for i, ok in enumerate(outcomes):
+            tracker.episode(steps=10 * (i + 1), ret=float(i), length=10, success=bool(ok))
+            assert tracker.success_rate() == pytest.approx(outcomes[max(0, i - 99): i + 1].mean())
+        tracker.episode(steps=1510, ret=0.0, length=10, success=None)  # an episode the env did not judge
+        assert tracker.success_rate() == pytest.approx(outcomes[-100:].mean())
+    finally:
+        tracker.close()
+    assert outcomes[-100:].mean() != pytest.approx(outcomes.mean())  # the window matters here
+    _, rows = read_metrics_rows(tmp_path)
+    assert len(rows) == 151
+    for i, r in enumerate(rows[:150]):
+        assert int(r["episode_success"]) == outcomes[i]
+        assert float(r["success_rate_100"]) == pytest.approx(outcomes[max(0, i - 99): i + 1].mean())
+    assert rows[150]["episode_success"] == "" and rows[150]["success_rate_100"] == ""
+
+
+def test_myosuite_run_logs_training_success(hand_play_run):
+    header, rows = read_metrics_rows(hand_play_run)
+    assert {"episode_success", "success_rate_100"} <= set(header)
+    eps = episode_rows(rows)
+    assert eps
+    success = np.array([int(r["episode_success"]) for r in eps])
+    assert set(success) <= {0, 1}
+    for i, r in enumerate(eps):
+        assert float(r["success_rate_100"]) == pytest.approx(success[max(0, i - 99): i + 1].mean())
+    s = read_summary(hand_play_run)
+    assert 0.0 <= s["train_success_rate_last100"] <= 1.0
+    assert s["train_success_rate_last100"] == pytest.approx(success[-100:].mean())
+    assert s["train_episodes"] == len(eps)

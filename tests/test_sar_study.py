@@ -1,0 +1,284 @@
+"""The SAR study as a recipe: play -> collect -> VAF -> fit -> SAR-RL vs RL-E2E -> zero-shot
+-> learning curves, each step in its own folder; a re-run keeps every finished step."""
+
+from __future__ import annotations
+
+import io
+import json
+import statistics
+import tomllib
+
+import pytest
+from rich.console import Console
+
+from helpers import HAND_MUSCLES, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli
+from motorlab.recipes import bundled, load_recipe, parse_recipe
+from motorlab.studies import run_study
+from motorlab.synergy import load_sar
+
+N_SYNERGIES = 5
+PHI = 0.66
+ZS_ENV = "myoHandReorientID-v0"
+SEEDS = [0, 1]
+
+MINI_RECIPE = f"""
+name = "sar-mini"
+description = "the SAR study at toy scale"
+
+[defaults]
+preset = "sar-sac"
+hyperparams = {{ learning_starts = 100, gradient_steps = 4, policy_kwargs = {{ net_arch = {{ pi = [32, 32], qf = [32, 32] }} }} }}
+solve_episodes = 2
+progress = false
+
+[[steps]]
+name = "play"
+kind = "train"
+env = "myoHandReorient8-v0"
+timesteps = 400
+
+[[steps]]
+name = "collect"
+kind = "collect"
+run = "@play"
+episodes = 6
+preview = 4
+percentile = 50
+workers = 1
+
+[[steps]]
+name = "vaf"
+kind = "vaf"
+activations = "@collect"
+threshold = 0.8
+
+[[steps]]
+name = "fit"
+kind = "fit"
+activations = "@collect"
+n_synergies = {N_SYNERGIES}
+
+[[steps]]
+name = "sar-rl"
+kind = "train"
+env = "myoHandReorient100-v0"
+sar = "@fit"
+phi = {PHI}
+timesteps = 300
+seeds = {SEEDS}
+
+[[steps]]
+name = "rl-e2e"
+kind = "train"
+env = "myoHandReorient100-v0"
+timesteps = 300
+seeds = {SEEDS}
+
+[[steps]]
+name = "zeroshot"
+kind = "zeroshot"
+runs = ["@sar-rl", "@rl-e2e"]
+envs = ["{ZS_ENV}"]
+episodes = 2
+
+[[steps]]
+name = "curves"
+kind = "compare"
+groups = {{ "SAR-RL" = ["@sar-rl"], "RL-E2E" = ["@rl-e2e"] }}
+title = "mini"
+"""
+
+STEP_DIRS = ["play", "collect", "vaf", "fit", "sar-rl/seed0", "sar-rl/seed1", "rl-e2e/seed0", "rl-e2e/seed1",
+             "zeroshot", "curves"]
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    root = tmp_path_factory.mktemp("study")
+    recipe = root / "sar-mini.toml"
+    recipe.write_text(MINI_RECIPE)
+    out = root / "out"
+    proc = run_cli("run", recipe, "--out", out, timeout=600)
+    assert_ok(proc)
+    return recipe, out, proc
+
+
+def test_every_step_has_its_folder(study):
+    _, out, _ = study
+    for d in STEP_DIRS:
+        assert (out / d / "summary.json").is_file(), d
+    assert (out / "collect" / "activations.npz").is_file()
+    assert_png(out / "vaf" / "vaf.png")
+    assert_png(out / "curves" / "plots" / "learning_curves.png")
+    assert_png(out / "zeroshot" / "plots" / "zeroshot.png")
+    assert not (out / "sar-rl" / "summary.json").exists()  # seeds, not the step, are runs
+    sar = load_sar(out / "fit" / "sar.npz")
+    assert (sar.n_synergies, sar.n_muscles) == (N_SYNERGIES, HAND_MUSCLES)
+
+
+def test_sar_rl_trains_in_the_fitted_synergy_space(study):
+    _, out, _ = study
+    sar_path = str((out / "fit" / "sar.npz").resolve())
+    for seed in SEEDS:
+        cfg = tomllib.loads((out / "sar-rl" / f"seed{seed}" / "config.toml").read_text())
+        assert cfg["env"]["sar"] == sar_path and cfg["env"]["phi"] == pytest.approx(PHI) and cfg["seed"] == seed
+        e2e = tomllib.loads((out / "rl-e2e" / f"seed{seed}" / "config.toml").read_text())
+        assert "sar" not in e2e["env"] and e2e["seed"] == seed
+    policy = json.loads((out / "sar-rl" / "seed0" / "policy.json").read_text())
+    assert policy["action_space"]["shape"] == [N_SYNERGIES + HAND_MUSCLES]  # [synergies, raw muscles]
+    e2e_policy = json.loads((out / "rl-e2e" / "seed0" / "policy.json").read_text())
+    assert e2e_policy["action_space"]["shape"] == [HAND_MUSCLES]
+
+
+def test_study_summary(study):
+    _, out, _ = study
+    s = read_summary(out)
+    assert s["steps"] == ["play", "collect", "vaf", "fit", "sar-rl", "rl-e2e", "zeroshot", "curves"]
+    assert s["fit.n_synergies"] == N_SYNERGIES and s["fit.n_muscles"] == HAND_MUSCLES
+    assert s["collect.episodes_kept"] == 6 and s["collect.n_muscles"] == HAND_MUSCLES
+    assert s["vaf.n_for_threshold"] == read_summary(out / "vaf")["n_for_threshold"]
+    assert s["sar-rl.seeds"] == 2 and s["rl-e2e.seeds"] == 2
+    for step in ("sar-rl", "rl-e2e"):
+        per_seed = [s[f"zeroshot.{step}/seed{k}.{ZS_ENV}.success_rate"] for k in SEEDS]
+        mean = s[f"zeroshot.{step}.{ZS_ENV}.success_rate_mean"]
+        assert 0.0 <= mean <= 1.0 and mean == pytest.approx(statistics.fmean(per_seed))
+        returns = [read_summary(out / step / f"seed{k}")["eval_return_mean"] for k in SEEDS]
+        assert s[f"{step}.return_mean"] == pytest.approx(statistics.fmean(returns))
+    assert s["curves.SAR-RL.seeds"] == 2 and s["curves.RL-E2E.seeds"] == 2
+    assert (out / "table.txt").read_text().startswith("step")
+
+
+def test_rerun_keeps_every_step(study):
+    recipe, out, _ = study
+    before = {d: (out / d / "summary.json").stat().st_mtime_ns for d in STEP_DIRS}
+    sar_bytes = (out / "fit" / "sar.npz").read_bytes()
+    proc = run_cli("run", recipe, "--out", out, timeout=600)
+    assert_ok(proc)
+    assert proc.stdout.count("already done") == len(STEP_DIRS)
+    assert {d: (out / d / "summary.json").stat().st_mtime_ns for d in STEP_DIRS} == before
+    assert (out / "fit" / "sar.npz").read_bytes() == sar_bytes
+
+
+# ---- recipe mistakes --------------------------------------------------------------------
+
+HEAD = """
+name = "broken"
+[[steps]]
+name = "play"
+kind = "train"
+env = "InvertedPendulum-v5"
+timesteps = 100
+[[steps]]
+name = "collect"
+kind = "collect"
+run = "@play"
+"""
+
+BROKEN = [
+    ("""
+[[steps]]
+name = "sar-rl"
+kind = "train"
+env = "InvertedPendulum-v5"
+sar = "@collect"
+""", ["steps[2] (sar-rl)", "'@collect'", "fit step"]),
+    ("""
+[[steps]]
+name = "vaf"
+kind = "vaf"
+activations = "@play"
+""", ["steps[2] (vaf)", "'@play'", "collect step", "collect steps so far: collect"]),
+    ("""
+[[steps]]
+name = "fit"
+kind = "fitt"
+activations = "@collect"
+""", ["steps[2] (fit)", "unknown kind 'fitt'", "did you mean fit"]),
+]
+
+
+@pytest.mark.parametrize("tail, fragments", BROKEN, ids=["sar-names-collect", "activations-names-train", "fitt"])
+def test_recipe_mistakes(tmp_path, tail, fragments):
+    path = tmp_path / "broken.toml"
+    path.write_text(HEAD + tail)
+    proc = run_cli("run", path, "--out", tmp_path / "out")
+    assert_one_line_error(proc, str(path), *fragments)
+    assert not (tmp_path / "out").exists()
+
+
+# ---- the bundled SAR recipes ------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["sar-hand", "sar-hand-quick", "sar-legs"])
+def test_bundled_sar_recipes_parse(name):
+    raw = tomllib.loads(bundled()[name].read_text())
+    recipe = load_recipe(name)
+    assert recipe.name == name
+    assert [(s.name, s.kind) for s in recipe.steps] == [(r["name"], r["kind"]) for r in raw["steps"]]
+    kinds = [s.kind for s in recipe.steps]
+    assert kinds[:4] == ["train", "collect", "vaf", "fit"] and kinds[-1] == "compare"
+    assert ("zeroshot" in kinds) == (name != "sar-legs")
+    by_name = {s.name: s for s in recipe.steps}
+    sar_rl = by_name["sar-rl"]
+    assert sar_rl.sar_ref == "@fit" and sar_rl.train.env.sar is None  # resolved when the study runs
+    assert sar_rl.train.env.phi == pytest.approx(next(r for r in raw["steps"] if r["name"] == "sar-rl")["phi"])
+    assert by_name["rl-e2e"].train.env.sar is None and by_name["rl-e2e"].sar_ref is None
+    assert by_name["collect"].settings.run == "@play"
+    for r in raw["steps"]:
+        if r["kind"] == "train":
+            step = by_name[r["name"]]
+            assert step.train.env.id == r["env"] and step.train.timesteps == r["timesteps"]
+            assert step.train.algo == "sac"  # the SAR study's SAC presets
+
+
+# ---- resuming after an upstream step changed ---------------------------------------------
+
+def tiny_sar_study(n_synergies: int) -> str:
+    return f"""
+name = "sar-tiny"
+[defaults]
+preset = "sar-sac"
+hyperparams = {{ learning_starts = 100, gradient_steps = 2, policy_kwargs = {{ net_arch = {{ pi = [16], qf = [16] }} }} }}
+solve_episodes = 1
+progress = false
+
+[[steps]]
+name = "play"
+kind = "train"
+env = "myoHandReorient8-v0"
+timesteps = 150
+
+[[steps]]
+name = "collect"
+kind = "collect"
+run = "@play"
+episodes = 2
+preview = 2
+percentile = 0
+workers = 1
+
+[[steps]]
+name = "fit"
+kind = "fit"
+activations = "@collect"
+n_synergies = {n_synergies}
+
+[[steps]]
+name = "sar-rl"
+kind = "train"
+env = "myoHandReorient8-v0"
+sar = "@fit"
+timesteps = 120
+"""
+
+
+def test_rerun_retrains_on_a_refitted_sar(tmp_path):
+    """Re-running after a step's settings changed must not keep later steps built on its
+    old output: a SAR refitted with fewer synergies needs a new synergy-space policy."""
+    out = tmp_path / "study"
+    quiet = Console(file=io.StringIO())
+    run_study(parse_recipe(tiny_sar_study(3), "tiny.toml"), out, console=quiet)
+    assert load_sar(out / "fit" / "sar.npz").n_synergies == 3
+    run_study(parse_recipe(tiny_sar_study(2), "tiny.toml"), out, console=quiet)
+    assert load_sar(out / "fit" / "sar.npz").n_synergies == 2
+    policy = json.loads((out / "sar-rl" / "policy.json").read_text())
+    assert policy["action_space"]["shape"] == [2]
