@@ -282,7 +282,8 @@ def _cells(step: Step, r: dict[str, Any]) -> list[str]:
     rate = r.get("train_success_rate_last100")
     return [step.name, _describe(step), f"{fmt(r.get('return_mean'))} ± {fmt(r.get('return_std'))}",
             fmt(r.get("return_min"), "{:,.0f}"), fmt(r.get("success_rate"), "{:.0%}"),
-            sts if isinstance(sts, str) else ("not solved" if sts is None else f"{sts:,.0f}"),
+            sts if isinstance(sts, str) else (f"{sts:,.0f}" if sts is not None
+                                              else "not solved" if step.train.until_solved else "-"),
             fmt(r.get("wall_seconds"), "{:.1f}"),
             f"training success (last 100 episodes) {rate:.0%}" if rate is not None else ""]
 
