@@ -22,6 +22,7 @@ test: $(STAMP)  ## the test suite (a few minutes on 2 cores)
 bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/pendulum_steps_to_success.py
 	$(VENV)/bin/python benchmarks/sar_decode.py
+	$(VENV)/bin/python benchmarks/sar_study.py
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
