@@ -32,7 +32,7 @@ def _load_pickle(path: Path, expected: type, pickled_versions: set[str]) -> Any:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", InconsistentVersionWarning)
-            obj = joblib.load(path)
+            obj = joblib.load(path)  # reached only with trust=True, checked in import_sklearn
     except Exception as e:  # an unpickler can raise anything; all of it means "not a usable pickle"
         raise MotorlabError(f"cannot unpickle {path} ({type(e).__name__}: {e}); is it a joblib pickle?") from None
     for w in caught:
