@@ -25,7 +25,7 @@ CHECK_RTOL = 1e-7
 
 
 def _load_pickle(path: Path, expected: type, pickled_versions: set[str]) -> Any:
-    """joblib.load one estimator; version-mismatch warnings are collected, not shown."""
+    """Unpickle one estimator (callers check trust first); version-mismatch warnings are collected, not shown."""
     import joblib
     from sklearn.exceptions import InconsistentVersionWarning
 
