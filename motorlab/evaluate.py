@@ -191,6 +191,14 @@ def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, recor
                     actions=[a for p in parts for a in p.actions], dt=parts[0].dt)
 
 
+def trained_env_settings(run_dir) -> dict:
+    """The env settings a run folder records, without reward shaping: evaluation,
+    plots, videos, collection and zero-shot all report the task's own return."""
+    from motorlab.runs import read_config
+
+    return {k: v for k, v in read_config(run_dir).get("env", {}).items() if k != "reward"}
+
+
 def resolve_env(policy_spec: str, overrides: dict) -> EnvConfig:
     """The env to evaluate on: the run folder's training env (if the policy is a run
     folder), with the given overrides (id, delay, delay_on, history) on top.
@@ -202,12 +210,11 @@ def resolve_env(policy_spec: str, overrides: dict) -> EnvConfig:
 
     from motorlab.errors import MotorlabError
     from motorlab.policies import BUILTIN_POLICIES, unknown_policy_message
-    from motorlab.runs import read_config, require_run_dir
+    from motorlab.runs import require_run_dir
 
     base: dict = {}
     if Path(policy_spec).exists():
-        base = dict(read_config(require_run_dir(Path(policy_spec))).get("env", {}))
-        base.pop("reward", None)  # evaluation reports the task's own return
+        base = trained_env_settings(require_run_dir(Path(policy_spec)))
     elif policy_spec.split(":", 1)[0] not in BUILTIN_POLICIES:
         raise MotorlabError(unknown_policy_message(policy_spec))
     base.update({k: v for k, v in overrides.items() if v is not None})

@@ -50,6 +50,17 @@ def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode())
 
 
+def atomic_write_npz(path: Path, **arrays: Any) -> None:
+    """Plain arrays in one .npz (np.savez, no pickle), written atomically."""
+    import io
+
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    atomic_write_bytes(path, buf.getvalue())
+
+
 def _plain(value: Any) -> Any:
     """JSON-safe value: numpy scalars to Python, NaN/Inf to null."""
     if hasattr(value, "item") and getattr(value, "ndim", 1) == 0:
@@ -97,7 +108,7 @@ def _config_toml(config: dict[str, Any]) -> str:
 
 def write_config(run_dir: Path, config: dict[str, Any]) -> None:
     """Resolved settings as config.toml."""
-    atomic_write_text(Path(run_dir) / CONFIG, _config_toml(config))
+    write_toml(Path(run_dir) / CONFIG, config)
 
 
 def finished_with(run_dir: Path, config: dict[str, Any], filename: str = CONFIG) -> bool:

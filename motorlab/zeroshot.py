@@ -14,11 +14,11 @@ from rich.console import Console
 from rich.table import Table
 
 from motorlab.envs import EnvConfig, check_env_id
-from motorlab.evaluate import evaluate
+from motorlab.evaluate import evaluate, trained_env_settings
 from motorlab.errors import MotorlabError
 from motorlab.policies import load_run_policy
 from motorlab.report.plots import grouped_bars
-from motorlab.runs import prepare_run_dir, read_config, require_run_dir, write_config, write_summary
+from motorlab.runs import prepare_run_dir, require_run_dir, write_config, write_summary
 
 
 def zeroshot(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: int = 0,
@@ -45,7 +45,7 @@ def zeroshot(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: i
         names = [str(r) for r in runs]
     results: dict[str, dict[str, dict]] = {}
     for name, run in zip(names, runs):
-        base = {k: v for k, v in read_config(run).get("env", {}).items() if k != "reward"}
+        base = trained_env_settings(run)
         policy = load_run_policy(run)
         results[name] = {}
         for env_id in envs:

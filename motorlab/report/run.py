@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from motorlab.envs import EnvConfig
-from motorlab.evaluate import evaluate
+from motorlab.evaluate import evaluate, trained_env_settings
 from motorlab.policies import load_policy
 from motorlab.report.plots import learning_curve, obs_labels, observation_trace
 from motorlab.runs import METRICS, read_config, read_json, require_run_dir
@@ -33,7 +33,7 @@ def plot_run(run_dir: Path) -> list[Path]:
                                             f"{_env_tag(config.get('env', {}))} (seed {summary.get('seed')})",
                                       solve_return=summary.get("solve_return"),
                                       steps_to_success=summary.get("steps_to_success")))
-    env_cfg = EnvConfig.model_validate({k: v for k, v in config.get("env", {}).items() if k != "reward"})
+    env_cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
     spec = config.get("policy", str(run_dir))
     from motorlab.envs import make_env
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from motorlab.envs import EnvConfig, env_dt, make_env
 from motorlab.errors import MotorlabError
+from motorlab.evaluate import trained_env_settings
 from motorlab.policies import load_policy
 from motorlab.runs import read_config, require_run_dir, write_json
 
@@ -53,13 +54,12 @@ def render_video(run_dir: Path, episodes: int = 5, seed: int = 0, camera: str | 
     Returns:
         A summary with the files, frame counts, fps and episode returns.
     """
-    import imageio.v3 as iio
 
     if episodes <= 0:
         raise MotorlabError(f"--episodes must be positive, got {episodes}.")
     run_dir = require_run_dir(Path(run_dir))
     config = read_config(run_dir)
-    env_cfg = EnvConfig.model_validate({k: v for k, v in config.get("env", {}).items() if k != "reward"})
+    env_cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
     env = make_env(env_cfg, shaped=False)
     policy = load_policy(config.get("policy", str(run_dir)), env, env_cfg.id, seed)
     renderer, data, cam = _renderer(env, width, height, camera)

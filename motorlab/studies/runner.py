@@ -67,18 +67,13 @@ def _upstream(step: Step, outputs: _Outputs) -> dict[str, str]:
     inputs were redone is redone too, even when its own settings did not change."""
     import hashlib
 
-    refs = [step.sar_ref] if step.sar_ref else []
-    if step.settings is not None:
-        for value in step.settings.model_dump().values():
-            refs += [f"@{r}" for r in _refs_in(value)]
-    dirs = [d for ref in refs for d in outputs.dirs[ref[1:]]]
-    return {str(d): hashlib.sha256((d / "summary.json").read_bytes()).hexdigest()[:16] for d in dirs}
-
-
-def _refs_in(value: Any) -> list[str]:
     from motorlab.recipes import _refs
 
-    return _refs(value) if isinstance(value, (str, list, dict)) else []
+    names = [step.sar_ref[1:]] if step.sar_ref else []
+    if step.settings is not None:
+        names += [r for value in step.settings.model_dump().values() for r in _refs(value)]
+    dirs = [d for name in names for d in outputs.dirs[name]]
+    return {str(d): hashlib.sha256((d / "summary.json").read_bytes()).hexdigest()[:16] for d in dirs}
 
 
 def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console) -> dict[str, Any]:
@@ -89,7 +84,8 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console) 
     upstream = _upstream(step, outputs)
     if step.kind == "train":
         summaries = []
-        for run_dir, cfg in _train_configs(step, study_dir, outputs):
+        runs = _train_configs(step, study_dir, outputs)
+        for run_dir, cfg in runs:
             asked = {"train": cfg.model_dump(), "upstream": upstream}
             if finished_with(run_dir, asked, STEP_FILE):
                 console.print(f"      {run_dir.name}: already done with these settings; kept")
@@ -98,7 +94,7 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console) 
                 summaries.append(train(cfg, run_dir))
                 write_toml(run_dir / STEP_FILE, asked)
             plot_run(run_dir)
-        outputs.dirs[step.name] = [d for d, _ in _train_configs(step, study_dir, outputs)]
+        outputs.dirs[step.name] = [d for d, _ in runs]
         return _train_headline(summaries)
     config = {**_step_config(step, outputs), "upstream": upstream}
     outputs.dirs[step.name] = [step_dir]

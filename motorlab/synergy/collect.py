@@ -21,8 +21,8 @@ from rich.progress import Progress
 
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.evaluate import EpisodeSuccess
-from motorlab.runs import atomic_write_bytes, prepare_run_dir, read_config, require_run_dir, write_config, write_summary
+from motorlab.evaluate import EpisodeSuccess, trained_env_settings
+from motorlab.runs import atomic_write_npz, prepare_run_dir, require_run_dir, write_config, write_summary
 
 ACTIVATIONS = "activations.npz"
 
@@ -126,8 +126,7 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
     if not 0.0 <= percentile <= 100.0:
         raise MotorlabError(f"--percentile must be between 0 and 100, got {percentile}.")
     run_dir = require_run_dir(Path(run_dir))
-    env_cfg = {k: v for k, v in read_config(run_dir).get("env", {}).items() if k != "reward"}
-    cfg = EnvConfig.model_validate(env_cfg)
+    cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
     probe = make_env(cfg)
     muscle_activations(probe)  # fail early for an env without muscles
     probe.close()
@@ -161,7 +160,7 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
     acts = np.concatenate([e.activations for e in kept])
     meta = {"source_run": str(run_dir.resolve()), "env_id": cfg.id, "percentile": percentile, "preview": preview,
             "deterministic": deterministic, "seed": seed, "episodes_requested": episodes, "episodes_tried": tried}
-    _save_npz(run / ACTIVATIONS, activations=acts,
+    atomic_write_npz(run / ACTIVATIONS, activations=acts,
               episode=np.concatenate([np.full(e.length, i) for i, e in enumerate(kept)]),
               returns=np.array([e.ret for e in kept]), seeds=np.array([e.seed for e in kept]),
               solved=np.array([e.solved for e in kept]), threshold=np.array(threshold),
@@ -176,11 +175,3 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
     write_summary(run, summary)
     summary["run_dir"] = str(run)
     return summary
-
-
-def _save_npz(path: Path, **arrays: np.ndarray) -> None:
-    import io
-
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    atomic_write_bytes(path, buf.getvalue())

@@ -20,7 +20,6 @@ never unpickles anything. scikit-learn is needed to *fit*, not to decode or load
 
 from __future__ import annotations
 
-import io
 import json
 import math
 import warnings
@@ -32,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from motorlab.errors import MotorlabError
-from motorlab.runs import atomic_write_bytes
+from motorlab.runs import atomic_write_npz
 
 METHODS = ("pca-ica", "pca", "nmf", "sklearn-import")
 FIT_METHODS = ("pca-ica", "pca", "nmf")
@@ -622,10 +621,8 @@ def save_sar(sar: SAR, path: Path | str) -> Path:
     meta = {**sar.metadata, "method": sar.method, "n_synergies": sar.n_synergies, "n_muscles": sar.n_muscles}
     meta.setdefault("format_version", FORMAT_VERSION)
     text = json.dumps(meta, default=_json_default, allow_nan=False, sort_keys=True)
-    buf = io.BytesIO()
-    np.savez(buf, **sar.arrays, decode_weight=sar.weight, decode_bias=sar.bias,
-             metadata=np.array(text, dtype=np.str_))
-    atomic_write_bytes(path, buf.getvalue())
+    atomic_write_npz(path, **sar.arrays, decode_weight=sar.weight, decode_bias=sar.bias,
+                     metadata=np.array(text, dtype=np.str_))
     return path
 
 
