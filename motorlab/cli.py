@@ -76,7 +76,9 @@ def train(
         help="ppo | sac | td3 (Stable-Baselines3) | lqr (model-based: linear model + LQR).")] = None,
     preset: Annotated[Optional[str], typer.Option(
         help="Named settings: fast (motorlab's most sample-efficient for balancing), sb3-ppo, sb3-sac, "
-             "sar-sac (the SAR study's SAC), sar-sac-synergy. Flags override it.")] = None,
+             "sar-sac (the SAR study's reference SAC), sar-sac-synergy (the same, learning_starts 5000), "
+             "sar-sac-fast (the reference SAC with 4 env processes and 1 gradient step per 25 env steps: "
+             "~19x faster on 2 cores). Flags override it.")] = None,
     timesteps: Annotated[Optional[int], typer.Option(help="Env-step budget (default 100000).")] = None,
     seed: Seed = 0,
     out: Out = None,

@@ -208,7 +208,7 @@ def test_recipe_mistakes(tmp_path, tail, fragments):
 
 # ---- the bundled SAR recipes ------------------------------------------------------------
 
-@pytest.mark.parametrize("name", ["sar-hand", "sar-hand-quick", "sar-legs"])
+@pytest.mark.parametrize("name", ["sar-hand", "sar-hand-reference", "sar-hand-quick", "sar-legs", "sar-legs-quick"])
 def test_bundled_sar_recipes_parse(name):
     raw = tomllib.loads(bundled()[name].read_text())
     recipe = load_recipe(name)
@@ -216,7 +216,7 @@ def test_bundled_sar_recipes_parse(name):
     assert [(s.name, s.kind) for s in recipe.steps] == [(r["name"], r["kind"]) for r in raw["steps"]]
     kinds = [s.kind for s in recipe.steps]
     assert kinds[:4] == ["train", "collect", "vaf", "fit"] and kinds[-1] == "compare"
-    assert ("zeroshot" in kinds) == (name != "sar-legs")
+    assert ("zeroshot" in kinds) == name.startswith("sar-hand")
     by_name = {s.name: s for s in recipe.steps}
     sar_rl = by_name["sar-rl"]
     assert sar_rl.sar_ref == "@fit" and sar_rl.train.env.sar is None  # resolved when the study runs
@@ -228,6 +228,34 @@ def test_bundled_sar_recipes_parse(name):
             step = by_name[r["name"]]
             assert step.train.env.id == r["env"] and step.train.timesteps == r["timesteps"]
             assert step.train.algo == "sac"  # the SAR study's SAC presets
+
+
+def test_fast_preset_changes_only_the_compute_per_env_step():
+    from motorlab.rl.config import resolve
+
+    def train_settings(preset):
+        cfg = resolve({"preset": preset, "env": {"id": "myoHandReorient8-v0"}})
+        return cfg.model_dump(exclude={"preset"})
+
+    ref, fast = train_settings("sar-sac"), train_settings("sar-sac-fast")
+    compute = {"train_freq", "gradient_steps"}
+    assert {k: v for k, v in fast["hyperparams"].items() if k not in compute} == \
+           {k: v for k, v in ref["hyperparams"].items() if k not in compute}
+    assert {k for k in ref if ref[k] != fast[k]} == {"n_envs", "torch_threads", "hyperparams"}
+    # one gradient step per 25 env steps; SB3 counts train_freq in steps of all n_envs envs
+    assert fast["hyperparams"]["gradient_steps"] / (fast["hyperparams"]["train_freq"] * fast["n_envs"]) == 1 / 25
+
+
+def test_sar_hand_is_the_reference_study_with_the_fast_preset():
+    fast, ref = load_recipe("sar-hand"), load_recipe("sar-hand-reference")
+    assert [(s.name, s.kind) for s in fast.steps] == [(s.name, s.kind) for s in ref.steps]
+    for f, r in zip(fast.steps, ref.steps):
+        if f.kind == "train":
+            assert (f.train.env, f.train.timesteps) == (r.train.env, r.train.timesteps)
+            assert f.train.hyperparams["learning_starts"] == r.train.hyperparams["learning_starts"]
+            assert (f.train.n_envs, r.train.n_envs) == (4, 1)
+        else:
+            assert f.settings == r.settings
 
 
 # ---- resuming after an upstream step changed ---------------------------------------------

@@ -276,7 +276,9 @@ def _cells(step: Step, r: dict[str, Any]) -> list[str]:
         return [step.name, _describe(step), "-", "-", "-", "n/a", "-", _note(step, r)]
     sts = r.get("steps_to_success", "n/a" if step.kind == "evaluate" else None)
     rate = r.get("train_success_rate_last100")
-    return [step.name, _describe(step), f"{fmt(r.get('return_mean'))} ± {fmt(r.get('return_std'))}",
+    # ± is the spread over evaluation episodes for one seed, over the seeds' means for several
+    spread = f" ({r['seeds']} seeds)" if r.get("seeds") else ""
+    return [step.name, _describe(step), f"{fmt(r.get('return_mean'))} ± {fmt(r.get('return_std'))}{spread}",
             fmt(r.get("return_min"), "{:,.0f}"), fmt(r.get("success_rate"), "{:.0%}"),
             sts if isinstance(sts, str) else (f"{sts:,.0f}" if sts is not None
                                               else "not solved" if step.train.until_solved else "-"),
@@ -298,7 +300,7 @@ def _note(step: Step, r: dict[str, Any]) -> str:
     return "plots/learning_curves.png"
 
 
-COLUMNS = ["step", "what", "return (mean ± std)", "min return", "success", "steps to success", "train s", "notes"]
+COLUMNS = ["step", "what", "return (mean ± sd)", "min return", "success", "steps to success", "train s", "notes"]
 
 
 def _table(recipe: Recipe, rows: list[list[str]]) -> Table:
