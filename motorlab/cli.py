@@ -78,7 +78,7 @@ def train(
         help="Named settings: fast (motorlab's most sample-efficient for balancing), sb3-ppo, sb3-sac, "
              "sar-sac (the SAR study's reference SAC), sar-sac-synergy (the same, learning_starts 5000), "
              "sar-sac-fast (the reference SAC with 4 env processes and 1 gradient step per 25 env steps: "
-             "~19x faster on 2 cores). Flags override it.")] = None,
+             "~18x faster on 2 cores). Flags override it.")] = None,
     timesteps: Annotated[Optional[int], typer.Option(help="Env-step budget (default 100000).")] = None,
     seed: Seed = 0,
     out: Out = None,

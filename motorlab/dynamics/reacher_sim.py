@@ -76,14 +76,15 @@ def rollout_reacher(env, qpos0: np.ndarray, qvel0: np.ndarray, actions: np.ndarr
     qvel = np.concatenate([qvel0[:, None], state[:, last, iv:iv + model.nv]], axis=1)
     vec = fingertip_xyz(model, qpos) - target_xyz(model, qpos)
     theta = qpos[..., :2]
-    width = 2 if env.observation_space.shape[0] == 10 else 3  # v5 drops the z of the vector
+    v4 = env.observation_space.shape[0] == 11  # v4 keeps the z of the vector, v5 drops it
+    width = 3 if v4 else 2
     obs = np.concatenate([np.cos(theta), np.sin(theta), qpos[..., 2:], qvel[..., :2], vec[..., :width]], axis=-1)
     dist = np.linalg.norm(vec, axis=-1)
     ctrl_cost = np.square(actions).sum(-1)
-    if env.spec is not None and env.spec.id.startswith("Reacher-v4"):
+    if v4:
         reward = -dist[:, :-1] - ctrl_cost  # v4 scores the state before the step
     else:
         w_dist = getattr(u, "_reward_dist_weight", 1.0)
         w_ctrl = getattr(u, "_reward_control_weight", 1.0)
         reward = -w_dist * dist[:, 1:] - w_ctrl * ctrl_cost  # v5 scores the state after it
-    return obs.astype(np.float64), reward
+    return obs, reward

@@ -7,8 +7,8 @@ layout is the observation itself; `reacher` is the reference notebook's 8-number
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
