@@ -11,10 +11,11 @@ $(STAMP): pyproject.toml requirements.lock scripts/setup.sh
 
 setup: $(STAMP)
 
-demo: $(STAMP)  ## the pendulum study, then the SAR pipeline on the MyoSuite hand in miniature (~3 min)
+demo: $(STAMP)  ## the pendulum study, the SAR pipeline on the MyoSuite hand and forward model + MPC on Reacher, in miniature (~4 min)
 	$(VENV)/bin/motorlab run pendulum --out runs/demo-pendulum
 	$(VENV)/bin/motorlab run sar-hand-quick --out runs/demo-sar-hand-quick
-	@echo "Results: runs/demo-pendulum and runs/demo-sar-hand-quick (table.txt, summary.json, plots/, one folder per step)"
+	$(VENV)/bin/motorlab run reacher-quick --out runs/demo-reacher-quick
+	@echo "Results: runs/demo-pendulum, runs/demo-sar-hand-quick and runs/demo-reacher-quick (table.txt, summary.json, plots/, one folder per step)"
 
 test: $(STAMP)  ## the test suite (a few minutes on 2 cores)
 	$(VENV)/bin/python -m pytest -q
@@ -23,6 +24,9 @@ bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/pendulum_steps_to_success.py
 	$(VENV)/bin/python benchmarks/sar_decode.py
 	$(VENV)/bin/python benchmarks/sar_study.py
+	$(VENV)/bin/python benchmarks/dynamics_collect.py
+	$(VENV)/bin/python benchmarks/dynamics_fit.py
+	$(VENV)/bin/python benchmarks/mpc.py
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

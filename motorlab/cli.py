@@ -369,6 +369,112 @@ def synergies_import(
                  + (f" (decode matches scikit-learn, max abs error {err_max:.1e})" if err_max is not None else ""))
 
 
+dynamics = typer.Typer(help="Forward models: collect transitions, fit a model, check it against the simulator.",
+                        no_args_is_help=True, rich_markup_mode="rich")
+app.add_typer(dynamics, name="dynamics")
+
+
+def _hidden(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(h) for h in text.split(",") if h.strip())
+    except ValueError:
+        raise MotorlabError(f"--hidden {text!r}: write layer widths separated by commas, e.g. 64,64.") from None
+
+
+@dynamics.command("collect", epilog="Examples:\n\n  motorlab dynamics collect Reacher-v5 --episodes 20000 --out runs/reacher-data\n\n"
+                                    "  motorlab dynamics collect InvertedPendulum-v5 --episodes 200 --policy runs/ppo")
+def dynamics_collect(
+    env_id: Annotated[str, typer.Argument(help="Gymnasium env id, e.g. Reacher-v5.")],
+    episodes: Annotated[int, typer.Option(help="Episodes to run, each to its end.")] = 1000,
+    policy: Annotated[str, typer.Option(help="random (uniform actions) or a run folder from `motorlab train`.")] = "random",
+    workers: Annotated[Optional[int], typer.Option(help="Processes or threads (default: all cores).")] = None,
+    state: Annotated[str, typer.Option(
+        help="State layout: auto (Reacher: cos, sin, joint velocities, fingertip x-y; else the observation), "
+             "reacher, observation.")] = "auto",
+    simulator: Annotated[str, typer.Option(
+        help="auto (MuJoCo rollouts in C for Reacher with random actions, else Gymnasium), mujoco, gymnasium.")] = "auto",
+    seed: Seed = 0,
+    out: Out = None,
+):
+    """Record transitions (state, action, next state, reward, done) to transitions.npz."""
+    from motorlab.dynamics.collect import collect_step
+
+    s = collect_step(env_id, episodes, policy, workers, seed, state, simulator, out)
+    stdout.print(f"{s['transitions']:,} transitions ({s['state_size']} state, {s['action_size']} action entries) "
+                 f"at {s['transitions_per_second']:,.0f}/s via {s['simulator']} -> {s['run_dir']}/transitions.npz")
+
+
+@dynamics.command("fit", epilog="Examples:\n\n  motorlab dynamics fit runs/reacher-data --out runs/reacher-model\n\n"
+                                "  motorlab dynamics fit runs/reacher-data/transitions.npz --hidden 128,128 --ensemble 5 --patience 5")
+def dynamics_fit(
+    transitions: Annotated[Path, typer.Argument(help="transitions.npz (or its folder) from `dynamics collect`.")],
+    epochs: Annotated[int, typer.Option(help="Passes over the training data (the most, with --patience).")] = 50,
+    hidden: Annotated[str, typer.Option(help="Hidden layer widths (Tanh + LayerNorm each).")] = "64,64",
+    ensemble: Annotated[int, typer.Option(help="Members K, trained together as one batched net.")] = 1,
+    lr: Annotated[float, typer.Option(help="Adam's learning rate, cosine-decayed to 0.")] = 1e-3,
+    batch_size: Annotated[int, typer.Option(help="Rows per gradient step.")] = 2000,
+    valid_fraction: Annotated[float, typer.Option(help="Share of episodes held out for valid_mse.")] = 0.1,
+    patience: Annotated[Optional[int], typer.Option(help="Early stopping: epochs without a better valid_mse.")] = None,
+    seed: Seed = 0,
+    out: Out = None,
+):
+    """Fit a forward model predicting the normalized state delta; writes model.safetensors + model.json."""
+    from motorlab.dynamics.train import fit_step
+
+    s = fit_step(transitions, epochs, _hidden(hidden), ensemble, lr, batch_size, valid_fraction, patience, seed, out)
+    valid = f"valid_mse {s['valid_mse']:.2e} (normalized)" if s["valid_mse"] is not None else "no validation"
+    stdout.print(f"{valid} after {s['epochs_run']} epochs, {s['wall_seconds']:.1f} s -> {s['run_dir']}/model.json, "
+                 f"plots/loss.png")
+
+
+@dynamics.command("check", epilog="Example:\n\n  motorlab dynamics check runs/reacher-model --episodes 5")
+def dynamics_check(
+    model: Annotated[Path, typer.Argument(help="A model folder from `dynamics fit`.")],
+    episodes: Annotated[int, typer.Option(help="Open-loop episodes (random actions).")] = 5,
+    steps: Annotated[Optional[int], typer.Option(help="Steps per episode (default: the env's time limit).")] = None,
+    seed: Seed = 0,
+    out: Out = None,
+):
+    """Model vs simulator under the same actions, open loop: error vs horizon, x-y traces, summary numbers."""
+    from motorlab.dynamics.check import check_step
+
+    s = check_step(model, episodes, seed, steps, out)
+    tip = {k: v for k, v in s.items() if k.startswith("tip_error_mean_h")}
+    stdout.print("open-loop error: " + ", ".join(
+        [f"{k.removeprefix('tip_error_mean_')} {v * 1000:.1f} mm" for k, v in tip.items()]
+        or [f"{k.removeprefix('state_nrmse_')} {v:.3f}" for k, v in s.items() if k.startswith("state_nrmse_h")]))
+    stdout.print(f"written: {s['run_dir']}/plots/error_vs_horizon.png, traces.png")
+
+
+@app.command(epilog="Examples:\n\n  motorlab mpc Reacher-v5 --model runs/reacher-model --episodes 50\n\n"
+                    "  motorlab mpc Reacher-v5 --model runs/reacher-model --optimizer evotorch --horizon 4 "
+                    "--population 250 --iterations 20 --episodes 5")
+def mpc(
+    env_id: Annotated[str, typer.Argument(help="Env id the model was fit on, e.g. Reacher-v5.")],
+    model: Annotated[Path, typer.Option("--model", help="A model folder from `motorlab dynamics fit`.")],
+    episodes: Annotated[int, typer.Option(help="Episodes to control.")] = 50,
+    horizon: Annotated[Optional[int], typer.Option(help="Planning horizon in control steps (default 10).")] = None,
+    population: Annotated[Optional[int], typer.Option(help="Action sequences per CEM iteration (default 200).")] = None,
+    iterations: Annotated[Optional[int], typer.Option(help="CEM iterations per control step (default 5).")] = None,
+    elites: Annotated[Optional[int], typer.Option(help="Best sequences the Gaussian is refit to (default 20).")] = None,
+    optimizer: Annotated[str, typer.Option(help="cem (motorlab's, batched) or evotorch (EvoTorch's CEM).")] = "cem",
+    parallel: Annotated[int, typer.Option(help="Episodes run side by side, planned in one batched call.")] = 1,
+    video: Annotated[bool, typer.Option("--video", help="Also render the first episode to videos/episode_0.mp4.")] = False,
+    seed: Seed = 0,
+    out: Out = None,
+):
+    """Model-predictive control: CEM on a learned forward model, maximizing the env's own reward.
+
+    summary.json: return_mean, return_std, final_distance_mean (metres), plan_ms_median (per env per control step).
+    """
+    from motorlab.control.mpc_step import mpc_step
+
+    s = mpc_step(env_id, model, episodes, horizon, population, iterations, elites, optimizer, parallel, seed, video, out)
+    stdout.print(f"return {s['return_mean']:.2f} ± {s['return_std']:.2f}, final distance "
+                 f"{s['final_distance_mean'] * 1000:.1f} mm (mean), planning {s['plan_ms_median']:.2f} ms/step "
+                 f"(median) over {s['episodes']} episodes -> {s['run_dir']}")
+
+
 @app.command()
 def recipes():
     """List the bundled recipes."""

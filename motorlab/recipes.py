@@ -30,6 +30,12 @@ Kinds and their fields ("@step" names an earlier step's output):
     fit        activations = "@collect-step", n_synergies | vaf, method, seed
     zeroshot   runs = ["@train-step", ...], envs = [...], episodes, seed
     compare    groups = { "LABEL" = ["@train-step", ...] }, title
+    dynamics-collect  env, episodes, policy ("random" or "@train-step"), workers, state, simulator, seed
+    dynamics-fit      transitions = "@dynamics-collect-step", epochs, hidden, ensemble, lr, batch_size,
+                      valid_fraction, patience, seed
+    dynamics-check    model = "@dynamics-fit-step", episodes, steps, seed
+    mpc               env, model = "@dynamics-fit-step", episodes, horizon, population, iterations, elites,
+                      optimizer (cem | evotorch), parallel, video, seed
 Bundled recipes live in motorlab/recipes/ and are addressed by name.
 """
 
@@ -98,19 +104,67 @@ class CompareStep(_Strict):
     title: str = "Learning curves"
 
 
+class DynamicsCollectStep(_Strict):
+    env: str
+    episodes: int = Field(1000, gt=0)
+    policy: str = "random"
+    workers: int | None = Field(None, gt=0)
+    state: Literal["auto", "reacher", "observation"] = "auto"
+    simulator: Literal["auto", "mujoco", "gymnasium"] = "auto"
+    seed: int = Field(0, ge=0)
+
+
+class DynamicsFitStep(_Strict):
+    transitions: str
+    epochs: int = Field(50, gt=0)
+    hidden: list[int] = Field(default_factory=lambda: [64, 64], min_length=1)
+    ensemble: int = Field(1, gt=0)
+    lr: float = Field(1e-3, gt=0)
+    batch_size: int = Field(2000, gt=0)
+    valid_fraction: float = Field(0.1, ge=0, lt=1)
+    patience: int | None = Field(None, gt=0)
+    seed: int = Field(0, ge=0)
+
+
+class DynamicsCheckStep(_Strict):
+    model: str
+    episodes: int = Field(5, gt=0)
+    steps: int | None = Field(None, gt=0)
+    seed: int = Field(0, ge=0)
+
+
+class MpcStep(_Strict):
+    env: str
+    model: str
+    episodes: int = Field(50, gt=0)
+    horizon: int | None = Field(None, gt=0)
+    population: int | None = Field(None, gt=0)
+    iterations: int | None = Field(None, gt=0)
+    elites: int | None = Field(None, gt=0)
+    optimizer: Literal["cem", "evotorch"] = "cem"
+    parallel: int = Field(1, gt=0)
+    video: bool = False
+    seed: int = Field(0, ge=0)
+
+
 KINDS: dict[str, type[BaseModel]] = {"evaluate": EvalStep, "collect": CollectStep, "vaf": VafStep, "fit": FitStep,
-                                     "zeroshot": ZeroshotStep, "compare": CompareStep}
+                                     "zeroshot": ZeroshotStep, "compare": CompareStep,
+                                     "dynamics-collect": DynamicsCollectStep, "dynamics-fit": DynamicsFitStep,
+                                     "dynamics-check": DynamicsCheckStep, "mpc": MpcStep}
 # Which kind of earlier step each reference field must name.
 REFERENCES = {("evaluate", "policy"): "train", ("collect", "run"): "train", ("vaf", "activations"): "collect",
               ("fit", "activations"): "collect", ("zeroshot", "runs"): "train", ("compare", "groups"): "train",
-              ("train", "sar"): "fit"}
+              ("train", "sar"): "fit", ("dynamics-collect", "policy"): "train",
+              ("dynamics-fit", "transitions"): "dynamics-collect", ("dynamics-check", "model"): "dynamics-fit",
+              ("mpc", "model"): "dynamics-fit"}
 
 
 class Step(BaseModel):
     """One validated step: its name, kind and settings (`train` for training, else `settings`)."""
 
     name: str
-    kind: Literal["train", "evaluate", "collect", "vaf", "fit", "zeroshot", "compare"]
+    kind: Literal["train", "evaluate", "collect", "vaf", "fit", "zeroshot", "compare", "dynamics-collect",
+                  "dynamics-fit", "dynamics-check", "mpc"]
     train: TrainConfig | None = None
     seeds: list[int] | None = None
     sar_ref: str | None = None  # train: "@fit" resolved when the study runs
@@ -282,7 +336,12 @@ def _make_step(name: str, kind: str, fields: dict, steps: list[Step]) -> Step:
             trained_env = ref.train.env.model_dump(exclude={"reward"})
             settings["env"] = {**trained_env, **settings.get("env", {})}
         return Step(name=name, kind="evaluate", settings=EvalStep.model_validate(settings))
-    return Step(name=name, kind=kind, settings=KINDS[kind].model_validate(fields))
+    step = Step(name=name, kind=kind, settings=KINDS[kind].model_validate(fields))
+    if kind in ("dynamics-collect", "mpc"):
+        from motorlab.envs import check_env_id
+
+        check_env_id(step.settings.env)
+    return step
 
 
 def _check_env(env: EnvConfig, where: str) -> None:

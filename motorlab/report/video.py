@@ -62,26 +62,11 @@ def render_video(run_dir: Path, episodes: int = 5, seed: int = 0, camera: str | 
     env_cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
     env = make_env(env_cfg, shaped=False)
     policy = load_policy(config.get("policy", str(run_dir)), env, env_cfg.id, seed)
-    renderer, data, cam = _renderer(env, width, height, camera)
-    dt = env_dt(env) or 1.0 / MAX_FPS
-    every = max(1, math.ceil((1.0 / dt) / MAX_FPS))
-    fps = (1.0 / dt) / every
+    renderer, data, cam, every, fps = video_settings(env, width, height, camera)
     folder = Path(out) if out else run_dir / "videos"
     files, returns, frames_per = [], [], []
     for k in range(episodes):
-        obs, _ = env.reset(seed=seed + k)
-        policy.reset(1)
-        frames, ret, done, t = [], 0.0, False, 0
-        while not done:
-            if t % every == 0:
-                renderer.update_scene(data, camera=cam)
-                frames.append(renderer.render().copy())
-            obs, r, terminated, truncated, _ = env.step(policy.act(obs[None])[0])
-            ret += float(r)
-            done = terminated or truncated
-            t += 1
-        renderer.update_scene(data, camera=cam)
-        frames.append(renderer.render().copy())
+        frames, ret = record_episode(env, policy, renderer, data, cam, seed + k, every)
         path = folder / f"episode_{k}.mp4"
         write_mp4(path, frames, fps)
         files.append(str(path))
@@ -94,6 +79,32 @@ def render_video(run_dir: Path, episodes: int = 5, seed: int = 0, camera: str | 
     # the run's own summary.json stays as it is; the videos get their own index
     write_json(folder / "videos.json", summary)
     return summary
+
+
+def record_episode(env, policy, renderer, data, camera, seed: int, every: int = 1) -> tuple[list[np.ndarray], float]:
+    """Frames (every `every` env steps, and the last) and the return of one episode of `policy`."""
+    obs, _ = env.reset(seed=seed)
+    policy.reset(1)
+    frames, ret, done, t = [], 0.0, False, 0
+    while not done:
+        if t % every == 0:
+            renderer.update_scene(data, camera=camera)
+            frames.append(renderer.render().copy())
+        obs, r, terminated, truncated, _ = env.step(policy.act(obs[None])[0])
+        ret += float(r)
+        done = terminated or truncated
+        t += 1
+    renderer.update_scene(data, camera=camera)
+    frames.append(renderer.render().copy())
+    return frames, ret
+
+
+def video_settings(env, width: int, height: int, camera):
+    """(renderer, data, camera, every, fps) for rendering env at most MAX_FPS frames per second."""
+    renderer, data, cam = _renderer(env, width, height, camera)
+    dt = env_dt(env) or 1.0 / MAX_FPS
+    every = max(1, math.ceil((1.0 / dt) / MAX_FPS))
+    return renderer, data, cam, every, (1.0 / dt) / every
 
 
 def write_mp4(path: Path, frames: list[np.ndarray], fps: float) -> None:

@@ -124,6 +124,12 @@ def _step_config(step: Step, outputs: _Outputs) -> dict[str, Any]:
         config["runs"] = {label: str(d) for label, d in outputs.many(s.runs)}
     elif step.kind == "compare":
         config["groups"] = {g: [str(d) for _, d in outputs.many(refs)] for g, refs in s.groups.items()}
+    elif step.kind == "dynamics-collect" and s.policy.startswith("@"):
+        config["policy"] = str(outputs.one(s.policy))
+    elif step.kind == "dynamics-fit":
+        config["transitions"] = str(outputs.one(s.transitions) / "transitions.npz")
+    elif step.kind in ("dynamics-check", "mpc"):
+        config["model"] = str(outputs.one(s.model))
     return config
 
 
@@ -160,6 +166,25 @@ def _execute(step: Step, c: dict[str, Any], step_dir: Path, console: Console) ->
         summary = {f"{label}.{k}": v for label, r in result.items() for k, v in r.items()}
         write_summary(run, summary)
         return summary
+    if step.kind == "dynamics-collect":
+        from motorlab.dynamics.collect import collect_step
+
+        return collect_step(c["env"], c["episodes"], c["policy"], c["workers"], c["seed"], c["state"],
+                            c["simulator"], step_dir)
+    if step.kind == "dynamics-fit":
+        from motorlab.dynamics.train import fit_step
+
+        return fit_step(Path(c["transitions"]), c["epochs"], tuple(c["hidden"]), c["ensemble"], c["lr"],
+                        c["batch_size"], c["valid_fraction"], c["patience"], c["seed"], step_dir)
+    if step.kind == "dynamics-check":
+        from motorlab.dynamics.check import check_step
+
+        return check_step(Path(c["model"]), c["episodes"], c["seed"], c["steps"], step_dir)
+    if step.kind == "mpc":
+        from motorlab.control.mpc_step import mpc_step
+
+        return mpc_step(c["env"], Path(c["model"]), c["episodes"], c["horizon"], c["population"], c["iterations"],
+                        c["elites"], c["optimizer"], c["parallel"], c["seed"], c["video"], step_dir)
     raise AssertionError(step.kind)  # recipes.py admits no other kind
 
 
@@ -196,6 +221,15 @@ def _other_headline(step: Step, s: dict[str, Any]) -> dict[str, Any]:
         keys = ("n_synergies", "n_muscles", "vaf")
     elif step.kind == "zeroshot":
         return {**{k: v for k, v in s.items() if "." in k}, **_zeroshot_means(s)}
+    elif step.kind == "dynamics-collect":
+        keys = ("transitions", "transitions_per_second", "simulator", "collect_seconds")
+    elif step.kind == "dynamics-fit":
+        keys = ("valid_mse", "epochs_run", "wall_seconds", "train_rows")
+    elif step.kind == "dynamics-check":
+        keys = tuple(k for k in s if k.startswith(("tip_error_mean_", "state_nrmse_")))
+    elif step.kind == "mpc":
+        keys = ("return_mean", "return_std", "return_min", "final_distance_mean", "plan_ms_median", "episodes",
+                "wall_seconds")
     else:
         return {k: v for k, v in s.items() if "." in k}  # compare: already "<group>.<key>"
     return {k: s.get(k) for k in keys}
@@ -227,7 +261,11 @@ def _describe(step: Step) -> str:
                 "fit": lambda: f"fit {s.method} to {s.activations}"
                                + (f", N = {s.n_synergies}" if s.n_synergies else f", VAF ≥ {s.vaf}"),
                 "zeroshot": lambda: f"zero-shot {', '.join(s.runs)} on {', '.join(s.envs)}",
-                "compare": lambda: f"compare {', '.join(s.groups)}"}[step.kind]()
+                "compare": lambda: f"compare {', '.join(s.groups)}",
+                "dynamics-collect": lambda: f"collect {s.episodes:,} {s.policy} episodes of {s.env}",
+                "dynamics-fit": lambda: f"fit a forward model {s.ensemble}x{s.hidden} to {s.transitions}",
+                "dynamics-check": lambda: f"check {s.model} open loop, {s.episodes} episodes",
+                "mpc": lambda: f"MPC ({s.optimizer}) on {s.model} · {s.env}"}[step.kind]()
     tags = [env.id]
     if env.delay:
         tags.append(f"delay {env.delay:g} s")
@@ -272,6 +310,9 @@ def _cells(step: Step, r: dict[str, Any]) -> list[str]:
     def fmt(v, f="{:,.1f}"):
         return "-" if v is None else f.format(v)
 
+    if step.kind == "mpc":
+        return [step.name, _describe(step), f"{fmt(r['return_mean'], '{:.2f}')} ± {fmt(r['return_std'], '{:.2f}')}",
+                fmt(r.get("return_min"), "{:.2f}"), "-", "n/a", "-", _note(step, r)]
     if step.kind not in ("train", "evaluate"):
         return [step.name, _describe(step), "-", "-", "-", "n/a", "-", _note(step, r)]
     sts = r.get("steps_to_success", "n/a" if step.kind == "evaluate" else None)
@@ -297,6 +338,19 @@ def _note(step: Step, r: dict[str, Any]) -> str:
     if step.kind == "zeroshot":
         means = {k[: -len(".success_rate_mean")]: v for k, v in r.items() if k.endswith(".success_rate_mean")}
         return "; ".join(f"{k}: {v:.0%}" for k, v in means.items()) + " (success, mean over seeds)"
+    if step.kind == "dynamics-collect":
+        return f"{r['transitions']:,} transitions at {r['transitions_per_second']:,.0f}/s ({r['simulator']})"
+    if step.kind == "dynamics-fit":
+        return f"valid MSE {r['valid_mse']:.2e} (normalized delta), {r['epochs_run']} epochs, {r['wall_seconds']:.1f} s"
+    if step.kind == "dynamics-check":
+        tips = [(k.removeprefix("tip_error_mean_"), v) for k, v in r.items() if k.startswith("tip_error_mean_h")]
+        if tips:
+            return "open-loop fingertip error " + ", ".join(f"{h}: {v * 1000:.1f} mm" for h, v in tips)
+        return "open-loop state NRMSE " + ", ".join(f"{k.removeprefix('state_nrmse_')}: {v:.3f}"
+                                                    for k, v in r.items() if k.startswith("state_nrmse_h"))
+    if step.kind == "mpc":
+        return (f"final distance {r['final_distance_mean'] * 1000:.1f} mm (mean), "
+                f"planning {r['plan_ms_median']:.2f} ms/step")
     return "plots/learning_curves.png"
 
 

@@ -1,0 +1,110 @@
+"""Transition collection on Reacher-v5: motorlab's MuJoCo rollouts vs the reference Gymnasium pool.
+
+Reference (the notebook approach): a multiprocessing pool with one worker per core, each
+stepping Gymnasium's Reacher-v5 with random actions and extracting the 8-number state
+(joint cos/sin, joint velocities, fingertip x-y = fingertip-target vector + target).
+motorlab: `collect_transitions` (mujoco.rollout on all cores). Both collect the same
+number of episodes; the rate counts transitions per second of wall time, start to arrays.
+
+Identity: a sample of motorlab's episodes is replayed in Gymnasium's env from the same
+initial state under the same actions; joint entries must match exactly, the fingertip
+and rewards to the RK4-stage tolerance documented in motorlab/dynamics/reacher_sim.py.
+
+Usage:  .venv/bin/python benchmarks/dynamics_collect.py [--episodes 20000] [--workers N]
+Prints one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import platform
+import time
+
+import gymnasium as gym
+import numpy as np
+
+from motorlab.dynamics.collect import collect_transitions
+
+TARGET_RATIO = 5.0
+TARGET_RATE = 200_000
+
+
+def _reference_episodes(args: tuple[int, int]) -> tuple[np.ndarray, ...]:
+    """One worker's share: `count` random-action episodes from seed `first`."""
+    first, count = args
+    env = gym.make("Reacher-v5")
+    states, actions, next_states, rewards = [], [], [], []
+    for k in range(count):
+        obs, _ = env.reset(seed=first + k)
+        env.action_space.seed(first + k)
+        done = False
+        while not done:
+            a = env.action_space.sample()
+            nxt, r, terminated, truncated, _ = env.step(a)
+            for o, out in ((obs, states), (nxt, next_states)):
+                out.append(np.r_[o[0:4], o[6:8], o[8:10] + o[4:6]])
+            actions.append(a)
+            rewards.append(r)
+            obs, done = nxt, terminated or truncated
+    return np.array(states), np.array(actions), np.array(next_states), np.array(rewards)
+
+
+def reference_collect(episodes: int, workers: int) -> tuple[float, int]:
+    start = time.perf_counter()
+    share = -(-episodes // workers)
+    jobs = [(i * share, min(share, episodes - i * share)) for i in range(workers) if i * share < episodes]
+    with mp.get_context("fork").Pool(workers) as pool:
+        parts = pool.map(_reference_episodes, jobs)
+    n = sum(len(p[0]) for p in parts)
+    return time.perf_counter() - start, n
+
+
+def replay_check(data, episodes: int = 50) -> dict[str, float]:
+    """Replay motorlab episodes in Gymnasium's env; the largest differences seen."""
+    env = gym.make("Reacher-v5")
+    env.reset(seed=0)
+    joint = tip = reward = 0.0
+    for e in np.linspace(0, data.episode.max(), episodes).astype(int):
+        rows = np.flatnonzero(data.episode == e)
+        s0 = data.states[rows[0]]
+        env.unwrapped.set_state(np.r_[np.arctan2(s0[2:4], s0[0:2]), data.goals[rows[0]]], np.r_[s0[4:6], 0.0, 0.0])
+        for r in rows:
+            obs, rew, *_ = env.step(data.actions[r])
+            joint = max(joint, float(np.abs(data.next_states[r][:6] - np.r_[obs[0:4], obs[6:8]]).max()))
+            tip = max(tip, float(np.abs(data.next_states[r][6:] - (obs[8:10] + obs[4:6])).max()))
+            reward = max(reward, abs(float(data.rewards[r] - rew)))
+    return {"replayed_episodes": episodes, "max_joint_diff": joint, "max_tip_diff_m": tip, "max_reward_diff": reward}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=20000, help="episodes per side (50 transitions each)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes / threads per side")
+    parser.add_argument("--repeats", type=int, default=3, help="motorlab runs; the median rate is reported")
+    args = parser.parse_args()
+
+    ref_seconds, ref_n = reference_collect(args.episodes, args.workers)
+    rates, data = [], None
+    for _ in range(args.repeats):
+        data = collect_transitions("Reacher-v5", args.episodes, workers=args.workers, progress=False)
+        rates.append(len(data) / data.meta["seconds"])
+    rate = float(np.median(rates))
+    check = replay_check(data)
+    ref_rate = ref_n / ref_seconds
+    print(json.dumps({
+        "benchmark": "dynamics_collect", "env_id": "Reacher-v5", "episodes": args.episodes,
+        "workers": args.workers, "cpus": os.cpu_count(), "machine": platform.processor() or platform.machine(),
+        "motorlab_transitions_per_second": rate, "motorlab_rates": rates,
+        "reference_transitions_per_second": ref_rate, "reference_seconds": ref_seconds,
+        "ratio": rate / ref_rate, "target_ratio": TARGET_RATIO, "target_rate": TARGET_RATE,
+        "meets_target": rate >= TARGET_RATE and rate / ref_rate >= TARGET_RATIO
+                        and check["max_joint_diff"] == 0.0,
+        **check,
+    }, indent=2))
+
+
+if __name__ == "__main__":
+    main()

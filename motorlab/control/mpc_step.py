@@ -1,0 +1,147 @@
+"""`motorlab mpc`: control an env with CEM on a learned forward model; returns, distances, timing.
+
+Episodes run in groups of `parallel` Gymnasium envs whose plans are made in one batched
+planner call per control step (Brax-style batching: the model sees all envs' candidates at
+once). `plan_ms_median` is the planning time per env per control step, i.e. a call's time
+divided by the envs it planned for; `plan_call_ms_median` is the call's own latency.
+With `parallel = 1` (the default) the two are the same.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from motorlab.control.mpc import MPCPolicy, check_plan_settings, make_planner, model_scorer
+from motorlab.dynamics.model import load_model
+from motorlab.dynamics.rewards import reward_for
+from motorlab.dynamics.state import layout_for
+from motorlab.envs import EnvConfig, make_env
+from motorlab.errors import MotorlabError
+from motorlab.runs import MetricsWriter, atomic_write_npz, prepare_run_dir, write_config, write_summary
+
+DEFAULTS = {"horizon": 10, "population": 200, "iterations": 5, "elites": 20}
+
+
+def build_policy(env, env_id: str, model_path: Path, optimizer: str = "cem", seed: int = 0, threads: int | None = 1,
+                 **settings) -> MPCPolicy:
+    """An MPC policy for `env` on the model in `model_path` (checked against the env and its layout)."""
+    model = load_model(model_path, env_id=env_id)
+    layout = layout_for(env_id, env.observation_space.shape[0], model.meta.get("state_layout", "observation"))
+    if model.state_size != layout.size or model.action_size != env.action_space.shape[0]:
+        raise MotorlabError(f"{model_path} predicts {model.state_size} state entries from {model.action_size} "
+                            f"actions; {env_id} has {layout.size} and {env.action_space.shape[0]}. Refit the model.")
+    if threads:
+        torch.set_num_threads(threads)  # small batches: more threads cost more than they give
+    score = model_scorer(model, reward_for(env_id, layout.name))
+    planner = make_planner(optimizer, score, env.action_space.low, env.action_space.high, seed=seed,
+                           **{**DEFAULTS, **{k: v for k, v in settings.items() if v is not None}})
+    return MPCPolicy(planner, layout)
+
+
+def _distance(layout, obs: np.ndarray) -> float:
+    """Fingertip-to-target distance for layouts that know both (reacher), else NaN."""
+    if "tip x" not in layout.labels or len(layout.goal_labels) != 2:
+        return float("nan")
+    tip = layout.state(obs[None])[0][[layout.labels.index("tip x"), layout.labels.index("tip y")]]
+    return float(np.linalg.norm(tip - layout.goal(obs[None])[0]))
+
+
+def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, parallel: int, progress: bool = True):
+    """Episodes of `policy`, `parallel` at a time: returns, per-step distances, planning times."""
+    from rich.progress import Progress
+
+    envs = [make_env(EnvConfig(id=env_id), shaped=False) for _ in range(parallel)]
+    returns, distances, call_ms, per_env_ms = [], [], [], []
+    with Progress(disable=not progress) as bar:
+        task = bar.add_task(f"MPC on {env_id}", total=episodes)
+        for first in range(0, episodes, parallel):
+            group = envs[:min(parallel, episodes - first)]
+            obs = np.stack([e.reset(seed=seed + first + i)[0] for i, e in enumerate(group)])
+            policy.reset(len(group))
+            live = np.ones(len(group), dtype=bool)
+            ret = np.zeros(len(group))
+            dist = [[_distance(policy.layout, o)] for o in obs]
+            while live.any():
+                start = time.perf_counter()
+                actions = policy.act(obs)
+                ms = (time.perf_counter() - start) * 1000
+                call_ms.append(ms)
+                per_env_ms.append(ms / len(group))
+                for i in np.flatnonzero(live):
+                    o, r, terminated, truncated, _ = group[i].step(actions[i])
+                    obs[i] = o
+                    ret[i] += r
+                    dist[i].append(_distance(policy.layout, o))
+                    live[i] = not (terminated or truncated)
+            returns.extend(ret)
+            distances.extend(dist)
+            bar.advance(task, len(group))
+    for e in envs:
+        e.close()
+    length = max(len(d) for d in distances)
+    padded = np.array([d + [d[-1]] * (length - len(d)) for d in distances])
+    return np.array(returns), padded, np.array(call_ms), np.array(per_env_ms)
+
+
+def mpc_step(env_id: str, model_path: Path, episodes: int = 50, horizon: int | None = None,
+             population: int | None = None, iterations: int | None = None, elites: int | None = None,
+             optimizer: str = "cem", parallel: int = 1, seed: int = 0, video: bool = False,
+             out: Path | None = None, progress: bool = True) -> dict[str, Any]:
+    """`motorlab mpc`: summary.json (return_mean, return_std, final_distance_mean, plan_ms_median), episodes.npz,
+    metrics.csv (one row per episode), plots/distance.png and, with `video`, videos/episode_0.mp4."""
+    from motorlab.report.dynamics_plots import distance_over_time
+
+    if episodes <= 0 or parallel <= 0:
+        raise MotorlabError(f"--episodes and --parallel must be positive, got {episodes} and {parallel}.")
+    settings = {"horizon": horizon, "population": population, "iterations": iterations, "elites": elites}
+    resolved = {**DEFAULTS, **{k: v for k, v in settings.items() if v is not None}}
+    check_plan_settings(**resolved)
+    env = make_env(EnvConfig(id=env_id), shaped=False)
+    policy = build_policy(env, env_id, model_path, optimizer, seed, **resolved)
+    dt = float(getattr(env.unwrapped, "dt", 0.0)) or None
+    env.close()
+    parallel = min(parallel, episodes)
+    run = prepare_run_dir(out, "mpc")
+    start = time.perf_counter()
+    returns, distances, call_ms, per_env_ms = run_episodes(env_id, policy, episodes, seed, parallel, progress)
+    wall = time.perf_counter() - start
+    final = distances[:, -1]
+    metrics = MetricsWriter(run / "metrics.csv", ["episode", "return", "final_distance"])
+    for i, (r, d) in enumerate(zip(returns, final)):
+        metrics.write({"episode": i, "return": r, "final_distance": d})
+    metrics.close()
+    atomic_write_npz(run / "episodes.npz", returns=returns, distances=distances, plan_ms=call_ms)
+    if np.isfinite(distances).all():
+        distance_over_time(distances, run / "plots" / "distance.png",
+                           f"{env_id}: MPC ({optimizer}, horizon {resolved['horizon']}, "
+                           f"{resolved['population']} x {resolved['iterations']})", dt=dt)
+    summary = {"env_id": env_id, "episodes": episodes, "return_mean": float(returns.mean()),
+               "return_std": float(returns.std()), "return_min": float(returns.min()),
+               "final_distance_mean": float(final.mean()),
+               "final_distance_median": float(np.median(final)), "plan_ms_median": float(np.median(per_env_ms)),
+               "plan_call_ms_median": float(np.median(call_ms)), "parallel": parallel, "optimizer": optimizer,
+               **resolved, "wall_seconds": wall}
+    if video:
+        summary["video"] = str(_video(env_id, policy, run / "videos" / "episode_0.mp4", seed))
+    write_config(run, {"env": env_id, "model": str(model_path), "episodes": episodes, "optimizer": optimizer,
+                       "parallel": parallel, "seed": seed, **resolved})
+    write_summary(run, summary)
+    summary["run_dir"] = str(run)
+    return summary
+
+
+def _video(env_id: str, policy: MPCPolicy, path: Path, seed: int) -> Path:
+    from motorlab.report.video import record_episode, video_settings, write_mp4
+
+    env = make_env(EnvConfig(id=env_id), shaped=False)
+    renderer, data, cam, every, fps = video_settings(env, 480, 480, None)
+    frames, _ = record_episode(env, policy, renderer, data, cam, seed, every)
+    write_mp4(path, frames, fps)
+    renderer.close()
+    env.close()
+    return path

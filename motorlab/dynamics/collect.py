@@ -1,0 +1,204 @@
+"""`motorlab dynamics collect`: transitions (state, action, next state, reward, done).
+
+Two collectors, one result format (transitions.py):
+- Reacher with random actions runs straight in MuJoCo (`reacher_sim.rollout_reacher`):
+  all episodes' substeps in C on every core, ~10x Gymnasium's Python stepping. Its
+  transitions are the ones Gymnasium's env gives for the same initial state and actions
+  (tests/test_dynamics_collect.py).
+- Any other env or policy (a trained run folder) steps Gymnasium envs in a process
+  pool, one episode per seed, so the result does not depend on the number of workers.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from rich.progress import Progress
+
+from motorlab.dynamics.reacher_sim import rollout_reacher, sample_initial_states
+from motorlab.dynamics.state import StateLayout, layout_for
+from motorlab.dynamics.transitions import TRANSITIONS, Transitions
+from motorlab.envs import EnvConfig, make_env
+from motorlab.errors import MotorlabError
+from motorlab.runs import prepare_run_dir, write_config, write_summary
+
+CHUNK = 1000  # episodes per batched MuJoCo rollout: bounds memory, paces the progress bar
+
+
+def _is_reacher(env: gym.Env) -> bool:
+    spec = env.spec.id if env.spec else ""
+    return spec.startswith("Reacher-") and env.observation_space.shape[0] in (10, 11)
+
+
+def _episode_arrays(obs, actions, rewards, terminated, truncated, layout: StateLayout, episode_ids):
+    """Transitions from per-episode observation sequences (T+1 rows each)."""
+    states = [layout.state(o[:-1]) for o in obs]
+    return dict(
+        states=np.concatenate(states), next_states=np.concatenate([layout.state(o[1:]) for o in obs]),
+        goals=np.concatenate([layout.goal(o[:-1]) for o in obs]), actions=np.concatenate(actions),
+        rewards=np.concatenate(rewards), terminated=np.concatenate(terminated),
+        dones=np.concatenate([te | tr for te, tr in zip(terminated, truncated)]),
+        episode=np.concatenate([np.full(len(s), i) for s, i in zip(states, episode_ids)]),
+    )
+
+
+def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers: int, bar, task) -> dict:
+    rng = np.random.default_rng(seed)
+    steps = env.spec.max_episode_steps or 50
+    low, high = env.action_space.low, env.action_space.high
+    parts = []
+    for start in range(0, episodes, CHUNK):
+        n = min(CHUNK, episodes - start)
+        qpos, qvel = sample_initial_states(env, n, rng)
+        actions = rng.uniform(low, high, size=(n, steps, len(low)))
+        obs, rewards = rollout_reacher(env, qpos, qvel, actions, threads=workers)
+        # Reacher never terminates; the time limit truncates each episode's last step
+        truncated = np.zeros((n, steps), dtype=bool)
+        truncated[:, -1] = True
+        parts.append(_episode_arrays(obs, actions, rewards, np.zeros_like(truncated), truncated, layout,
+                                     range(start, start + n)))
+        bar.advance(task, n)
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+# ---- the Gymnasium pool: any env, random actions or a trained policy --------------
+
+_worker: dict[str, Any] = {}
+
+
+def _init_worker(env_cfg: dict, policy_dir: str | None) -> None:
+    import torch
+
+    from motorlab.policies import load_policy_files
+
+    torch.set_num_threads(1)
+    _worker["env"] = make_env(EnvConfig.model_validate(env_cfg), shaped=False)
+    _worker["policy"] = load_policy_files(Path(policy_dir)) if policy_dir else None
+
+
+def _run_episode(seed: int) -> tuple:
+    env, policy = _worker["env"], _worker["policy"]
+    rng = np.random.default_rng(seed)
+    obs, _ = env.reset(seed=seed)
+    if policy is not None:
+        policy.reset(1)
+    low, high = env.action_space.low, env.action_space.high
+    observations, actions, rewards, terminated, truncated = [obs], [], [], [], []
+    done = False
+    while not done:
+        action = rng.uniform(low, high) if policy is None else np.asarray(policy.act(obs[None])[0])
+        obs, reward, term, trunc, _ = env.step(action)
+        observations.append(obs)
+        actions.append(action)
+        rewards.append(reward)
+        terminated.append(term)
+        truncated.append(trunc)
+        done = term or trunc
+    return (np.array(observations, dtype=np.float64), np.array(actions, dtype=np.float64), np.array(rewards),
+            np.array(terminated), np.array(truncated))
+
+
+def _collect_pool(env_cfg: EnvConfig, policy_dir: str | None, episodes: int, seed: int, layout: StateLayout,
+                  workers: int, bar, task) -> dict:
+    seeds = [seed + i for i in range(episodes)]
+    init_args = (env_cfg.model_dump(), policy_dir)
+    results = []
+    if workers <= 1:
+        _init_worker(*init_args)
+        episode_iter = map(_run_episode, seeds)
+    else:  # spawn: a fresh interpreter per worker is safe with torch and MuJoCo state
+        pool = mp.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=init_args)
+        episode_iter = pool.imap(_run_episode, seeds, chunksize=max(1, min(64, episodes // (4 * workers))))
+    try:
+        for r in episode_iter:
+            results.append(r)
+            bar.advance(task)
+    finally:
+        if workers > 1:
+            pool.terminate()
+    return _episode_arrays(*zip(*results), layout=layout, episode_ids=range(episodes))
+
+
+def collect_transitions(env_id: str, episodes: int, policy: str = "random", workers: int | None = None,
+                        seed: int = 0, state: str = "auto", simulator: str = "auto",
+                        progress: bool = True) -> Transitions:
+    """Transitions of `episodes` episodes of ENV_ID.
+
+    Args:
+        env_id: a Gymnasium (or MyoSuite) env id.
+        episodes: number of episodes, each to its end (termination or time limit).
+        policy: "random" (uniform actions) or a run folder from `motorlab train`.
+        workers: processes or threads (default: all cores).
+        state: state layout, "auto" (reacher for Reacher ids, else the observation), "reacher", "observation".
+        simulator: "auto" (MuJoCo rollouts for Reacher with random actions, else Gymnasium),
+            "mujoco" or "gymnasium".
+
+    Raises:
+        MotorlabError: bad counts, unknown env or layout, a policy folder that does not fit the env.
+    """
+    if episodes <= 0:
+        raise MotorlabError(f"--episodes must be positive, got {episodes}.")
+    if workers is not None and workers <= 0:
+        raise MotorlabError(f"--workers must be positive, got {workers}.")
+    if simulator not in ("auto", "mujoco", "gymnasium"):
+        raise MotorlabError(f"--simulator {simulator!r}: choose auto, mujoco or gymnasium.")
+    env_cfg = EnvConfig(id=env_id)
+    env = make_env(env_cfg, shaped=False)
+    layout = layout_for(env_id, env.observation_space.shape[0], state)
+    policy_dir = None
+    if policy != "random":
+        from motorlab.policies import load_run_policy
+
+        policy_dir = str(Path(policy).resolve())
+        if not Path(policy).exists():
+            raise MotorlabError(f"--policy {policy!r} is neither 'random' nor a run folder from `motorlab train`.")
+        expected = getattr(getattr(load_run_policy(Path(policy)), "policy", None), "observation_space", None)
+        if expected is not None and expected.shape != env.observation_space.shape:
+            raise MotorlabError(f"the policy in {policy} expects observations of shape {expected.shape}, "
+                                f"{env_id} gives {env.observation_space.shape}; pick the env it was trained on.")
+    fast = _is_reacher(env) and policy_dir is None
+    if simulator == "mujoco" and not fast:
+        raise MotorlabError("--simulator mujoco covers Reacher with random actions only; use auto or gymnasium.")
+    fast = fast and simulator != "gymnasium"
+    workers = workers or os.cpu_count() or 1
+    start = time.perf_counter()
+    with Progress(disable=not progress, transient=False) as bar:
+        task = bar.add_task(f"{env_id} episodes", total=episodes)
+        if fast:
+            arrays = _collect_reacher(env, episodes, seed, layout, workers, bar, task)
+        else:
+            arrays = _collect_pool(env_cfg, policy_dir, episodes, seed, layout, workers, bar, task)
+    seconds = time.perf_counter() - start
+    meta = {"env_id": env_id, "state_layout": layout.name, "state_labels": list(layout.labels),
+            "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),
+            "action_low": env.action_space.low.tolist(), "action_high": env.action_space.high.tolist(),
+            "policy": policy_dir or "random", "seed": seed, "episodes": episodes,
+            "simulator": "mujoco.rollout" if fast else "gymnasium", "workers": workers, "seconds": seconds}
+    env.close()
+    return Transitions(**arrays, meta=meta).check()
+
+
+def collect_step(env_id: str, episodes: int, policy: str = "random", workers: int | None = None, seed: int = 0,
+                 state: str = "auto", simulator: str = "auto", out: Path | None = None,
+                 progress: bool = True) -> dict[str, Any]:
+    """`motorlab dynamics collect`: transitions.npz in a run folder; returns the summary."""
+    data = collect_transitions(env_id, episodes, policy, workers, seed, state, simulator, progress)
+    run = prepare_run_dir(out, "dynamics-collect")
+    data.save(run / TRANSITIONS)
+    write_config(run, {"env": env_id, "episodes": episodes, "policy": policy, "workers": workers, "seed": seed,
+                       "state": state, "simulator": simulator})
+    seconds = data.meta["seconds"]
+    summary = {"env_id": env_id, "transitions": len(data), "episodes": episodes,
+               "transitions_per_second": len(data) / seconds, "collect_seconds": seconds,
+               "simulator": data.meta["simulator"], "state_layout": data.meta["state_layout"],
+               "state_size": int(data.states.shape[1]), "action_size": int(data.actions.shape[1]),
+               "return_mean": float(np.bincount(data.episode, weights=data.rewards).mean())}
+    write_summary(run, summary)
+    summary["run_dir"] = str(run)
+    return summary

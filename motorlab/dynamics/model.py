@@ -1,0 +1,212 @@
+"""Forward model: (state, action) -> next state, learned as a normalized state delta.
+
+The network is the reference notebook's MLP (10 -> 64 Tanh LayerNorm -> 64 Tanh LayerNorm
+-> 8 for Reacher), optionally an ensemble of K such nets. The K members are stored as
+stacked weights and run as batched matmuls (`torch.baddbmm`), so an ensemble costs one
+pass, not K. Saved as `model.safetensors` (weights, normalizer statistics) + `model.json`
+(architecture, state layout, env id, metrics): no pickle.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from motorlab.errors import MotorlabError
+from motorlab.runs import atomic_write_bytes, read_json, write_json
+
+MODEL_JSON = "model.json"
+MODEL_WEIGHTS = "model.safetensors"
+FORMAT = "motorlab.forward_model/1"
+
+
+class Normalizer(nn.Module):
+    """x -> (x - mean) / std with fixed statistics (std floored so constant entries stay finite)."""
+
+    def __init__(self, size: int):
+        super().__init__()
+        self.register_buffer("mean", torch.zeros(size))
+        self.register_buffer("std", torch.ones(size))
+
+    def fit(self, x: np.ndarray | torch.Tensor) -> Normalizer:
+        x = torch.as_tensor(x, dtype=torch.float64)
+        self.mean.copy_(x.mean(0))
+        self.std.copy_(x.std(0).clamp_min(1e-6))
+        return self
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.mean) / self.std
+
+    def inverse(self, z: torch.Tensor) -> torch.Tensor:
+        return z * self.std + self.mean
+
+
+class EnsembleMLP(nn.Module):
+    """K independent MLPs (Linear -> Tanh -> LayerNorm per hidden layer), evaluated together.
+
+    Input (K, B, n_in) or (B, n_in) (shared by all members); output (K, B, n_out).
+    """
+
+    def __init__(self, n_in: int, n_out: int, hidden: tuple[int, ...] = (64, 64), members: int = 1):
+        super().__init__()
+        sizes = (n_in, *hidden, n_out)
+        self.members = members
+        self.weights = nn.ParameterList()
+        self.biases = nn.ParameterList()
+        for a, b in zip(sizes[:-1], sizes[1:]):
+            bound = 1 / math.sqrt(a)  # nn.Linear's default initialization, per member
+            self.weights.append(nn.Parameter(torch.empty(members, a, b).uniform_(-bound, bound)))
+            self.biases.append(nn.Parameter(torch.empty(members, 1, b).uniform_(-bound, bound)))
+        self.ln_weights = nn.ParameterList([nn.Parameter(torch.ones(members, 1, h)) for h in hidden])
+        self.ln_biases = nn.ParameterList([nn.Parameter(torch.zeros(members, 1, h)) for h in hidden])
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if x.dim() == 2:
+            x = x.expand(self.members, *x.shape)
+        last = len(self.weights) - 1
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            x = torch.baddbmm(b, x, w)
+            if i < last:
+                x = F.layer_norm(torch.tanh(x), x.shape[-1:]) * self.ln_weights[i] + self.ln_biases[i]
+        return x
+
+
+class ForwardModel(nn.Module):
+    """next_state = state + delta_norm.inverse(net([state_norm(s), action_norm(a)]))."""
+
+    def __init__(self, state_size: int, action_size: int, hidden: tuple[int, ...] = (64, 64), members: int = 1,
+                 meta: dict[str, Any] | None = None):
+        super().__init__()
+        self.state_size, self.action_size, self.hidden = state_size, action_size, tuple(hidden)
+        self.state_norm = Normalizer(state_size)
+        self.action_norm = Normalizer(action_size)
+        self.delta_norm = Normalizer(state_size)
+        self.net = EnsembleMLP(state_size + action_size, state_size, self.hidden, members)
+        self.meta = dict(meta or {})
+
+    @property
+    def members(self) -> int:
+        return self.net.members
+
+    def fit_normalizers(self, states, actions, next_states) -> None:
+        self.state_norm.fit(states)
+        self.action_norm.fit(actions)
+        self.delta_norm.fit(np.asarray(next_states) - np.asarray(states))
+
+    def inputs(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        return torch.cat([self.state_norm(states), self.action_norm(actions)], dim=-1)
+
+    def forward(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Normalized deltas (K, B, S) for (B, S) states and (B, A) actions."""
+        return self.net(self.inputs(states, actions))
+
+    def predict(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Next states (..., S) for states (..., S) and actions (..., A), by the members' mean delta."""
+        delta = self.net(self.inputs(states.reshape(-1, self.state_size), actions.reshape(-1, self.action_size)))
+        delta = delta[0] if self.members == 1 else delta.mean(0)
+        return states + self.delta_norm.inverse(delta).reshape(states.shape)
+
+    def fast_predict(self):
+        """predict() for planning: the normalizers folded into the first and last layers, the input
+        concatenation split into two matmuls, no autograd. ~Half the torch calls per step, which is
+        what a small-batch planner pays for (per-call overhead, not FLOPs, dominates on a CPU)."""
+        with torch.no_grad():
+            net, n_s = self.net, self.state_size
+            w_in = torch.cat([1 / self.state_norm.std, 1 / self.action_norm.std]).float()[None, :, None]
+            shift = torch.cat([self.state_norm.mean, self.action_norm.mean]).float()
+            w0 = net.weights[0] * w_in  # (K, in, h): x_norm @ W = x @ (W / std) - (mean / std) @ W
+            scaled_shift = shift / torch.cat([self.state_norm.std, self.action_norm.std]).float()
+            b0 = net.biases[0] - (scaled_shift @ net.weights[0])[:, None]
+            std_d, mean_d = self.delta_norm.std.float(), self.delta_norm.mean.float()
+            w_last = net.weights[-1] * std_d  # delta = z * std + mean, folded into the output layer
+            b_last = net.biases[-1] * std_d + mean_d
+            ws = [w0, *net.weights[1:-1], w_last]
+            bs = [b0, *net.biases[1:-1], b_last]
+            lns = [(w, b) for w, b in zip(net.ln_weights, net.ln_biases)]
+            if self.members == 1:
+                ws0s, ws0a = w0[0, :n_s].clone(), w0[0, n_s:].clone()
+                rest = [(w[0].clone(), b[0, 0].clone()) for w, b in zip(ws[1:], bs[1:])]
+                b00 = bs[0][0, 0].clone()
+                lns1 = [(w[0, 0].clone(), b[0, 0].clone()) for w, b in lns]
+
+                def step(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+                    x = torch.addmm(b00, states, ws0s).addmm_(actions, ws0a)
+                    for (w, b), (lw, lb) in zip(rest, lns1):
+                        x = torch.addmm(b, F.layer_norm(torch.tanh(x), lw.shape, lw, lb), w)
+                    return states + x
+            else:
+                def step(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+                    x = torch.cat([states, actions], -1).expand(self.members, -1, -1)
+                    for i, (w, b) in enumerate(zip(ws, bs)):
+                        x = torch.baddbmm(b, x, w)
+                        if i < len(lns):
+                            x = F.layer_norm(torch.tanh(x), x.shape[-1:]) * lns[i][0] + lns[i][1]
+                    return states + x.mean(0)
+        return step
+
+    # ---- files -------------------------------------------------------------------
+
+    def save(self, folder: Path, metrics: dict[str, Any] | None = None) -> None:
+        """model.safetensors + model.json in `folder`, each written atomically."""
+        from safetensors.torch import save
+
+        folder = Path(folder)
+        tensors = {k: v.detach().contiguous() for k, v in self.state_dict().items()}
+        atomic_write_bytes(folder / MODEL_WEIGHTS, save(tensors))
+        write_json(folder / MODEL_JSON, {
+            "format": FORMAT, "architecture": {
+                "state_size": self.state_size, "action_size": self.action_size, "hidden": list(self.hidden),
+                "members": self.members, "activation": "tanh", "layer_norm": True,
+                "output": "normalized state delta"},
+            **self.meta, "metrics": metrics or {}})
+
+
+def load_model(path: Path, env_id: str | None = None, state_layout: str | None = None) -> ForwardModel:
+    """A forward model from a folder holding model.json + model.safetensors (or from model.json itself).
+
+    Args:
+        env_id, state_layout: when given, the model must have been trained for them.
+
+    Raises:
+        MotorlabError: missing or corrupt files, or a model for another env or state layout.
+    """
+    from safetensors import SafetensorError
+    from safetensors.torch import load_file
+
+    path = Path(path)
+    folder = path.parent if path.name in (MODEL_JSON, MODEL_WEIGHTS) else path
+    if not (folder / MODEL_JSON).is_file():
+        raise MotorlabError(f"{folder / MODEL_JSON} is missing; pass a folder written by `motorlab dynamics fit`.")
+    meta = read_json(folder / MODEL_JSON)
+    try:
+        if meta.get("format") != FORMAT:
+            raise KeyError("format")
+        arch = meta["architecture"]
+        model = ForwardModel(int(arch["state_size"]), int(arch["action_size"]), tuple(int(h) for h in arch["hidden"]),
+                             int(arch["members"]), meta={k: v for k, v in meta.items()
+                                                         if k not in ("format", "architecture", "metrics")})
+    except (KeyError, TypeError, ValueError) as e:
+        raise MotorlabError(f"{folder / MODEL_JSON} is not a motorlab forward model (bad or missing {e}); "
+                            "re-run `motorlab dynamics fit`.") from None
+    try:
+        model.load_state_dict(load_file(folder / MODEL_WEIGHTS))
+    except FileNotFoundError:
+        raise MotorlabError(f"{folder / MODEL_WEIGHTS} is missing; re-run `motorlab dynamics fit`.") from None
+    except (SafetensorError, RuntimeError, OSError) as e:
+        raise MotorlabError(f"{folder / MODEL_WEIGHTS} does not fit {MODEL_JSON} or is damaged "
+                            f"({str(e).splitlines()[0]}); re-run `motorlab dynamics fit`.") from None
+    model.metrics = meta.get("metrics", {})
+    if env_id is not None and model.meta.get("env_id") != env_id:
+        raise MotorlabError(f"{folder} models {model.meta.get('env_id')!r}, not {env_id!r}; "
+                            f"fit a model on {env_id} transitions first.")
+    if state_layout is not None and model.meta.get("state_layout") != state_layout:
+        raise MotorlabError(f"{folder} uses the {model.meta.get('state_layout')!r} state layout, not "
+                            f"{state_layout!r}; fit a model with that layout.")
+    model.eval()
+    return model

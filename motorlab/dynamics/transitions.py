@@ -1,0 +1,99 @@
+"""`transitions.npz`: what `motorlab dynamics collect` writes and `dynamics fit` reads.
+
+Plain arrays (no pickle), one row per env step:
+    states (N, S), actions (N, A), next_states (N, S), rewards (N,), dones (N,)
+    (episode ended: terminated or truncated), terminated (N,), episode (N,) (index of
+    the episode the row belongs to), goals (N, G) (the planner's goal, e.g. Reacher's
+    target; G = 0 for goal-free layouts)
+and `meta`, a JSON string: env id, state layout and labels, policy, seed, collector.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from motorlab.errors import MotorlabError
+from motorlab.runs import atomic_write_npz
+
+TRANSITIONS = "transitions.npz"
+_ARRAYS = ("states", "actions", "next_states", "rewards", "dones", "terminated", "episode", "goals")
+
+
+@dataclass
+class Transitions:
+    states: np.ndarray
+    actions: np.ndarray
+    next_states: np.ndarray
+    rewards: np.ndarray
+    dones: np.ndarray
+    terminated: np.ndarray
+    episode: np.ndarray
+    goals: np.ndarray
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.states)
+
+    @property
+    def env_id(self) -> str:
+        return self.meta.get("env_id", "?")
+
+    def save(self, path: Path) -> None:
+        atomic_write_npz(path, **{k: getattr(self, k) for k in _ARRAYS}, meta=np.array(json.dumps(self.meta)))
+
+    def check(self, source: str = "transitions") -> Transitions:
+        """Shapes agree and every number is finite, or one clear MotorlabError."""
+        n = len(self.states)
+        fix = "re-run `motorlab dynamics collect`."
+        if self.states.ndim != 2 or self.actions.ndim != 2 or self.goals.ndim != 2:
+            raise MotorlabError(f"{source}: states, actions and goals must be 2-D (rows x entries), got shapes "
+                                f"{self.states.shape}, {self.actions.shape}, {self.goals.shape}; {fix}")
+        if n == 0:
+            raise MotorlabError(f"{source} holds no transitions; collect at least one episode.")
+        if self.next_states.shape != self.states.shape:
+            raise MotorlabError(f"{source}: next_states {self.next_states.shape} and states {self.states.shape} "
+                                f"differ in shape; {fix}")
+        for name in ("actions", "rewards", "dones", "terminated", "episode", "goals"):
+            if len(getattr(self, name)) != n:
+                raise MotorlabError(f"{source}: {name} has {len(getattr(self, name))} rows, states {n}; {fix}")
+        for name in ("states", "actions", "next_states", "rewards", "goals"):
+            bad = ~np.isfinite(getattr(self, name))
+            if bad.any():
+                row = int(np.argwhere(bad)[0][0])
+                raise MotorlabError(f"{source}: {name} holds NaN or Inf ({int(bad.sum())} entries, first in row {row}); "
+                                    f"drop those episodes or {fix}")
+        labels = self.meta.get("state_labels")
+        if labels is not None and len(labels) != self.states.shape[1]:
+            raise MotorlabError(f"{source}: meta names {len(labels)} state entries but states have "
+                                f"{self.states.shape[1]}; {fix}")
+        return self
+
+
+def load_transitions(path: Path) -> Transitions:
+    """Read and check a transitions.npz (or the run folder holding one), without unpickling."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / TRANSITIONS
+    if not path.is_file():
+        raise MotorlabError(f"{path} is missing; write it with `motorlab dynamics collect ENV_ID --out DIR`.")
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            missing = [k for k in (*_ARRAYS, "meta") if k not in f.files]
+            if missing:
+                raise MotorlabError(f"{path} lacks {', '.join(missing)}: not a transitions file from "
+                                    "`motorlab dynamics collect`.")
+            arrays = {k: f[k] for k in _ARRAYS}
+            meta = json.loads(str(f["meta"]))
+    except MotorlabError:
+        raise
+    except Exception as e:  # zip, npy-header or JSON damage all mean the same to the user
+        raise MotorlabError(f"{path} is not a readable transitions.npz ({type(e).__name__}: {e}); "
+                            "re-run `motorlab dynamics collect`.") from None
+    if not isinstance(meta, dict):
+        raise MotorlabError(f"{path}: its meta is not a JSON object; re-run `motorlab dynamics collect`.")
+    return Transitions(**arrays, meta=meta).check(str(path))

@@ -1,0 +1,167 @@
+"""Model-based workflow: collected transitions, forward model, fit, save/load, CEM planning."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from motorlab.control.mpc import CEMPlanner, EvoTorchCEM, model_scorer
+from motorlab.dynamics.collect import collect_transitions
+from motorlab.dynamics.model import ForwardModel, Normalizer, load_model
+from motorlab.dynamics.rewards import reacher_v5
+from motorlab.dynamics.train import fit_model, normalized_mse, split_episodes
+from motorlab.dynamics.transitions import load_transitions
+from motorlab.errors import MotorlabError
+
+
+@pytest.fixture(scope="module")
+def reacher_data():
+    return collect_transitions("Reacher-v5", 120, seed=4, workers=2, progress=False)
+
+
+def test_collected_reacher_transitions_are_gymnasiums(reacher_data):
+    """Replay each collected episode in Gymnasium's env from its first state: same transitions."""
+    d = reacher_data
+    assert d.meta["simulator"] == "mujoco.rollout" and len(d) == 120 * 50
+    env = gym.make("Reacher-v5")
+    env.reset(seed=0)
+    for e in range(0, 120, 17):
+        rows = np.flatnonzero(d.episode == e)
+        s0 = d.states[rows[0]]
+        qpos = np.r_[np.arctan2(s0[2:4], s0[0:2]), d.goals[rows[0]]]
+        qvel = np.r_[s0[4:6], 0.0, 0.0]
+        env.unwrapped.set_state(qpos, qvel)
+        for i, r in enumerate(rows):
+            obs, reward, terminated, truncated, _ = env.step(d.actions[r])
+            tip = obs[8:10] + obs[4:6]
+            np.testing.assert_allclose(d.next_states[r][:6], np.r_[obs[0:4], obs[6:8]], atol=1e-9)
+            assert np.abs(d.next_states[r][6:] - tip).max() < 5e-3  # RK4 stage vs final state, see reacher_sim
+            assert abs(d.rewards[r] - reward) < 5e-3
+            np.testing.assert_array_equal(d.goals[r], obs[4:6])
+        assert d.dones[rows].tolist() == [False] * 49 + [True] and not d.terminated[rows].any()
+    np.testing.assert_array_equal(d.states[1:][d.episode[1:] == d.episode[:-1]],
+                                  d.next_states[:-1][d.episode[1:] == d.episode[:-1]])
+
+
+def test_gymnasium_pool_does_not_depend_on_workers():
+    one = collect_transitions("Pendulum-v1", 3, workers=1, seed=2, progress=False)
+    two = collect_transitions("Pendulum-v1", 3, workers=2, seed=2, progress=False)
+    for k in ("states", "actions", "next_states", "rewards", "dones", "episode"):
+        np.testing.assert_array_equal(getattr(one, k), getattr(two, k))
+    assert one.meta["simulator"] == "gymnasium" and one.goals.shape == (600, 0) and one.dones.sum() == 3
+
+
+def test_transitions_round_trip_and_bad_files(reacher_data, tmp_path):
+    path = tmp_path / "transitions.npz"
+    reacher_data.save(path)
+    back = load_transitions(tmp_path)
+    np.testing.assert_array_equal(back.next_states, reacher_data.next_states)
+    assert back.meta["state_labels"][6:] == ["tip x", "tip y"]
+
+    arrays = dict(np.load(path))
+    bad = dict(arrays, states=arrays["states"].copy())
+    bad["states"][5, 1] = np.nan
+    np.savez(tmp_path / "nan.npz", **bad)
+    with pytest.raises(MotorlabError, match="NaN or Inf .* row 5"):
+        load_transitions(tmp_path / "nan.npz")
+    np.savez(tmp_path / "short.npz", **dict(arrays, actions=arrays["actions"][:-3]))
+    with pytest.raises(MotorlabError, match="actions has"):
+        load_transitions(tmp_path / "short.npz")
+    np.savez(tmp_path / "nometa.npz", **{k: v for k, v in arrays.items() if k != "meta"})
+    with pytest.raises(MotorlabError, match="lacks meta"):
+        load_transitions(tmp_path / "nometa.npz")
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(MotorlabError, match="not a readable"):
+        load_transitions(tmp_path / "junk.npz")
+
+
+def test_normalizer_round_trip():
+    x = np.random.default_rng(0).normal(3.0, [0.1, 5.0, 0.0], size=(500, 3))  # a constant column too
+    norm = Normalizer(3).fit(x)
+    z = norm(torch.as_tensor(x))
+    assert torch.isfinite(z).all() and abs(float(z[:, 1].std()) - 1) < 1e-6
+    np.testing.assert_allclose(norm.inverse(z).numpy(), x, atol=1e-9)
+
+
+def test_validation_holds_out_whole_episodes():
+    episode = np.repeat(np.arange(20), 5)
+    train, valid = split_episodes(episode, 0.2, seed=0)
+    assert len(valid) == 20 and not set(episode[train]) & set(episode[valid])
+    assert sorted(np.r_[train, valid]) == list(range(100))
+
+
+def test_tiny_fit_lowers_the_loss_and_saves_identically(reacher_data, tmp_path):
+    model, result = fit_model(reacher_data, epochs=4, ensemble=2, batch_size=500, progress=False)
+    history = [r["valid_mse"] for r in result["history"]]
+    untrained = ForwardModel(8, 2, members=2)
+    untrained.fit_normalizers(reacher_data.states, reacher_data.actions, reacher_data.next_states)
+    x = model.inputs(torch.as_tensor(reacher_data.states, dtype=torch.float32),
+                     torch.as_tensor(reacher_data.actions, dtype=torch.float32))
+    y = model.delta_norm(torch.as_tensor(reacher_data.next_states - reacher_data.states, dtype=torch.float32))
+    assert history[-1] < history[0] < normalized_mse(untrained, x, y)
+    assert result["valid_mse"] == min(history) and model.members == 2
+
+    model.save(tmp_path, metrics={"valid_mse": result["valid_mse"]})
+    back = load_model(tmp_path, env_id="Reacher-v5", state_layout="reacher")
+    s = torch.as_tensor(reacher_data.states[:64], dtype=torch.float32)
+    a = torch.as_tensor(reacher_data.actions[:64], dtype=torch.float32)
+    assert torch.equal(model.predict(s, a), back.predict(s, a))
+    assert back.metrics["valid_mse"] == result["valid_mse"]
+    with pytest.raises(MotorlabError, match="models 'Reacher-v5', not 'Reacher-v4'"):
+        load_model(tmp_path, env_id="Reacher-v4")
+    with pytest.raises(MotorlabError, match="'reacher' state layout, not 'observation'"):
+        load_model(tmp_path, state_layout="observation")
+    (tmp_path / "model.safetensors").write_bytes(b"\x00" * 40)
+    with pytest.raises(MotorlabError, match="damaged"):
+        load_model(tmp_path)
+    (tmp_path / "model.json").write_text("{")
+    with pytest.raises(MotorlabError, match="not valid JSON"):
+        load_model(tmp_path)
+
+
+class PointMass:
+    """A known linear system: position += velocity * dt, velocity += action * dt; the goal is a point."""
+
+    dt = 0.1
+
+    def predict(self, s, a):
+        pos, vel = s[..., :2], s[..., 2:]
+        return torch.cat([pos + vel * self.dt, vel + a * self.dt], -1)
+
+
+def point_reward(s, a, s2, goal):
+    return -torch.linalg.vector_norm(s2[..., :2] - goal, dim=-1) - 0.01 * a.square().sum(-1)
+
+
+@pytest.mark.parametrize("planner_class, iterations", [(CEMPlanner, 4), (EvoTorchCEM, 10)])
+def test_cem_reaches_the_target_of_a_known_linear_system(planner_class, iterations):
+    system = PointMass()
+    planner = planner_class(model_scorer(system, point_reward), -np.ones(2), np.ones(2), horizon=15,
+                            population=100, iterations=iterations, elites=10, seed=0)
+    goals = torch.tensor([[0.5, -0.3], [-0.4, 0.2], [0.0, 0.45]])
+    s = torch.zeros(3, 4)
+    planner.reset(3)
+    for _ in range(60):
+        s = system.predict(s, planner.plan(s, goals))
+    assert torch.linalg.vector_norm(s[:, :2] - goals, dim=-1).max() < 0.03
+
+
+def test_reacher_reward_in_torch_matches_the_env(reacher_data):
+    d = reacher_data
+    r = reacher_v5(*(torch.as_tensor(x) for x in (d.states, d.actions, d.next_states, d.goals)))
+    np.testing.assert_allclose(r.numpy(), d.rewards, atol=1e-12)
+
+
+@pytest.mark.parametrize("members", [1, 3])
+def test_fast_predict_equals_predict(members):
+    """The planner's folded-normalizer model computes the same next states."""
+    rng = np.random.default_rng(0)
+    model = ForwardModel(8, 2, members=members)
+    model.fit_normalizers(rng.normal(1, 3, (200, 8)), rng.uniform(-1, 1, (200, 2)), rng.normal(1, 3, (200, 8))
+                          + rng.normal(0, 0.1, (200, 8)))
+    s = torch.as_tensor(rng.normal(1, 3, (64, 8)), dtype=torch.float32)
+    a = torch.as_tensor(rng.uniform(-1, 1, (64, 2)), dtype=torch.float32)
+    with torch.no_grad():
+        torch.testing.assert_close(model.fast_predict()(s, a), model.predict(s, a), rtol=1e-5, atol=1e-5)
