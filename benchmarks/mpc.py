@@ -42,6 +42,8 @@ class ReferencePlanner:
     """The notebook's MPC: EvoTorch CEM from scratch each step, minimizing the final distance."""
 
     def __init__(self, model, horizon: int = 4, population: int = 250, iterations: int = 20):
+        import evotorch  # noqa: F401  (sets its logger to INFO on import; quiet it after)
+
         self.model, self.horizon, self.population, self.iterations = model, horizon, population, iterations
         logging.getLogger("evotorch").setLevel(logging.WARNING)
 
@@ -64,7 +66,8 @@ class ReferencePlanner:
             return reacher_distance(s, goal)
 
         problem = Problem("min", cost, solution_length=2 * self.horizon, vectorized=True, dtype=torch.float32)
-        searcher = CEM(problem, popsize=self.population, parenthood_ratio=0.1, stdev_init=0.5)
+        searcher = CEM(problem, popsize=self.population, parenthood_ratio=0.1, stdev_init=0.5,
+                       center_init=torch.zeros(2 * self.horizon))
         for _ in range(self.iterations):
             searcher.step()
         return searcher.status["center"][:2].clamp(-1, 1).numpy()[None]

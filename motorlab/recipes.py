@@ -119,7 +119,7 @@ class DynamicsFitStep(_Strict):
     epochs: int = Field(50, gt=0)
     hidden: list[int] = Field(default_factory=lambda: [64, 64], min_length=1)
     ensemble: int = Field(1, gt=0)
-    lr: float = Field(1e-3, gt=0)
+    lr: float = Field(2e-3, gt=0)
     batch_size: int = Field(2000, gt=0)
     valid_fraction: float = Field(0.1, ge=0, lt=1)
     patience: int | None = Field(None, gt=0)

@@ -34,7 +34,7 @@ def test_collected_reacher_transitions_are_gymnasiums(reacher_data):
         qvel = np.r_[s0[4:6], 0.0, 0.0]
         env.unwrapped.set_state(qpos, qvel)
         for i, r in enumerate(rows):
-            obs, reward, terminated, truncated, _ = env.step(d.actions[r])
+            obs, reward, *_ = env.step(d.actions[r])
             tip = obs[8:10] + obs[4:6]
             np.testing.assert_allclose(d.next_states[r][:6], np.r_[obs[0:4], obs[6:8]], atol=1e-9)
             assert np.abs(d.next_states[r][6:] - tip).max() < 5e-3  # RK4 stage vs final state, see reacher_sim

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import pytest
-
 from helpers import assert_ok, assert_one_line_error, read_summary, run_cli
+
 from motorlab.recipes import load_recipe
 
 TINY = """
@@ -53,7 +53,7 @@ def study(tmp_path_factory):
 
 
 def test_study_runs_every_step(study):
-    root, proc = study
+    root, _ = study
     out = root / "out"
     for step in ("collect", "model", "check", "mpc"):
         assert (out / step / "summary.json").is_file(), step

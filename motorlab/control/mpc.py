@@ -51,8 +51,8 @@ def check_plan_settings(horizon: int, population: int, iterations: int, elites: 
 class CEMPlanner:
     """Batched CEM over action sequences; `plan(states, goals)` gives one action per env."""
 
-    def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int = 10,
-                 population: int = 200, iterations: int = 5, elites: int = 20, init_std: float = 0.5,
+    def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int = 15,
+                 population: int = 100, iterations: int = 5, elites: int = 10, init_std: float = 0.5,
                  min_std: float = 0.05, momentum: float = 0.1, keep: float = 0.3, execute: str = "mean",
                  seed: int = 0):
         check_plan_settings(horizon, population, iterations, elites)

@@ -58,11 +58,15 @@ def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers
         qpos, qvel = sample_initial_states(env, n, rng)
         actions = rng.uniform(low, high, size=(n, steps, len(low)))
         obs, rewards = rollout_reacher(env, qpos, qvel, actions, threads=workers)
-        # Reacher never terminates; the time limit truncates each episode's last step
-        truncated = np.zeros((n, steps), dtype=bool)
-        truncated[:, -1] = True
-        parts.append(_episode_arrays(obs, actions, rewards, np.zeros_like(truncated), truncated, layout,
-                                     range(start, start + n)))
+        # equal-length episodes: whole-array state extraction, no per-episode Python
+        rows = n * steps
+        dones = np.zeros((n, steps), dtype=bool)
+        dones[:, -1] = True  # Reacher never terminates; the time limit truncates each episode's last step
+        parts.append(dict(
+            states=layout.state(obs[:, :-1]).reshape(rows, -1), next_states=layout.state(obs[:, 1:]).reshape(rows, -1),
+            goals=layout.goal(obs[:, :-1]).reshape(rows, -1), actions=actions.reshape(rows, -1),
+            rewards=rewards.reshape(rows), terminated=np.zeros(rows, dtype=bool), dones=dones.reshape(rows),
+            episode=np.repeat(np.arange(start, start + n), steps)))
         bar.advance(task, n)
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 

@@ -47,6 +47,20 @@ class Normalizer(nn.Module):
         return z * self.std + self.mean
 
 
+LN_EPS = 1e-5  # nn.LayerNorm's default
+
+
+def tanh_layer_norm(x: torch.Tensor) -> torch.Tensor:
+    """layer_norm(tanh(x)) (no affine), computed as layer_norm(sigmoid(2x)) with eps/4.
+
+    tanh(x) = 2 sigmoid(2x) - 1, and layer norm ignores a positive scale and a shift of its
+    input once eps is scaled by 1/4 (the variance scales by 4), so the two are the same
+    function. Why: torch's CPU tanh is ~4x slower than its sigmoid (measured 14.8 vs 3.9 us
+    on 80x64 floats), and tanh is the bulk of a small forward pass.
+    """
+    return F.layer_norm(torch.sigmoid(2 * x), x.shape[-1:], eps=LN_EPS / 4)
+
+
 class EnsembleMLP(nn.Module):
     """K independent MLPs (Linear -> Tanh -> LayerNorm per hidden layer), evaluated together.
 
@@ -73,7 +87,7 @@ class EnsembleMLP(nn.Module):
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
             x = torch.baddbmm(b, x, w)
             if i < last:
-                x = F.layer_norm(torch.tanh(x), x.shape[-1:]) * self.ln_weights[i] + self.ln_biases[i]
+                x = tanh_layer_norm(x) * self.ln_weights[i] + self.ln_biases[i]
         return x
 
 
@@ -126,11 +140,12 @@ class ForwardModel(nn.Module):
             std_d, mean_d = self.delta_norm.std.float(), self.delta_norm.mean.float()
             w_last = net.weights[-1] * std_d  # delta = z * std + mean, folded into the output layer
             b_last = net.biases[-1] * std_d + mean_d
-            ws = [w0, *net.weights[1:-1], w_last]
-            bs = [b0, *net.biases[1:-1], b_last]
+            # the hidden layers feed tanh_layer_norm: fold its 2x into their weights
+            ws = [2 * w0, *(2 * w for w in net.weights[1:-1]), w_last]
+            bs = [2 * b0, *(2 * b for b in net.biases[1:-1]), b_last]
             lns = [(w, b) for w, b in zip(net.ln_weights, net.ln_biases)]
             if self.members == 1:
-                ws0s, ws0a = w0[0, :n_s].clone(), w0[0, n_s:].clone()
+                ws0s, ws0a = ws[0][0, :n_s].clone(), ws[0][0, n_s:].clone()
                 rest = [(w[0].clone(), b[0, 0].clone()) for w, b in zip(ws[1:], bs[1:])]
                 b00 = bs[0][0, 0].clone()
                 lns1 = [(w[0, 0].clone(), b[0, 0].clone()) for w, b in lns]
@@ -138,7 +153,7 @@ class ForwardModel(nn.Module):
                 def step(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
                     x = torch.addmm(b00, states, ws0s).addmm_(actions, ws0a)
                     for (w, b), (lw, lb) in zip(rest, lns1):
-                        x = torch.addmm(b, F.layer_norm(torch.tanh(x), lw.shape, lw, lb), w)
+                        x = torch.addmm(b, F.layer_norm(torch.sigmoid(x), lw.shape, lw, lb, LN_EPS / 4), w)
                     return states + x
             else:
                 def step(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
@@ -146,7 +161,7 @@ class ForwardModel(nn.Module):
                     for i, (w, b) in enumerate(zip(ws, bs)):
                         x = torch.baddbmm(b, x, w)
                         if i < len(lns):
-                            x = F.layer_norm(torch.tanh(x), x.shape[-1:]) * lns[i][0] + lns[i][1]
+                            x = F.layer_norm(torch.sigmoid(x), x.shape[-1:], eps=LN_EPS / 4) * lns[i][0] + lns[i][1]
                     return states + x.mean(0)
         return step
 

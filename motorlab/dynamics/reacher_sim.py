@@ -13,6 +13,7 @@ forward model is better served by the fingertip of the state it actually reached
 
 from __future__ import annotations
 
+import copy
 import os
 
 import mujoco
@@ -52,12 +53,27 @@ def sample_initial_states(env, n: int, rng: np.random.Generator) -> tuple[np.nda
     return qpos, qvel
 
 
+def _without_collision(model: mujoco.MjModel) -> mujoco.MjModel:
+    """A copy of `model` with collision detection off, when no two geoms can ever touch.
+
+    MuJoCo only pairs geoms whose contype and conaffinity bits meet; in Reacher every
+    contype is 0, so collision detection finds nothing, and skipping it changes no number
+    (the test checks bit-identity) while saving ~20% of each step.
+    """
+    can_touch = (model.geom_contype[:, None] & model.geom_conaffinity[None, :]).any() or model.npair > 0
+    if can_touch:
+        return model
+    fast = copy.copy(model)
+    fast.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    return fast
+
+
 def rollout_reacher(env, qpos0: np.ndarray, qvel0: np.ndarray, actions: np.ndarray,
                     threads: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Observations (E, T+1, obs_dim) and rewards (E, T) of Gymnasium's Reacher-v4/v5 for
     E episodes from the given initial qpos/qvel under actions (E, T, 2)."""
     u = env.unwrapped
-    model = u.model
+    model = _without_collision(u.model)
     frame_skip = u.frame_skip
     n, steps = actions.shape[:2]
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS

@@ -63,7 +63,7 @@ def check_settings(epochs: int, hidden: tuple[int, ...], ensemble: int, lr: floa
 
 
 def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64, 64), ensemble: int = 1,
-              lr: float = 1e-3, batch_size: int = 2000, valid_fraction: float = 0.1, patience: int | None = None,
+              lr: float = 2e-3, batch_size: int = 2000, valid_fraction: float = 0.1, patience: int | None = None,
               seed: int = 0, threads: int | None = None, run_dir: Path | None = None,
               progress: bool = True) -> tuple[ForwardModel, dict[str, Any]]:
     """Train a normalized-delta forward model.
@@ -158,7 +158,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
 
 
 def fit_step(transitions: Path, epochs: int = 50, hidden: tuple[int, ...] = (64, 64), ensemble: int = 1,
-             lr: float = 1e-3, batch_size: int = 2000, valid_fraction: float = 0.1, patience: int | None = None,
+             lr: float = 2e-3, batch_size: int = 2000, valid_fraction: float = 0.1, patience: int | None = None,
              seed: int = 0, out: Path | None = None, progress: bool = True) -> dict[str, Any]:
     """`motorlab dynamics fit`: model.safetensors + model.json, metrics, loss plot; returns the summary."""
     from motorlab.report.dynamics_plots import loss_curve
