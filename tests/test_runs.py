@@ -107,3 +107,15 @@ def test_metrics_round_trip(tmp_path):
 def test_read_metrics_missing(tmp_path):
     with pytest.raises(MotorlabError, match="metrics.csv"):
         read_metrics(tmp_path)
+
+
+
+def test_atomic_writes_get_normal_file_permissions(tmp_path):
+    """Plots, videos and summaries are as readable as any file the user writes (not mkstemp's 0600)."""
+    from motorlab.runs import _umask, atomic_write_text
+
+    atomic_write_text(tmp_path / "a.txt", "x")
+    with open(tmp_path / "b.txt", "w") as f:  # what plain open() gives under this umask
+        f.write("y")
+    mode = (tmp_path / "a.txt").stat().st_mode & 0o777
+    assert mode == (tmp_path / "b.txt").stat().st_mode & 0o777 == 0o666 & ~_umask()
