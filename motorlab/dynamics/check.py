@@ -36,7 +36,7 @@ def open_loop(model: ForwardModel, episodes: int, seed: int = 0, steps: int | No
         states, actions = [layout.state(obs)], []
         for _ in range(steps):
             a = rng.uniform(env.action_space.low, env.action_space.high)
-            obs, _, terminated, truncated, _ = env.step(a)
+            obs, _, terminated, *_ = env.step(a)
             states.append(layout.state(obs))
             actions.append(a)
             if terminated:
