@@ -57,9 +57,7 @@ def main() -> None:
 
     # the reference sees exactly motorlab's normalized inputs and targets and split
     train_rows, valid_rows = split_episodes(data.episode, 0.1, args.seed)
-    with torch.no_grad():
-        s, a, s2 = (torch.as_tensor(v, dtype=torch.float32) for v in (data.states, data.actions, data.next_states))
-        x, y = model.inputs(s, a), model.delta_norm(s2 - s)
+    x, y = model.training_pairs(data.states, data.actions, data.next_states)
     module, ref_seconds = reference_fit(x[train_rows].numpy(), y[train_rows].numpy(), args.reference_epochs, args.seed)
     with torch.no_grad():
         ref_mse = float(((module(x[valid_rows]) - y[valid_rows]) ** 2).mean())

@@ -97,9 +97,7 @@ def test_tiny_fit_lowers_the_loss_and_saves_identically(reacher_data, tmp_path):
     history = [r["valid_mse"] for r in result["history"]]
     untrained = ForwardModel(8, 2, members=2)
     untrained.fit_normalizers(reacher_data.states, reacher_data.actions, reacher_data.next_states)
-    x = model.inputs(torch.as_tensor(reacher_data.states, dtype=torch.float32),
-                     torch.as_tensor(reacher_data.actions, dtype=torch.float32))
-    y = model.delta_norm(torch.as_tensor(reacher_data.next_states - reacher_data.states, dtype=torch.float32))
+    x, y = model.training_pairs(reacher_data.states, reacher_data.actions, reacher_data.next_states)
     assert history[-1] < history[0] < normalized_mse(untrained, x, y)
     assert result["valid_mse"] == min(history) and model.members == 2
 

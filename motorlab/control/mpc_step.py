@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from motorlab.control.mpc import MPCPolicy, check_plan_settings, make_planner, model_scorer
+from motorlab.control.mpc import MPCPolicy, make_planner, model_scorer
 from motorlab.dynamics.model import load_model
 from motorlab.dynamics.rewards import reward_for
-from motorlab.dynamics.state import layout_for
+from motorlab.dynamics.state import layout_for, xy_columns
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.runs import MetricsWriter, atomic_write_npz, prepare_run_dir, write_config, write_summary
@@ -47,10 +47,10 @@ def build_policy(env, env_id: str, model_path: Path, optimizer: str = "cem", see
 
 def _distance(layout, obs: np.ndarray) -> float:
     """Fingertip-to-target distance for layouts that know both (reacher), else NaN."""
-    if "tip x" not in layout.labels or len(layout.goal_labels) != 2:
+    xy = xy_columns(layout.labels)
+    if xy is None or len(layout.goal_labels) != 2:
         return float("nan")
-    tip = layout.state(obs[None])[0][[layout.labels.index("tip x"), layout.labels.index("tip y")]]
-    return float(np.linalg.norm(tip - layout.goal(obs[None])[0]))
+    return float(np.linalg.norm(layout.state(obs)[xy] - layout.goal(obs)))
 
 
 def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, parallel: int, progress: bool = True):
@@ -102,7 +102,6 @@ def mpc_step(env_id: str, model_path: Path, episodes: int = 50, horizon: int | N
         raise MotorlabError(f"--episodes and --parallel must be positive, got {episodes} and {parallel}.")
     settings = {"horizon": horizon, "population": population, "iterations": iterations, "elites": elites}
     resolved = {**DEFAULTS, **{k: v for k, v in settings.items() if v is not None}}
-    check_plan_settings(**resolved)
     env = make_env(EnvConfig(id=env_id), shaped=False)
     policy = build_policy(env, env_id, model_path, optimizer, seed, **resolved)
     dt = float(getattr(env.unwrapped, "dt", 0.0)) or None

@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 import torch
 
+from motorlab.dynamics.collect import collect_transitions
 from motorlab.dynamics.model import ForwardModel, load_model
-from motorlab.dynamics.state import layout_for
-from motorlab.envs import EnvConfig, make_env
+from motorlab.dynamics.state import xy_columns
 from motorlab.errors import MotorlabError
 from motorlab.runs import atomic_write_npz, prepare_run_dir, write_config, write_summary
 
@@ -23,42 +23,27 @@ REPORT_STEPS = (1, 5, 10, 25)
 
 
 def open_loop(model: ForwardModel, episodes: int, seed: int = 0, steps: int | None = None) -> dict[str, np.ndarray]:
-    """Simulator and model states (E, T+1, S) under the same random actions (E, T, A), and goals (E, G)."""
-    env_id = model.meta["env_id"]
-    env = make_env(EnvConfig(id=env_id), shaped=False)
-    layout = layout_for(env_id, env.observation_space.shape[0], model.meta["state_layout"])
-    steps = steps or env.spec.max_episode_steps or 100
-    true, pred, acts, goals = [], [], [], []
-    for e in range(episodes):
-        rng = np.random.default_rng(seed + e)
-        obs, _ = env.reset(seed=seed + e)
-        goals.append(layout.goal(obs))
-        states, actions = [layout.state(obs)], []
-        for _ in range(steps):
-            a = rng.uniform(env.action_space.low, env.action_space.high)
-            obs, _, terminated, *_ = env.step(a)
-            states.append(layout.state(obs))
-            actions.append(a)
-            if terminated:
-                break
-        s = torch.as_tensor(states[0], dtype=torch.float32)[None]
-        model_states = [s[0]]
-        with torch.no_grad():
-            for a in actions:
-                s = model.predict(s, torch.as_tensor(a, dtype=torch.float32)[None])
-                model_states.append(s[0])
-        true.append(np.array(states))
-        pred.append(torch.stack(model_states).numpy().astype(np.float64))
-        acts.append(np.array(actions))
-    env.close()
-    horizon = min(len(t) for t in true)  # an episode may terminate early: compare the common length
-    return {"true": np.stack([t[:horizon] for t in true]), "model": np.stack([p[:horizon] for p in pred]),
-            "actions": np.stack([a[:horizon - 1] for a in acts]), "goals": np.stack(goals)}
+    """Simulator and model states (E, T+1, S) under the same random actions (E, T, A), and goals (E, G).
 
-
-def _xy_columns(labels: list[str]) -> list[int] | None:
-    cols = [labels.index(k) for k in ("tip x", "tip y") if k in labels]
-    return cols if len(cols) == 2 else None
+    The simulator side is `collect_transitions` on Gymnasium's env (episode k from seed + k), so the
+    check sees exactly what `dynamics collect --simulator gymnasium` would record.
+    """
+    data = collect_transitions(model.meta["env_id"], episodes, workers=1, seed=seed,
+                               state=model.meta["state_layout"], simulator="gymnasium", progress=False)
+    rows = [np.flatnonzero(data.episode == e) for e in range(episodes)]
+    # an episode may terminate early: compare the common length
+    horizon = min(min(len(r) for r in rows), steps or np.inf)
+    rows = np.stack([r[:horizon] for r in rows])  # (E, T)
+    true = np.concatenate([data.states[rows[:, :1]], data.next_states[rows]], axis=1)
+    actions = data.actions[rows]
+    s = torch.as_tensor(true[:, 0], dtype=torch.float32)
+    predicted = [s]
+    with torch.no_grad():
+        for t in range(horizon):
+            s = model.predict(s, torch.as_tensor(actions[:, t], dtype=torch.float32))
+            predicted.append(s)
+    return {"true": true, "model": torch.stack(predicted, 1).numpy().astype(np.float64), "actions": actions,
+            "goals": data.goals[rows[:, 0]]}
 
 
 def check_step(model_path: Path, episodes: int = 5, seed: int = 0, steps: int | None = None,
@@ -80,7 +65,7 @@ def check_step(model_path: Path, episodes: int = 5, seed: int = 0, steps: int | 
     horizons = np.arange(diff.shape[1])
     errors = {"state (normalized RMSE)": nrmse}
     summary: dict[str, Any] = {"env_id": model.meta["env_id"], "episodes": episodes, "horizon": int(horizons[-1])}
-    xy = _xy_columns(labels)
+    xy = xy_columns(labels)
     if xy:
         tip = np.linalg.norm(diff[..., xy], axis=-1)
         for h in REPORT_STEPS:

@@ -116,6 +116,12 @@ class ForwardModel(nn.Module):
     def inputs(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         return torch.cat([self.state_norm(states), self.action_norm(actions)], dim=-1)
 
+    @torch.no_grad()
+    def training_pairs(self, states, actions, next_states) -> tuple[torch.Tensor, torch.Tensor]:
+        """The net's inputs and targets (the normalized state delta) as float32 tensors, from arrays."""
+        s, a, s2 = (torch.as_tensor(v, dtype=torch.float32) for v in (states, actions, next_states))
+        return self.inputs(s, a), self.delta_norm(s2 - s)
+
     def forward(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """Normalized deltas (K, B, S) for (B, S) states and (B, A) actions."""
         return self.net(self.inputs(states, actions))

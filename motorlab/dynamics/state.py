@@ -51,6 +51,12 @@ REACHER = StateLayout("reacher", REACHER_LABELS, ("target x", "target y"),
                       _reacher_state, lambda obs: obs[..., 4:6])
 
 
+def xy_columns(labels) -> list[int] | None:
+    """Columns of the fingertip x-y ("tip x", "tip y") in a state with these labels, or None."""
+    labels = list(labels)
+    return [labels.index("tip x"), labels.index("tip y")] if {"tip x", "tip y"} <= set(labels) else None
+
+
 def layout_for(env_id: str, obs_dim: int, name: str = "auto") -> StateLayout:
     """The state layout NAME ("auto": reacher for Reacher ids, else the observation)."""
     if name == "auto":

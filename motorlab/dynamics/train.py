@@ -36,11 +36,6 @@ def split_episodes(episode: np.ndarray, fraction: float, seed: int) -> tuple[np.
     return np.flatnonzero(~is_valid), np.flatnonzero(is_valid)
 
 
-def _targets(model: ForwardModel, s: torch.Tensor, a: torch.Tensor, s2: torch.Tensor):
-    with torch.no_grad():
-        return model.inputs(s, a), model.delta_norm(s2 - s)
-
-
 def normalized_mse(model: ForwardModel, x: torch.Tensor, y: torch.Tensor, batch: int = 65536) -> float:
     """Mean squared error of the normalized delta, averaged over members, rows and entries."""
     with torch.no_grad():
@@ -93,8 +88,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
     model = ForwardModel(data.states.shape[1], data.actions.shape[1], hidden, ensemble, meta=meta)
     model.fit_normalizers(data.states[train_rows], data.actions[train_rows], data.next_states[train_rows])
     model.float()
-    tensors = [torch.as_tensor(a, dtype=torch.float32) for a in (data.states, data.actions, data.next_states)]
-    x, y = _targets(model, *tensors)
+    x, y = model.training_pairs(data.states, data.actions, data.next_states)
     x_train, y_train, x_valid, y_valid = x[train_rows], y[train_rows], x[valid_rows], y[valid_rows]
 
     optimizer = torch.optim.Adam(model.net.parameters(), lr=lr, foreach=True)

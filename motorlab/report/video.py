@@ -17,7 +17,7 @@ from motorlab.envs import EnvConfig, env_dt, make_env
 from motorlab.errors import MotorlabError
 from motorlab.evaluate import trained_env_settings
 from motorlab.policies import load_policy
-from motorlab.runs import read_config, require_run_dir, write_json
+from motorlab.runs import atomic_path, read_config, require_run_dir, write_json
 
 MAX_FPS = 50  # browsers and players want at most this; faster envs are subsampled
 
@@ -109,23 +109,10 @@ def video_settings(env, width: int, height: int, camera):
 
 def write_mp4(path: Path, frames: list[np.ndarray], fps: float) -> None:
     """H.264 (yuv420p, what browsers play) via imageio's ffmpeg, to a temp file renamed into place."""
-    import os
-    import tempfile
-
     import imageio.v2 as imageio
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    from motorlab.runs import _FILE_MODE
-
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".mp4")
-    os.fchmod(fd, _FILE_MODE)
-    os.close(fd)
-    try:
-        with imageio.get_writer(tmp, format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p",
-                                macro_block_size=8, ffmpeg_log_level="error") as writer:
-            for frame in frames:
-                writer.append_data(frame)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path, suffix=".mp4") as tmp, imageio.get_writer(
+            tmp, format="FFMPEG", fps=fps, codec="libx264", pixelformat="yuv420p", macro_block_size=8,
+            ffmpeg_log_level="error") as writer:
+        for frame in frames:
+            writer.append_data(frame)
