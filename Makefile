@@ -27,6 +27,7 @@ bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/dynamics_collect.py
 	$(VENV)/bin/python benchmarks/dynamics_fit.py
 	$(VENV)/bin/python benchmarks/mpc.py
+	$(VENV)/bin/python benchmarks/upkie_fps.py
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

@@ -45,11 +45,16 @@ Delay = Annotated[Optional[float], typer.Option(
 DelayOn = Annotated[Optional[str], typer.Option(
     "--delay-on", help="What the delay filters: both (default: actuation and perception), action or observation.")]
 History = Annotated[Optional[int], typer.Option("--history", help="Stack the last K observations (K=1: none).")]
+EnvArgs = Annotated[Optional[list[str]], typer.Option(
+    "--env-arg", help="Env keyword argument KEY=VALUE (VALUE as JSON), repeatable: --env-arg time_limit=5 "
+                      "--env-arg 'init_rand={\"pitch\": 0.1}' (Upkie).")]
 
 
-def _env_overrides(env: str | None, delay, delay_on, history, reward=None, sar=None, phi=None) -> dict:
+def _env_overrides(env: str | None, delay, delay_on, history, reward=None, sar=None, phi=None,
+                   env_args: list[str] | None = None) -> dict:
     given = {"id": env, "delay": delay, "delay_on": delay_on, "history": history, "reward": reward,
-             "sar": str(sar) if sar else None, "phi": phi}
+             "sar": str(sar) if sar else None, "phi": phi,
+             "kwargs": _parse_sets(env_args, "--env-arg") if env_args else None}
     return {k: v for k, v in given.items() if v is not None}
 
 
@@ -69,7 +74,9 @@ def _validation_message(e, flags: bool = True) -> str:
 @app.command(epilog="Examples:\n\n  motorlab train InvertedPendulum-v5 --until-solved --out runs/ppo\n\n"
                     "  motorlab train InvertedPendulum-v5 --preset fast --delay 0.2 --until-solved\n\n"
                     "  motorlab train InvertedPendulum-v5 --algo ppo --lr linear:3e-4,0 --clip-range linear:0.3,0.1 "
-                    "--history 10 --delay 0.2")
+                    "--history 10 --delay 0.2\n\n"
+                    "  motorlab train Upkie-PyBullet-Pendulum --n-envs 2 --timesteps 150000 "
+                    "--env-arg 'init_rand={\"pitch\": 0.1}'")
 def train(
     env_id: Annotated[str, typer.Argument(help="Gymnasium env id, e.g. InvertedPendulum-v5.")],
     algo: Annotated[Optional[str], typer.Option(
@@ -110,6 +117,7 @@ def train(
              "phi*decode(syn) + (1-phi)*raw (the reference used 0.66).")] = None,
     hp: Annotated[Optional[list[str]], typer.Option(
         "--set", help="Extra SB3 hyperparameter KEY=VALUE (VALUE as JSON), repeatable: --set n_steps=1024.")] = None,
+    env_arg: EnvArgs = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
 ):
     """Train a policy on ENV_ID and write a run folder.
@@ -127,7 +135,7 @@ def train(
         "algo": algo, "preset": preset, "timesteps": timesteps, "seed": seed, "lr": lr, "clip_range": clip_range,
         "until_solved": until_solved or None, "solve_episodes": solve_episodes, "solve_return": solve_return,
         "eval_every": eval_every, "n_envs": n_envs, "normalize": normalize, "device": device, "progress": progress,
-        "env": _env_overrides(env_id, delay, delay_on, history, reward, sar, phi),
+        "env": _env_overrides(env_id, delay, delay_on, history, reward, sar, phi, env_arg),
     }
     if hp:
         settings["hyperparams"] = _parse_sets(hp)
@@ -143,12 +151,13 @@ def train(
               + (f", steps_to_success {sts:,}" if sts is not None else (", not solved" if cfg.until_solved else "")))
 
 
-def _parse_sets(items: list[str]) -> dict:
+def _parse_sets(items: list[str], flag: str = "--set") -> dict:
     params = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key:
-            raise MotorlabError(f"--set {item!r}: write KEY=VALUE, e.g. --set n_steps=1024.")
+            example = "time_limit=5" if flag == "--env-arg" else "n_steps=1024"
+            raise MotorlabError(f"{flag} {item!r}: write KEY=VALUE, e.g. {flag} {example}.")
         try:
             params[key] = json.loads(value)
         except json.JSONDecodeError:
@@ -166,6 +175,7 @@ def evaluate(
     delay: Delay = None,
     delay_on: DelayOn = None,
     history: History = None,
+    env_arg: EnvArgs = None,
     episodes: Annotated[int, typer.Option(help="Evaluation episodes.")] = 10,
     seed: Seed = 0,
     out: Out = None,
@@ -181,16 +191,17 @@ def evaluate(
     from motorlab.evaluate import evaluate_step, resolve_env
 
     try:
-        env_cfg = resolve_env(policy, _env_overrides(env, delay, delay_on, history))
+        env_cfg = resolve_env(policy, _env_overrides(env, delay, delay_on, history, env_args=env_arg))
     except ValidationError as e:
         raise MotorlabError(_validation_message(e)) from None
     s = evaluate_step(policy, env_cfg, episodes, seed, out)
     table = Table(title=f"{policy} on {env_cfg.id}" + (f", delay {env_cfg.delay} s" if env_cfg.delay else "")
                   + (f", history {env_cfg.history}" if env_cfg.history > 1 else ""))
-    for col in ("episodes", "return mean ± std", "min", "max", "success", "mean length"):
+    for col in ("episodes", "return mean ± std", "min", "max", "success", "mean length", "falls"):
         table.add_column(col, justify="right")
     table.add_row(str(s["episodes"]), f"{s['return_mean']:.1f} ± {s['return_std']:.1f}", f"{s['return_min']:.1f}",
-                  f"{s['return_max']:.1f}", f"{s['success_rate']:.0%}", f"{s['episode_length_mean']:.0f}")
+                  f"{s['return_max']:.1f}", f"{s['success_rate']:.0%}", f"{s['episode_length_mean']:.0f}",
+                  str(s["falls"]))
     stdout.print(table)
     stdout.print(f"written: {s['run_dir']}/summary.json")
 

@@ -32,6 +32,7 @@ class Rollouts:
     success: np.ndarray
     aborted: bool = False
     faults: int = 0  # episodes ended by a numerical fault (NaN/Inf, diverging simulation)
+    falls: int = 0  # episodes the env terminated before the time limit (a fall, for balancing tasks)
     observations: list[np.ndarray] = field(default_factory=list)  # per episode, when recorded
     actions: list[np.ndarray] = field(default_factory=list)
     dt: float = 0.0
@@ -47,6 +48,7 @@ class Rollouts:
             "success_rate": float(np.mean(self.success)) if len(r) else None,
             "episode_length_mean": float(np.mean(self.lengths)) if len(r) else None,
             "episode_lengths": [int(x) for x in self.lengths],
+            "falls": int(self.falls),
             "numerical_faults": int(self.faults),
         }
 
@@ -137,7 +139,7 @@ class Evaluator:
         lengths = np.zeros(n, dtype=int)
         success = np.zeros(n, dtype=bool)
         outcome = EpisodeSuccess(n, self.target)
-        faults = 0
+        faults = falls = 0
         traces_o = [[o] for o in obs] if record else []
         traces_a: list[list] = [[] for _ in range(n)] if record else []
         while active.any():
@@ -155,12 +157,13 @@ class Evaluator:
                     active[i] = False
                     success[i] = bool(outcome.end(i, returns[i]))
                     faults += "numerical_fault" in info
+                    falls += bool(terminated) and "numerical_fault" not in info
                     if stop_below is not None and returns[i] < stop_below:
                         done = ~active
                         return Rollouts(returns[done], lengths[done], success[done], aborted=True, faults=faults,
-                                        dt=self.dt)
+                                        falls=falls, dt=self.dt)
         return Rollouts(
-            returns, lengths, success, faults=faults, dt=self.dt,
+            returns, lengths, success, faults=faults, falls=falls, dt=self.dt,
             observations=[np.array(t) for t in traces_o], actions=[np.array(t) for t in traces_a],
         )
 
@@ -187,6 +190,7 @@ def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, recor
         return parts[0]
     return Rollouts(np.concatenate([p.returns for p in parts]), np.concatenate([p.lengths for p in parts]),
                     np.concatenate([p.success for p in parts]), faults=sum(p.faults for p in parts),
+                    falls=sum(p.falls for p in parts),
                     observations=[o for p in parts for o in p.observations],
                     actions=[a for p in parts for a in p.actions], dt=parts[0].dt)
 
@@ -201,7 +205,7 @@ def trained_env_settings(run_dir) -> dict:
 
 def resolve_env(policy_spec: str, overrides: dict) -> EnvConfig:
     """The env to evaluate on: the run folder's training env (if the policy is a run
-    folder), with the given overrides (id, delay, delay_on, history) on top.
+    folder), with the given overrides (id, delay, delay_on, history, kwargs) on top.
 
     Raises:
         MotorlabError: no env id known (built-in controller without --env).
@@ -217,10 +221,18 @@ def resolve_env(policy_spec: str, overrides: dict) -> EnvConfig:
         base = trained_env_settings(require_run_dir(Path(policy_spec)))
     elif policy_spec.split(":", 1)[0] not in BUILTIN_POLICIES:
         raise MotorlabError(unknown_policy_message(policy_spec))
-    base.update({k: v for k, v in overrides.items() if v is not None})
-    if "id" not in base:
+    merged = merge_env(base, overrides)
+    if "id" not in merged:
         raise MotorlabError(f"no env for {policy_spec!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")
-    return EnvConfig.model_validate(base)
+    return EnvConfig.model_validate(merged)
+
+
+def merge_env(base: dict, overrides: dict) -> dict:
+    """Env settings `overrides` on top of `base`; env keyword arguments merge key by key."""
+    merged = {**base, **{k: v for k, v in overrides.items() if v is not None}}
+    if isinstance(base.get("kwargs"), dict) and isinstance(overrides.get("kwargs"), dict):
+        merged["kwargs"] = {**base["kwargs"], **overrides["kwargs"]}
+    return merged
 
 
 def evaluate_step(policy_spec: str, env_cfg: EnvConfig, episodes: int, seed: int, out) -> dict:

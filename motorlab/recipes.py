@@ -21,10 +21,11 @@
     delay = 0.2
 
 Kinds and their fields ("@step" names an earlier step's output):
-    train      every `motorlab train` setting (env, delay, delay_on, history, reward, sar, phi,
+    train      every `motorlab train` setting (env, env_kwargs, delay, delay_on, history, reward, sar, phi,
                algo, preset, timesteps, seed, seeds, lr, clip_range, until_solved, ...);
                sar = "@fit-step" trains in that step's synergy space
-    evaluate   policy, env, delay, delay_on, history, sar, phi, episodes, seed
+    evaluate   policy, env, env_kwargs, delay, delay_on, history, sar, phi, episodes, seed
+    video      run = "@train-step" or "@evaluate-step", episodes, seed
     collect    run = "@train-step", episodes, percentile, preview, deterministic, workers, seed
     vaf        activations = "@collect-step", threshold, method, max_n
     fit        activations = "@collect-step", n_synergies | vaf, method, seed
@@ -53,7 +54,7 @@ from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.rl.config import TrainConfig, resolve
 
 ENV_KEYS = {"env": "id", "delay": "delay", "delay_on": "delay_on", "history": "history", "reward": "reward",
-            "sar": "sar", "phi": "phi"}
+            "sar": "sar", "phi": "phi", "env_kwargs": "kwargs"}
 
 
 class _Strict(BaseModel):
@@ -74,6 +75,12 @@ class CollectStep(_Strict):
     preview: int = Field(50, gt=0)
     deterministic: bool = False
     workers: int | None = Field(None, gt=0)
+    seed: int = Field(0, ge=0)
+
+
+class VideoStep(_Strict):
+    run: str
+    episodes: int = Field(1, gt=0)
     seed: int = Field(0, ge=0)
 
 
@@ -147,12 +154,12 @@ class MpcStep(_Strict):
     seed: int = Field(0, ge=0)
 
 
-KINDS: dict[str, type[BaseModel]] = {"evaluate": EvalStep, "collect": CollectStep, "vaf": VafStep, "fit": FitStep,
+KINDS: dict[str, type[BaseModel]] = {"evaluate": EvalStep, "video": VideoStep, "collect": CollectStep, "vaf": VafStep, "fit": FitStep,
                                      "zeroshot": ZeroshotStep, "compare": CompareStep,
                                      "dynamics-collect": DynamicsCollectStep, "dynamics-fit": DynamicsFitStep,
                                      "dynamics-check": DynamicsCheckStep, "mpc": MpcStep}
 # Which kind of earlier step each reference field must name.
-REFERENCES = {("evaluate", "policy"): "train", ("collect", "run"): "train", ("vaf", "activations"): "collect",
+REFERENCES = {("evaluate", "policy"): "train", ("video", "run"): ("train", "evaluate"), ("collect", "run"): "train", ("vaf", "activations"): "collect",
               ("fit", "activations"): "collect", ("zeroshot", "runs"): "train", ("compare", "groups"): "train",
               ("train", "sar"): "fit", ("dynamics-collect", "policy"): "train",
               ("dynamics-fit", "transitions"): "dynamics-collect", ("dynamics-check", "model"): "dynamics-fit",
@@ -163,7 +170,7 @@ class Step(BaseModel):
     """One validated step: its name, kind and settings (`train` for training, else `settings`)."""
 
     name: str
-    kind: Literal["train", "evaluate", "collect", "vaf", "fit", "zeroshot", "compare", "dynamics-collect",
+    kind: Literal["train", "evaluate", "video", "collect", "vaf", "fit", "zeroshot", "compare", "dynamics-collect",
                   "dynamics-fit", "dynamics-check", "mpc"]
     train: TrainConfig | None = None
     seeds: list[int] | None = None
@@ -258,12 +265,14 @@ def _check_refs(kind: str, fields: dict, steps: list[Step], where: str) -> None:
     for (k, field), wanted in REFERENCES.items():
         if k != kind or field not in fields:
             continue
+        kinds = wanted if isinstance(wanted, tuple) else (wanted,)
         for ref in _refs(fields[field]):
             target = next((s for s in steps if s.name == ref), None)
-            if target is None or target.kind != wanted:
-                names = ", ".join(s.name for s in steps if s.kind == wanted) or "none"
-                raise MotorlabError(f"{where}: {field} '@{ref}' names no earlier {wanted} step; "
-                                    f"{wanted} steps so far: {names}.")
+            if target is None or target.kind not in kinds:
+                names = ", ".join(s.name for s in steps if s.kind in kinds) or "none"
+                label = " or ".join(kinds)
+                raise MotorlabError(f"{where}: {field} '@{ref}' names no earlier {label} step; "
+                                    f"{label} steps so far: {names}.")
 
 
 def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
@@ -328,13 +337,15 @@ def _make_step(name: str, kind: str, fields: dict, steps: list[Step]) -> Step:
             fields.pop("sar")  # the fit step's sar.npz exists only once the study runs
         return Step(name=name, kind="train", train=resolve(_split_env(fields)), seeds=seeds, sar_ref=sar_ref)
     if kind == "evaluate":
+        from motorlab.evaluate import merge_env
+
         settings = _split_env(fields)
         policy = str(fields.get("policy", ""))
         if policy.startswith("@"):
             ref = next(s for s in steps if s.name == policy[1:])
             # by default, evaluate on the env the policy was trained on, without its reward shaping
             trained_env = ref.train.env.model_dump(exclude={"reward"})
-            settings["env"] = {**trained_env, **settings.get("env", {})}
+            settings["env"] = merge_env(trained_env, settings.get("env", {}))
         return Step(name=name, kind="evaluate", settings=EvalStep.model_validate(settings))
     step = Step(name=name, kind=kind, settings=KINDS[kind].model_validate(fields))
     if kind in ("dynamics-collect", "mpc"):

@@ -140,9 +140,9 @@ def _video(env_id: str, policy: MPCPolicy, path: Path, seed: int) -> Path:
     from motorlab.report.video import record_episode, video_settings, write_mp4
 
     env = make_env(EnvConfig(id=env_id), shaped=False)
-    renderer, data, cam, every, fps = video_settings(env, 480, 480, None)
-    frames, _ = record_episode(env, policy, renderer, data, cam, seed, every)
+    cam, every, fps = video_settings(env, 480, 480, None)
+    frames, _ = record_episode(env, policy, cam, seed, every)
     write_mp4(path, frames, fps)
-    renderer.close()
+    cam.close()
     env.close()
     return path

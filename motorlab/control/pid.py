@@ -19,6 +19,11 @@ from motorlab.errors import MotorlabError
 # Gains that balance InvertedPendulum (obs: cart x, pole angle, cart velocity, pole velocity).
 DEFAULT_GAINS = {
     "InvertedPendulum": {"kp": [1.0, 20.0, 0.0, 0.0], "ki": [0.0, 0.0, 0.0, 0.0], "kd": [1.0, 3.0, 0.0, 0.0]},
+    # Upkie (obs: pitch, ground position, pitch rate, ground velocity; action: ground velocity):
+    # drive the wheels under the lean, damp the pitch rate, and pull back to the start
+    # position and to rest. Tuned on the PyBullet sim (balances 10 s from pitch up to 0.1 rad).
+    "Upkie-PyBullet-Pendulum": {"kp": [10.0, 0.3, 0.3, 0.5], "ki": [0.0] * 4, "kd": [0.0] * 4},
+    "Upkie-Spine-Pendulum": {"kp": [10.0, 0.3, 0.3, 0.5], "ki": [0.0] * 4, "kd": [0.0] * 4},
 }
 
 

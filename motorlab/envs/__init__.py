@@ -3,6 +3,8 @@
     base env -> numerical guard -> reward shaping -> low-pass delay -> synergy actions -> observation history
 
 Reward shaping sees the true state; the policy sees delayed, stacked observations.
+Upkie ids (`Upkie-PyBullet-Pendulum`, ...) get motorlab's learning defaults and
+balancing reward as their base env (see `motorlab.envs.upkie`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from motorlab.envs.rewards import resolve_reward
+from motorlab.envs.upkie import is_upkie, make_upkie, register_upkie
 from motorlab.envs.wrappers import DelayOn, LowPassDelay, NumericalGuard, RewardShaping, delay_alpha, env_dt_of
 from motorlab.errors import MotorlabError, did_you_mean
 
@@ -52,6 +55,8 @@ class EnvConfig(BaseModel):
     reward: str | None = Field(None, description="built-in reward name or module:function")
     sar: str | None = Field(None, description="sar.npz: act in synergy space (SynergyActionWrapper)")
     phi: float = Field(1.0, gt=0, le=1, description="synergy weight: 1 = synergies only, <1 = blend with raw actions")
+    kwargs: dict[str, Any] = Field(default_factory=dict,
+                                   description="keyword arguments for the env (gymnasium.make), e.g. Upkie's time_limit")
 
     @field_validator("sar")
     @classmethod
@@ -81,6 +86,8 @@ def check_env_id(env_id: str) -> None:
     MyoSuite ids (`myo...`) are registered on first use; without MyoSuite installed
     they get a message saying how to install it.
     """
+    if is_upkie(env_id):
+        register_upkie()  # clear message when upkie or pybullet is missing
     if env_id not in gym.registry:
         installed = register_myosuite()
         if env_id in gym.registry:
@@ -108,9 +115,15 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
         MotorlabError: unknown id, bad delay, unknown reward.
     """
     check_env_id(cfg.id)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # -v4 deprecation notices are noise here
-        env = gym.make(cfg.id, render_mode=render_mode, **kwargs)
+    if is_upkie(cfg.id):
+        env = make_upkie(cfg.id, render_mode, **{**cfg.kwargs, **kwargs})
+    else:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # -v4 deprecation notices are noise here
+            try:
+                env = gym.make(cfg.id, render_mode=render_mode, **cfg.kwargs, **kwargs)
+            except TypeError as e:  # an env argument it does not take
+                raise MotorlabError(f"{cfg.id} does not take these settings: {e}.") from None
     env = NumericalGuard(env)
     if shaped and cfg.reward and cfg.reward != "task":
         env = RewardShaping(env, resolve_reward(cfg.reward), name=cfg.reward)

@@ -3,6 +3,7 @@
 Rendering uses MuJoCo's own offscreen renderer on the unwrapped env's model and
 data, so it works for Gymnasium's MuJoCo envs and MyoSuite alike; set
 MUJOCO_GL=egl (the CLI does) to render without a display, on a CPU with Mesa.
+Other simulators render their own rgb_array frames (Upkie: PyBullet's CPU renderer).
 """
 
 from __future__ import annotations
@@ -22,29 +23,73 @@ from motorlab.runs import atomic_path, read_config, require_run_dir, write_json
 MAX_FPS = 50  # browsers and players want at most this; faster envs are subsampled
 
 
-def _renderer(env, width: int, height: int, camera: str | int | None):
+def _mujoco_parts(env):
+    """(model, data) of a MuJoCo env, else (None, None)."""
     import mujoco
 
     base = env.unwrapped
     model = getattr(base, "mj_model", None) or getattr(base, "model", None)
     data = getattr(base, "mj_data", None) or getattr(base, "data", None)
-    if not isinstance(model, mujoco.MjModel):
-        raise MotorlabError("video needs a MuJoCo env (Gymnasium MuJoCo or MyoSuite).")
-    model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
-    model.vis.global_.offheight = max(model.vis.global_.offheight, height)
-    if camera is None:
-        camera = 0 if model.ncam else -1  # the model's first camera, else the free camera
-    elif isinstance(camera, str) and camera.lstrip("-").isdigit():
-        camera = int(camera)
-    names = [model.camera(i).name for i in range(model.ncam)]
-    if isinstance(camera, str) and camera not in names:
-        raise MotorlabError(f"no camera {camera!r} in this model; cameras: {', '.join(names) or 'none (use -1, the free camera)'}.")
-    try:
-        renderer = mujoco.Renderer(model, height, width)
-    except Exception as e:  # no usable OpenGL: say how to get one
-        raise MotorlabError(f"offscreen rendering failed ({e}); set MUJOCO_GL=egl and install "
-                            "libegl1 libegl-mesa0 libgl1-mesa-dri (make demo does).") from None
-    return renderer, data, camera
+    return (model, data) if isinstance(model, mujoco.MjModel) else (None, None)
+
+
+class MujocoCamera:
+    """Frames from MuJoCo's offscreen renderer on the env's own model and data."""
+
+    def __init__(self, env, width: int, height: int, camera: str | int | None):
+        import mujoco
+
+        model, self.data = _mujoco_parts(env)
+        model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
+        model.vis.global_.offheight = max(model.vis.global_.offheight, height)
+        if camera is None:
+            camera = 0 if model.ncam else -1  # the model's first camera, else the free camera
+        elif isinstance(camera, str) and camera.lstrip("-").isdigit():
+            camera = int(camera)
+        names = [model.camera(i).name for i in range(model.ncam)]
+        if isinstance(camera, str) and camera not in names:
+            raise MotorlabError(f"no camera {camera!r} in this model; cameras: {', '.join(names) or 'none (use -1, the free camera)'}.")
+        self.camera = camera
+        try:
+            self.renderer = mujoco.Renderer(model, height, width)
+        except Exception as e:  # no usable OpenGL: say how to get one
+            raise MotorlabError(f"offscreen rendering failed ({e}); set MUJOCO_GL=egl and install "
+                                "libegl1 libegl-mesa0 libgl1-mesa-dri (make demo does).") from None
+
+    def grab(self) -> np.ndarray:
+        self.renderer.update_scene(self.data, camera=self.camera)
+        return self.renderer.render().copy()
+
+    def close(self) -> None:
+        self.renderer.close()
+
+
+class EnvCamera:
+    """Frames from the env's own `render()` (render_mode "rgb_array"), for simulators
+    other than MuJoCo (Upkie's PyBullet camera)."""
+
+    camera = "env"
+
+    def __init__(self, env):
+        if env.render_mode != "rgb_array":
+            raise MotorlabError("video needs a MuJoCo env or one that renders rgb_array frames.")
+        self.env = env
+
+    def grab(self) -> np.ndarray:
+        return np.asarray(self.env.render())
+
+    def close(self) -> None:
+        pass
+
+
+def make_video_env(env_cfg: EnvConfig):
+    """The env for recording: MuJoCo envs as they are (motorlab renders their model
+    itself), any other env asked to render rgb_array frames."""
+    env = make_env(env_cfg, shaped=False)
+    if _mujoco_parts(env)[0] is None:
+        env.close()
+        env = make_env(env_cfg, shaped=False, render_mode="rgb_array")
+    return env
 
 
 def render_video(run_dir: Path, episodes: int = 5, seed: int = 0, camera: str | None = None,
@@ -60,51 +105,49 @@ def render_video(run_dir: Path, episodes: int = 5, seed: int = 0, camera: str | 
     run_dir = require_run_dir(Path(run_dir))
     config = read_config(run_dir)
     env_cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
-    env = make_env(env_cfg, shaped=False)
+    env = make_video_env(env_cfg)
     policy = load_policy(config.get("policy", str(run_dir)), env, env_cfg.id, seed)
-    renderer, data, cam, every, fps = video_settings(env, width, height, camera)
+    cam, every, fps = video_settings(env, width, height, camera)
     folder = Path(out) if out else run_dir / "videos"
     files, returns, frames_per = [], [], []
     for k in range(episodes):
-        frames, ret = record_episode(env, policy, renderer, data, cam, seed + k, every)
+        frames, ret = record_episode(env, policy, cam, seed + k, every)
         path = folder / f"episode_{k}.mp4"
         write_mp4(path, frames, fps)
         files.append(str(path))
         returns.append(ret)
         frames_per.append(len(frames))
-    renderer.close()
+    cam.close()
     env.close()
-    summary = {"videos": files, "frames": frames_per, "fps": fps, "returns": returns, "camera": cam,
+    summary = {"videos": files, "frames": frames_per, "fps": fps, "returns": returns, "camera": cam.camera,
                "width": width, "height": height}
     # the run's own summary.json stays as it is; the videos get their own index
     write_json(folder / "videos.json", summary)
     return summary
 
 
-def record_episode(env, policy, renderer, data, camera, seed: int, every: int = 1) -> tuple[list[np.ndarray], float]:
+def record_episode(env, policy, cam, seed: int, every: int = 1) -> tuple[list[np.ndarray], float]:
     """Frames (every `every` env steps, and the last) and the return of one episode of `policy`."""
     obs, _ = env.reset(seed=seed)
     policy.reset(1)
     frames, ret, done, t = [], 0.0, False, 0
     while not done:
         if t % every == 0:
-            renderer.update_scene(data, camera=camera)
-            frames.append(renderer.render().copy())
+            frames.append(cam.grab())
         obs, r, terminated, truncated, _ = env.step(policy.act(obs[None])[0])
         ret += float(r)
         done = terminated or truncated
         t += 1
-    renderer.update_scene(data, camera=camera)
-    frames.append(renderer.render().copy())
+    frames.append(cam.grab())
     return frames, ret
 
 
 def video_settings(env, width: int, height: int, camera):
-    """(renderer, data, camera, every, fps) for rendering env at most MAX_FPS frames per second."""
-    renderer, data, cam = _renderer(env, width, height, camera)
+    """(camera, every, fps) for recording env at most MAX_FPS frames per second."""
+    cam = MujocoCamera(env, width, height, camera) if _mujoco_parts(env)[0] is not None else EnvCamera(env)
     dt = env_dt(env) or 1.0 / MAX_FPS
     every = max(1, math.ceil((1.0 / dt) / MAX_FPS))
-    return renderer, data, cam, every, (1.0 / dt) / every
+    return cam, every, (1.0 / dt) / every
 
 
 def write_mp4(path: Path, frames: list[np.ndarray], fps: float) -> None:

@@ -26,7 +26,8 @@ from motorlab.runs import (atomic_write_text, finished_with, prepare_run_dir, re
                            write_toml)
 
 STEP_FILE = "recipe_step.toml"  # what the study asked of a step, for resuming
-HEADLINE = ("return_mean", "return_std", "return_min", "success_rate", "steps_to_success", "timesteps", "wall_seconds")
+HEADLINE = ("return_mean", "return_std", "return_min", "success_rate", "steps_to_success", "timesteps", "wall_seconds",
+            "episode_length_mean", "falls", "episodes")
 
 
 class _Outputs:
@@ -116,7 +117,7 @@ def _step_config(step: Step, outputs: _Outputs) -> dict[str, Any]:
     if step.kind == "evaluate":
         return {"policy": str(outputs.one(s.policy)), "episodes": s.episodes, "seed": s.seed, "env": s.env.model_dump()}
     config = s.model_dump()
-    if step.kind == "collect":
+    if step.kind in ("collect", "video"):
         config["run"] = str(outputs.one(s.run))
     elif step.kind in ("vaf", "fit"):
         config["activations"] = str(outputs.one(s.activations) / "activations.npz")
@@ -138,6 +139,14 @@ def _execute(step: Step, c: dict[str, Any], step_dir: Path, console: Console) ->
         from motorlab.evaluate import evaluate_step
 
         return evaluate_step(c["policy"], step.settings.env, c["episodes"], c["seed"], step_dir)
+    if step.kind == "video":
+        from motorlab.report.video import render_video
+
+        run = prepare_run_dir(step_dir, "video")
+        summary = render_video(Path(c["run"]), c["episodes"], c["seed"], out=run)
+        write_config(run, c)
+        write_summary(run, summary)
+        return summary
     if step.kind == "collect":
         from motorlab.synergy.collect import collect
 
@@ -213,7 +222,9 @@ def _train_headline(summaries: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def _other_headline(step: Step, s: dict[str, Any]) -> dict[str, Any]:
-    if step.kind == "collect":
+    if step.kind == "video":
+        keys = ("videos", "returns", "fps")
+    elif step.kind == "collect":
         keys = ("samples", "n_muscles", "episodes_kept", "threshold", "kept_success_rate")
     elif step.kind == "vaf":
         keys = ("n_for_threshold", "threshold", "n_muscles")
@@ -256,7 +267,8 @@ def _describe(step: Step) -> str:
         what, env = f"evaluate {step.evaluate.policy}", step.evaluate.env
     else:
         s = step.settings
-        return {"collect": lambda: f"collect {s.episodes} episodes from {s.run} (≥ {s.percentile:g}th pct.)",
+        return {"video": lambda: f"video of {s.run}, {s.episodes} episode{'s' * (s.episodes > 1)}",
+                "collect": lambda: f"collect {s.episodes} episodes from {s.run} (≥ {s.percentile:g}th pct.)",
                 "vaf": lambda: f"VAF of {s.activations} ({s.method})",
                 "fit": lambda: f"fit {s.method} to {s.activations}"
                                + (f", N = {s.n_synergies}" if s.n_synergies else f", VAF ≥ {s.vaf}"),
@@ -324,10 +336,19 @@ def _cells(step: Step, r: dict[str, Any]) -> list[str]:
             sts if isinstance(sts, str) else (f"{sts:,.0f}" if sts is not None
                                               else "not solved" if step.train.until_solved else "-"),
             fmt(r.get("wall_seconds"), "{:.1f}"),
-            f"training success (last 100 episodes) {rate:.0%}" if rate is not None else ""]
+            f"training success (last 100 episodes) {rate:.0%}" if rate is not None else _falls_note(r)]
+
+
+def _falls_note(r: dict[str, Any]) -> str:
+    """Mean episode length and falls of the evaluation, where they were recorded."""
+    if r.get("falls") is None or r.get("episode_length_mean") is None:
+        return ""
+    return f"mean length {r['episode_length_mean']:,.0f} steps, falls {r['falls']}/{r.get('episodes', '?')}"
 
 
 def _note(step: Step, r: dict[str, Any]) -> str:
+    if step.kind == "video":
+        return ", ".join(f"{step.name}/{Path(v).name}" for v in r["videos"])
     if step.kind == "collect":
         return f"kept {r['episodes_kept']} episodes, {r['samples']:,} samples x {r['n_muscles']} muscles"
     if step.kind == "vaf":
