@@ -9,15 +9,22 @@ export PYOPENGL_PLATFORM ?= egl
 $(STAMP): pyproject.toml requirements.lock scripts/setup.sh
 	@VENV=$(VENV) bash scripts/setup.sh
 
+# Chromium, for the tests that open HTML reports in a real browser (make test only)
+$(VENV)/.browser: $(STAMP) scripts/setup.sh
+	@VENV=$(VENV) bash scripts/setup.sh --browser
+
 setup: $(STAMP)
 
 demo: $(STAMP)  ## the pendulum study, the SAR pipeline on the MyoSuite hand and forward model + MPC on Reacher, in miniature (~4 min)
 	$(VENV)/bin/motorlab run pendulum --out runs/demo-pendulum
 	$(VENV)/bin/motorlab run sar-hand-quick --out runs/demo-sar-hand-quick
 	$(VENV)/bin/motorlab run reacher-quick --out runs/demo-reacher-quick
-	@echo "Results: runs/demo-pendulum, runs/demo-sar-hand-quick and runs/demo-reacher-quick (table.txt, summary.json, plots/, one folder per step)"
+	@echo "Reports (open in a browser; everything is inside each file):"
+	@echo "  runs/demo-pendulum/report.html"
+	@echo "  runs/demo-sar-hand-quick/report.html"
+	@echo "  runs/demo-reacher-quick/report.html"
 
-test: $(STAMP)  ## the test suite (a few minutes on 2 cores)
+test: $(STAMP) $(VENV)/.browser  ## the test suite (a few minutes on 2 cores)
 	$(VENV)/bin/python -m pytest -q
 
 bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object

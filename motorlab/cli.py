@@ -206,6 +206,20 @@ def evaluate(
     stdout.print(f"written: {s['run_dir']}/summary.json")
 
 
+@app.command(epilog="Examples:\n\n  motorlab report runs/pendulum            # -> runs/pendulum/report.html\n\n"
+                    "  motorlab report runs/sar-rl runs/rl-e2e --out compare.html   # side by side")
+def report(
+    paths: Annotated[list[Path], typer.Argument(help="Run folders and/or study folders.")],
+    out: Annotated[Optional[Path], typer.Option("--out", help="HTML file to write (default: report.html in the first PATH).")] = None,
+):
+    """Write one self-contained HTML report: headline tables, every plot and video, the runs
+    side by side, settings, library versions and TensorBoard links. Opens offline."""
+    from motorlab.report.html import build_report
+
+    path = build_report(paths, out)
+    stdout.print(f"written: {path}")
+
+
 @app.command(epilog="Example:\n\n  motorlab plot runs/ppo   # -> runs/ppo/plots/*.png")
 def plot(run_dir: Annotated[Path, typer.Argument(help="A run folder from train or evaluate.")]):
     """Plot a run: learning curve (training runs) and the observation trace of one evaluation episode."""
@@ -229,7 +243,8 @@ def run(
     from motorlab.studies import run_study
 
     summary = run_study(load_recipe(recipe), out, console=stdout)
-    stdout.print(f"\n[bold]Results:[/bold] {summary['study_dir']}  (table.txt, summary.json, plots/*.png, one folder per step)")
+    stdout.print(f"\n[bold]Results:[/bold] {summary['study_dir']}  (report.html, table.txt, summary.json, plots/*.png, "
+                 "one folder per step)")
 
 
 @app.command(epilog="Example:\n\n  motorlab zeroshot runs/sar-rl runs/rl-e2e --envs myoHandReorientID-v0 myoHandReorientOOD-v0 --episodes 500")

@@ -23,6 +23,7 @@ from motorlab.errors import MotorlabError
 
 SUMMARY = "summary.json"
 CONFIG = "config.toml"
+ENVIRONMENT = "environment.json"
 METRICS = "metrics.csv"
 
 
@@ -126,8 +127,11 @@ def _config_toml(config: dict[str, Any]) -> str:
 
 
 def write_config(run_dir: Path, config: dict[str, Any]) -> None:
-    """Resolved settings as config.toml."""
+    """Resolved settings as config.toml, and what they ran on as environment.json."""
+    from motorlab.environment import describe
+
     write_toml(Path(run_dir) / CONFIG, config)
+    write_json(Path(run_dir) / ENVIRONMENT, describe())
 
 
 def finished_with(run_dir: Path, config: dict[str, Any], filename: str = CONFIG) -> bool:

@@ -7,19 +7,27 @@ cd "$(dirname "$0")/.."
 VENV=${VENV:-.venv}
 PYTHON=${PYTHON:-python3}
 
-# Offscreen rendering (MUJOCO_GL=egl) on a CPU needs Mesa's EGL.
+# Debian packages: Mesa's EGL for offscreen rendering (MUJOCO_GL=egl) on a CPU, always;
+# with --browser (make test), Chromium too, where the tests open the HTML reports.
+packages=(libegl1 libegl-mesa0 libgl1-mesa-dri)
+if [ "${1:-}" = "--browser" ]; then packages=(chromium); fi
 missing=()
-for pkg in libegl1 libegl-mesa0 libgl1-mesa-dri; do
+for pkg in "${packages[@]}"; do
   dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
 done
 if [ ${#missing[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ]; then SUDO=""; elif command -v sudo >/dev/null; then SUDO="sudo"; else SUDO="none"; fi
   if [ "$SUDO" = none ]; then
-    echo "setup: missing Debian packages ${missing[*]} (needed for videos); install them as root." >&2
+    echo "setup: missing Debian packages ${missing[*]}; install them as root." >&2
   else
     echo "setup: installing ${missing[*]}"
     $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
   fi
+fi
+if [ "${1:-}" = "--browser" ]; then
+  command -v chromium >/dev/null || { echo "setup: chromium is missing (needed by the report tests)" >&2; exit 1; }
+  touch "$VENV/.browser"
+  exit 0
 fi
 
 if [ ! -x "$VENV/bin/python" ]; then

@@ -20,6 +20,7 @@ STYLE = {"figure.dpi": 110, "axes.grid": True, "grid.alpha": 0.3, "axes.spines.t
 # Observation labels (with units) for envs whose layout is known.
 OBS_LABELS = {
     "InvertedPendulum": ["cart position (m)", "pole angle (rad)", "cart velocity (m/s)", "pole angular velocity (rad/s)"],
+    "Upkie-PyBullet-Pendulum": ["pitch (rad)", "ground position (m)", "pitch rate (rad/s)", "ground velocity (m/s)"],
 }
 
 

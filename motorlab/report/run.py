@@ -24,15 +24,8 @@ def plot_run(run_dir: Path) -> list[Path]:
     """
     run_dir = require_run_dir(Path(run_dir))
     config = read_config(run_dir)
-    summary = read_json(run_dir / "summary.json")
     plots = run_dir / "plots"
-    written = []
-    if (run_dir / METRICS).is_file():
-        written.append(learning_curve(run_dir, plots / "learning_curve.png",
-                                      title=f"{summary.get('algo', '').upper()} on {summary.get('env_id')}"
-                                            f"{_env_tag(config.get('env', {}))} (seed {summary.get('seed')})",
-                                      solve_return=summary.get("solve_return"),
-                                      steps_to_success=summary.get("steps_to_success")))
+    written = [p for p in [plot_learning_curve(run_dir)] if p is not None]
     env_cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
     spec = config.get("policy", str(run_dir))
     from motorlab.envs import make_env
@@ -48,6 +41,18 @@ def plot_run(run_dir: Path) -> list[Path]:
         obs, result.actions[0], result.dt, obs_labels(env_cfg.id, base_dim), plots / "observation_trace.png",
         title=f"{env_cfg.id}{_env_tag(env_cfg.model_dump())}: return {result.returns[0]:.0f}"))
     return written
+
+
+def plot_learning_curve(run_dir: Path) -> Path | None:
+    """plots/learning_curve.png of a training run (None for runs without metrics.csv)."""
+    if not (Path(run_dir) / METRICS).is_file():
+        return None
+    config = read_config(run_dir)
+    summary = read_json(Path(run_dir) / "summary.json")
+    return learning_curve(run_dir, Path(run_dir) / "plots" / "learning_curve.png",
+                          title=f"{summary.get('algo', '').upper()} on {summary.get('env_id')}"
+                                f"{_env_tag(config.get('env', {}))} (seed {summary.get('seed')})",
+                          solve_return=summary.get("solve_return"), steps_to_success=summary.get("steps_to_success"))
 
 
 def _env_tag(env: dict) -> str:

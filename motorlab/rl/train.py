@@ -5,7 +5,9 @@
     run_dir/tensorboard/       SB3's scalars and motorlab's eval/ scalars
     run_dir/policy.json (+ policy.safetensors)   the policy, pickle-free
     run_dir/model.zip          SB3 model for continuing training (SB3 algorithms)
-    run_dir/summary.json       headline numbers, written last
+    run_dir/summary.json       headline numbers
+    run_dir/plots/learning_curve.png
+    run_dir/environment.json   Python, machine and library versions
 """
 
 from __future__ import annotations
@@ -109,5 +111,8 @@ def train(cfg: TrainConfig, out: Path | None = None) -> dict[str, Any]:
         "eval_episode_lengths": final["episode_lengths"],
     }
     write_summary(run_dir, summary)
+    from motorlab.report.run import plot_learning_curve
+
+    plot_learning_curve(run_dir)  # people would rather look at the curve than read metrics.csv
     summary["run_dir"] = str(run_dir)
     return summary

@@ -4,6 +4,7 @@
     <study>/table.txt          the printed table
     <study>/summary.json       "<step>.<key>" headline numbers
     <study>/plots/*.png        returns and steps-to-success of every step
+    <study>/report.html        all of it in one self-contained page (motorlab report)
 
 Re-running a study into the same folder keeps steps that finished with the same
 settings, so an interrupted study resumes where it stopped.
@@ -20,6 +21,7 @@ from rich.console import Console
 from rich.table import Table
 
 from motorlab.recipes import Recipe, Step
+from motorlab.report.html import build_report
 from motorlab.report.plots import comparison_bars
 from motorlab.report.run import plot_run
 from motorlab.runs import (atomic_write_text, finished_with, prepare_run_dir, read_json, write_config, write_summary,
@@ -305,7 +307,8 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
         t_step = time.perf_counter()
         results[step.name] = _run_step(step, study_dir, outputs, console)
         console.print(f"      done in {time.perf_counter() - t_step:.1f} s")
-    study_summary: dict[str, Any] = {"recipe": recipe.name, "steps": [s.name for s in recipe.steps],
+    study_summary: dict[str, Any] = {"recipe": recipe.name, "description": recipe.description,
+                                     "steps": [s.name for s in recipe.steps],
                                      "wall_seconds": round(time.perf_counter() - t0, 2)}
     for name, head in results.items():
         study_summary.update({f"{name}.{k}": v for k, v in head.items()})
@@ -314,6 +317,7 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
     atomic_write_text(study_dir / "table.txt", _plain_table(rows))
     write_summary(study_dir, study_summary)
     console.print(_table(recipe, rows))
+    build_report([study_dir], study_dir / "report.html")
     study_summary["study_dir"] = str(study_dir)
     return study_summary
 

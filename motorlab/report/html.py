@@ -1,0 +1,271 @@
+"""`motorlab report PATH...`: one self-contained HTML file for run folders and studies.
+
+The file carries everything inline (plots as PNG data URIs, videos as MP4 data URIs,
+CSS in the page, no scripts or network assets), so it opens offline and can be mailed:
+
+    headline table     summary.json of each run, or the study's "<step>.<key>" table
+    comparison         training runs side by side, one column per run and seed, with their curves
+    runs               per run: headline numbers, every plot, every video, the resolved
+                       settings (config.toml), a link to its TensorBoard logs
+    environment        Python, machine and library versions (the runs' environment.json)
+"""
+
+from __future__ import annotations
+
+import base64
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from motorlab.errors import MotorlabError
+from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, read_json
+
+REPORT = "report.html"
+# Headline keys of a comparison, in the order readers scan them; other numbers shared
+# by every compared run follow.
+COMPARE_FIRST = ("seed", "eval_return_mean", "eval_return_std", "eval_return_min", "eval_success_rate",
+                 "train_success_rate_last100", "steps_to_success", "eval_episode_length_mean", "eval_falls",
+                 "timesteps", "wall_seconds")
+VIDEO_BUDGET = 200 * 2**20  # bytes of video embedded per report; beyond it, videos are linked
+
+
+def fmt(value: Any) -> str:
+    """A number as the report shows it: 4 significant digits, thousands separated."""
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, int):
+        return f"{value:,}"
+    if isinstance(value, float):
+        return f"{value:,.4g}"
+    return "–" if value is None else str(value)
+
+
+@dataclass
+class Cell:
+    key: str
+    value: Any
+
+    @property
+    def text(self) -> str:
+        return fmt(self.value)
+
+    @property
+    def numeric(self) -> bool:
+        return isinstance(self.value, (int, float)) and not isinstance(self.value, bool)
+
+
+@dataclass
+class Media:
+    name: str
+    src: str  # a data: URI, or a relative link when over the video budget
+
+
+@dataclass
+class RunView:
+    label: str
+    path: Path
+    summary: dict[str, Any]
+    config_text: str
+    seed: int | None
+    plots: list[Media] = field(default_factory=list)
+    videos: list[Media] = field(default_factory=list)
+    tensorboard: str | None = None  # relative link from the report
+    tensorboard_dir: str | None = None
+    environment: dict | None = None
+
+    @property
+    def cells(self) -> list[Cell]:
+        return [Cell(k, v) for k, v in self.summary.items() if _scalar(v)]
+
+    @property
+    def lists(self) -> list[tuple[str, str]]:
+        return [(k, _describe_list(v)) for k, v in self.summary.items() if isinstance(v, list)]
+
+    @property
+    def trained(self) -> bool:
+        return (self.path / "metrics.csv").is_file() and "timesteps" in self.summary
+
+
+@dataclass
+class StudyView:
+    name: str
+    path: Path
+    description: str
+    steps: list[str]
+    columns: list[str]
+    rows: list[tuple[str, list[Cell | None]]]
+    plots: list[Media]
+    runs: list[RunView]
+    table_text: str | None
+
+
+def _scalar(v: Any) -> bool:
+    return v is None or isinstance(v, (int, float, str, bool))
+
+
+def _describe_list(v: list) -> str:
+    nums = [x for x in v if isinstance(x, (int, float)) and not isinstance(x, bool)]
+    if nums and len(nums) == len(v):
+        return f"{len(v)} values, mean {fmt(sum(nums) / len(nums))}, min {fmt(min(nums))}, max {fmt(max(nums))}"
+    return ", ".join(Path(x).name if isinstance(x, str) and os.sep in x else fmt(x) for x in v)
+
+
+def _data_uri(path: Path, mime: str) -> str:
+    return f"data:{mime};base64,{base64.b64encode(path.read_bytes()).decode('ascii')}"
+
+
+class _Collector:
+    """Reads run folders into views; embeds media until the video budget is spent."""
+
+    def __init__(self, report_dir: Path):
+        self.report_dir = report_dir
+        self.video_bytes = 0
+
+    def _rel(self, path: Path) -> str:
+        return Path(os.path.relpath(path.resolve(), self.report_dir.resolve())).as_posix()
+
+    def run(self, path: Path, label: str) -> RunView:
+        config_path = path / CONFIG
+        config_text = config_path.read_text() if config_path.is_file() else ""
+        seed = None
+        if config_text:
+            import tomllib
+
+            try:
+                seed = tomllib.loads(config_text).get("seed")
+            except tomllib.TOMLDecodeError:
+                pass
+        view = RunView(label=label, path=path, summary=read_json(path / SUMMARY), config_text=config_text, seed=seed)
+        files = sorted(p for p in path.rglob("*") if p.is_file() and "tensorboard" not in p.relative_to(path).parts)
+        view.plots = [Media(p.relative_to(path).as_posix(), _data_uri(p, "image/png")) for p in files
+                      if p.suffix == ".png"]
+        for p in (p for p in files if p.suffix == ".mp4"):
+            size = p.stat().st_size
+            if self.video_bytes + size <= VIDEO_BUDGET:
+                self.video_bytes += size
+                view.videos.append(Media(p.relative_to(path).as_posix(), _data_uri(p, "video/mp4")))
+            else:
+                view.videos.append(Media(p.relative_to(path).as_posix(), self._rel(p)))
+        if (path / "tensorboard").is_dir():
+            view.tensorboard = self._rel(path / "tensorboard") + "/"
+            view.tensorboard_dir = str((path / "tensorboard").resolve())
+        if (path / ENVIRONMENT).is_file():
+            view.environment = read_json(path / ENVIRONMENT)
+        return view
+
+    def study(self, path: Path) -> StudyView:
+        import tomllib
+
+        config = tomllib.loads((path / CONFIG).read_text())
+        summary = read_json(path / SUMMARY)
+        steps = list(summary.get("steps") or config.get("steps") or [])
+        columns: list[str] = []
+        per_step: dict[str, dict[str, Any]] = {s: {} for s in steps}
+        for key, value in summary.items():
+            step, dot, rest = key.partition(".")
+            if dot and step in per_step and _scalar(value):
+                per_step[step][rest] = value
+                if rest not in columns:
+                    columns.append(rest)
+        rows = [(s, [Cell(f"{s}.{c}", per_step[s][c]) if c in per_step[s] else None for c in columns]) for s in steps]
+        plots = [Media(p.name, _data_uri(p, "image/png")) for p in sorted((path / "plots").glob("*.png"))]
+        runs = []
+        for step in steps:
+            step_dir = path / step
+            if (step_dir / SUMMARY).is_file():
+                runs.append(self.run(step_dir, step))
+            elif step_dir.is_dir():  # several seeds: <step>/seed<k>/
+                runs += [self.run(d, f"{step}/{d.name}") for d in sorted(step_dir.iterdir())
+                         if (d / SUMMARY).is_file()]
+        table = path / "table.txt"
+        return StudyView(name=config.get("recipe", path.name), path=path, description=summary.get("description", ""),
+                         steps=steps, columns=columns, rows=rows, plots=plots, runs=runs,
+                         table_text=table.read_text() if table.is_file() else None)
+
+
+def _is_study(path: Path) -> bool:
+    import tomllib
+
+    try:
+        return "recipe" in tomllib.loads((path / CONFIG).read_text())
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+        return False
+
+
+def _check_path(path: Path) -> Path:
+    if not path.exists():
+        raise MotorlabError(f"{path} does not exist; give run folders or study folders (motorlab run --out DIR).")
+    if not path.is_dir() or not (path / SUMMARY).is_file():
+        raise MotorlabError(f"{path} is not a finished run or study folder (no {SUMMARY}); "
+                            "give folders written by motorlab train/evaluate/run.")
+    return path
+
+
+def _comparison(runs: list[RunView]) -> tuple[list[RunView], list[str]]:
+    """Training runs to show side by side, and the keys to compare them on."""
+    trained = [r for r in runs if r.trained]
+    if len(trained) < 2:
+        return [], []
+    shared = [k for k in trained[0].summary if all(_scalar(r.summary.get(k, [])) and k in r.summary for r in trained)
+              and all(isinstance(r.summary[k], (int, float)) and not isinstance(r.summary[k], bool) for r in trained)]
+    keys = [k for k in COMPARE_FIRST if k == "seed" or k in shared]
+    keys += [k for k in shared if k not in keys]
+    return trained, keys
+
+
+def _environments(runs: list[RunView]) -> list[tuple[dict, list[str]]]:
+    """Distinct environments with the runs that used each (report-time one if no run recorded any)."""
+    from motorlab.environment import describe
+
+    distinct: list[tuple[dict, list[str]]] = []
+    for r in runs:
+        if r.environment is None:
+            continue
+        for env, labels in distinct:
+            if env == r.environment:
+                labels.append(r.label)
+                break
+        else:
+            distinct.append((r.environment, [r.label]))
+    return distinct or [(describe(), ["(report time: the runs recorded none)"])]
+
+
+def build_report(paths: list[Path], out: Path | None = None) -> Path:
+    """Write the report for run and study folders `paths`; returns its path
+    (default: report.html inside the first path).
+
+    Raises:
+        MotorlabError: a path that is not a finished run or study folder.
+    """
+    import datetime
+
+    import jinja2
+
+    from motorlab.environment import describe
+
+    if not paths:
+        raise MotorlabError("give at least one run or study folder.")
+    paths = [_check_path(Path(p)) for p in paths]
+    out = Path(out) if out is not None else paths[0] / REPORT
+    if out.exists() and out.is_dir():
+        raise MotorlabError(f"--out {out} is a folder; give a file path such as {out / REPORT}.")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    collector = _Collector(out.parent)
+    studies, runs = [], []
+    for p in paths:
+        if _is_study(p):
+            studies.append(collector.study(p))
+        else:
+            runs.append(collector.run(p, p.name))
+    all_runs = runs + [r for s in studies for r in s.runs]
+    compared, compare_keys = _comparison(all_runs)
+    env = jinja2.Environment(loader=jinja2.PackageLoader("motorlab.report", "templates"),
+                             autoescape=jinja2.select_autoescape(), undefined=jinja2.StrictUndefined)
+    html = env.get_template("report.html.j2").render(
+        title=" · ".join(s.name for s in studies) or " · ".join(r.label for r in runs),
+        created=datetime.datetime.now().strftime("%Y-%m-%d %H:%M"), studies=studies, runs=runs,
+        compared=compared, compare_keys=compare_keys, environments=_environments(all_runs),
+        motorlab_version=describe()["packages"]["motorlab"], fmt=fmt)
+    atomic_write_text(out, html)
+    return out
