@@ -52,7 +52,7 @@ class Cell:
 
     @property
     def numeric(self) -> bool:
-        return isinstance(self.value, (int, float)) and not isinstance(self.value, bool)
+        return _number(self.value)
 
 
 @dataclass
@@ -104,8 +104,12 @@ def _scalar(v: Any) -> bool:
     return v is None or isinstance(v, (int, float, str, bool))
 
 
+def _number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
 def _describe_list(v: list) -> str:
-    nums = [x for x in v if isinstance(x, (int, float)) and not isinstance(x, bool)]
+    nums = [x for x in v if _number(x)]
     if nums and len(nums) == len(v):
         return f"{len(v)} values, mean {fmt(sum(nums) / len(nums))}, min {fmt(min(nums))}, max {fmt(max(nums))}"
     return ", ".join(Path(x).name if isinstance(x, str) and os.sep in x else fmt(x) for x in v)
@@ -207,8 +211,7 @@ def _comparison(runs: list[RunView]) -> tuple[list[RunView], list[str]]:
     trained = [r for r in runs if r.trained]
     if len(trained) < 2:
         return [], []
-    shared = [k for k in trained[0].summary if all(_scalar(r.summary.get(k, [])) and k in r.summary for r in trained)
-              and all(isinstance(r.summary[k], (int, float)) and not isinstance(r.summary[k], bool) for r in trained)]
+    shared = [k for k in trained[0].summary if all(_number(r.summary.get(k)) for r in trained)]
     keys = [k for k in COMPARE_FIRST if k == "seed" or k in shared]
     keys += [k for k in shared if k not in keys]
     return trained, keys
