@@ -221,5 +221,7 @@ def test_upkie_recipe_runs_end_to_end_on_tiny_budgets(tmp_path):
     for step in ("ppo-eval", "ppo-on-delay", "ppo-on-delay-both"):
         assert 0 <= s[f"{step}.falls"] <= 2 and 0 < s[f"{step}.episode_length_mean"] <= 200
     assert (tmp_path / "study" / "video" / "episode_0.mp4").stat().st_size > 1000
+    assert not (tmp_path / "study" / "video" / "episode_1.mp4").exists()  # one video, not one per evaluation episode
     table = (tmp_path / "study" / "table.txt").read_text()
     assert "falls 0/2" in table and "video/episode_0.mp4" in table
+    assert "delay 0.1 s on action" in table and "delay 0.1 s on both" in table

@@ -282,7 +282,7 @@ def _describe(step: Step) -> str:
                 "mpc": lambda: f"MPC ({s.optimizer}) on {s.model} · {s.env}"}[step.kind]()
     tags = [env.id]
     if env.delay:
-        tags.append(f"delay {env.delay:g} s")
+        tags.append(f"delay {env.delay:g} s on {env.delay_on}")  # action, observation or both
     if env.history > 1:
         tags.append(f"history {env.history}")
     if env.sar or step.sar_ref:
