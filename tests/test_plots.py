@@ -81,3 +81,27 @@ def test_obs_labels():
 def test_comparison_bars_mark_missing_values(tmp_path):
     path = comparison_bars(["pid", "ppo", "fast"], [1000.0, None, 100.0], "steps", tmp_path / "bars.png", "bars")
     assert_png(path)
+
+
+def test_step_tick_labels_read_at_a_glance():
+    from motorlab.report.plots import step_count
+    assert [step_count(x) for x in (0, 500, 250_000, 1_000_000, 1_500_000)] == ["0", "500", "250k", "1M", "1.5M"]
+
+
+def test_comparison_bars_without_any_value_draws_no_negative_axis(tmp_path):
+    from unittest import mock
+
+    import motorlab.report.plots as plots
+    seen = {}
+    real_save = plots._save
+
+    def spy(fig, path):
+        seen["ylim"] = fig.axes[0].get_ylim()
+        return real_save(fig, path)
+
+    with mock.patch("motorlab.report.plots._save", spy):
+        comparison_bars(["ppo"], [None], "environment steps", tmp_path / "sts.png", "t", steps=True)
+        assert seen["ylim"] == (0.0, 1.0)
+        comparison_bars(["a", "b"], [-5.0, None], "return", tmp_path / "r.png", "t")
+        assert seen["ylim"][0] <= -5.0  # a negative return still shows
+    assert_png(tmp_path / "sts.png")

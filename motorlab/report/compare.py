@@ -13,7 +13,7 @@ import numpy as np
 from scipy import stats
 
 from motorlab.errors import MotorlabError
-from motorlab.report.plots import STYLE, _save, plt
+from motorlab.report.plots import STYLE, _save, plt, steps_axis
 from motorlab.runs import read_metrics, require_run_dir
 
 GRID_POINTS = 100
@@ -79,6 +79,7 @@ def compare_curves(groups: dict[str, list[Path]], path: Path, title: str = "Lear
         ax_s.set_ylim(-0.02, 1.02)
         for ax in (ax_r, ax_s):
             ax.set_xlabel("environment steps")
+            steps_axis(ax.xaxis)
             ax.legend(fontsize=8)
         fig.suptitle(f"{title} — mean and 95% confidence band over seeds", fontsize=11)
         _save(fig, path)

@@ -33,9 +33,10 @@ def error_vs_horizon(horizons: np.ndarray, errors: dict[str, np.ndarray], path: 
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(6, 3.8))
         for label, e in errors.items():  # e: (episodes, horizon)
-            line, = ax.plot(horizons, e.mean(0), label=label)
+            line, = ax.plot(horizons, e.mean(0), label=f"{label}, mean")
             if len(e) > 1:
-                ax.fill_between(horizons, *np.percentile(e, [10, 90], axis=0), color=line.get_color(), alpha=0.2)
+                ax.fill_between(horizons, *np.percentile(e, [10, 90], axis=0), color=line.get_color(), alpha=0.2,
+                                lw=0, label=f"10–90% of {len(e)} episodes")
         ax.set_xlabel("steps ahead (open loop)")
         ax.set_ylabel(ylabel)
         ax.set_title(title)

@@ -14,8 +14,25 @@ import numpy as np  # noqa: E402
 
 from motorlab.runs import atomic_write_bytes, read_metrics  # noqa: E402
 
+# Legends sit on a translucent white box (no border) so they stay readable over dense data;
+# constrained layout keeps suptitles and colorbars from leaving gaps or overlapping.
 STYLE = {"figure.dpi": 110, "axes.grid": True, "grid.alpha": 0.3, "axes.spines.top": False,
-         "axes.spines.right": False, "font.size": 10, "legend.frameon": False}
+         "axes.spines.right": False, "font.size": 10, "legend.frameon": True, "legend.framealpha": 0.85,
+         "legend.edgecolor": "none", "figure.constrained_layout.use": True}
+
+
+def step_count(x: float, _pos=None) -> str:
+    """Environment-step tick labels people read at a glance: 0, 250k, 1M, 1.5M (not a 1e6 offset)."""
+    if abs(x) >= 1e6:
+        return f"{x / 1e6:.3g}M"
+    if abs(x) >= 1e3:
+        return f"{x / 1e3:.3g}k"
+    return f"{x:.0f}"
+
+
+def steps_axis(axis) -> None:
+    """Label `axis` (ax.xaxis or ax.yaxis) as environment steps."""
+    axis.set_major_formatter(matplotlib.ticker.FuncFormatter(step_count))
 
 # Observation labels (with units) for envs whose layout is known.
 OBS_LABELS = {
@@ -50,8 +67,8 @@ def learning_curve(run_dir: Path, path: Path, title: str = "", solve_return: flo
         fig, ax = plt.subplots(figsize=(7, 4))
         if ep:
             x, y = np.array(ep).T
-            ax.plot(x, y, ".", ms=2, alpha=0.3, color="tab:blue", label="training episode")
-            k = max(1, min(20, len(y) // 5))
+            ax.plot(x, y, ".", ms=1.5, alpha=0.2, color="tab:blue", label="training episode")
+            k = max(1, min(100, len(y) // 5))  # 100, as the rolling success rate and the comparison plots
             ax.plot(x[k - 1:], np.convolve(y, np.ones(k) / k, mode="valid"), color="tab:blue", label=f"running mean ({k})")
         if ev:
             x, m, lo = np.array(ev).T
@@ -62,6 +79,7 @@ def learning_curve(run_dir: Path, path: Path, title: str = "", solve_return: flo
         if steps_to_success is not None:
             ax.axvline(steps_to_success, color="tab:green", lw=1, label=f"solved at {steps_to_success:,} steps")
         ax.set_xlabel("environment steps")
+        steps_axis(ax.xaxis)
         ax.set_ylabel("episode return")
         ax.set_title(title or f"Learning curve: {Path(run_dir).name}")
         ax.legend(loc="best", fontsize=8)
@@ -116,16 +134,25 @@ def _trace_heatmaps(observations: np.ndarray, actions: np.ndarray, t: np.ndarray
 
 
 def comparison_bars(names: list[str], values: list[float | None], ylabel: str, path: Path, title: str,
-                    missing_label: str = "not reached") -> Path:
-    """One bar per study step; steps without a value are marked, not drawn as zero."""
+                    missing_label: str = "not reached", steps: bool = False) -> Path:
+    """One bar per study step; steps without a value are marked, not drawn as zero.
+    `steps`: the values are environment steps (labelled 250k, 1.5M)."""
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(max(5, 1.1 * len(names)), 4))
         xs = np.arange(len(names))
         heights = [v if v is not None else 0.0 for v in values]
         bars = ax.bar(xs, heights, color=["tab:blue" if v is not None else "lightgray" for v in values])
         for x, v, b in zip(xs, values, bars):
-            ax.annotate(f"{v:,.0f}" if v is not None else missing_label, (x, b.get_height()),
+            label = missing_label if v is None else (step_count(v) if steps else f"{v:,.0f}")
+            ax.annotate(label, (x, b.get_height()),
                         ha="center", va="bottom", fontsize=8)
+        if all(v is None for v in values):  # nothing to scale: no invented negative axis, no ticks
+            ax.set_ylim(0, 1)
+            ax.set_yticks([])
+        else:
+            ax.set_ylim(bottom=min(0.0, *(v for v in values if v is not None)))
+            if steps:
+                steps_axis(ax.yaxis)
         ax.set_xticks(xs, names, rotation=25, ha="right", fontsize=8)
         ax.set_ylabel(ylabel)
         ax.set_title(title)

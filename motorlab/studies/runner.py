@@ -405,4 +405,5 @@ def _figures(recipe: Recipe, results: dict[str, dict[str, Any]], study_dir: Path
     trained = [s.name for s in recipe.steps if s.kind == "train"]
     if trained:
         comparison_bars(trained, [results[n].get("steps_to_success") for n in trained], "environment steps",
-                        study_dir / "plots" / "steps_to_success.png", f"{recipe.name}: steps until consistently solved")
+                        study_dir / "plots" / "steps_to_success.png", f"{recipe.name}: steps until consistently solved",
+                        steps=True)
