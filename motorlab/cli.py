@@ -78,7 +78,11 @@ def _validation_message(e, flags: bool = True) -> str:
                     "  motorlab train Upkie-PyBullet-Pendulum --n-envs 2 --timesteps 150000 "
                     "--env-arg 'init_rand={\"pitch\": 0.1}'")
 def train(
-    env_id: Annotated[str, typer.Argument(help="Gymnasium env id, e.g. InvertedPendulum-v5.")],
+    env_id: Annotated[Optional[str], typer.Argument(
+        help="Gymnasium env id, e.g. InvertedPendulum-v5 (may be left out with --config).")] = None,
+    config: Annotated[Optional[Path], typer.Option(
+        "--config", help="Start from a run's config.toml (repeat a run, or run one a sweep or study planned); "
+                         "flags given here override it.")] = None,
     algo: Annotated[Optional[str], typer.Option(
         help="ppo | sac | td3 (Stable-Baselines3) | lqr (model-based: linear model + LQR).")] = None,
     preset: Annotated[Optional[str], typer.Option(
@@ -87,7 +91,8 @@ def train(
              "sar-sac-fast (the reference SAC with 4 env processes and 1 gradient step per 25 env steps: "
              "~18x faster on 2 cores). Flags override it.")] = None,
     timesteps: Annotated[Optional[int], typer.Option(help="Env-step budget (default 100000).")] = None,
-    seed: Seed = 0,
+    seed: Annotated[Optional[int], typer.Option(
+        "--seed", min=0, help="Random seed (training, env resets, evaluation); default 0.")] = None,
     out: Out = None,
     delay: Delay = None,
     delay_on: DelayOn = None,
@@ -139,8 +144,13 @@ def train(
     }
     if hp:
         settings["hyperparams"] = _parse_sets(hp)
+    settings = {k: v for k, v in settings.items() if v is not None}
+    if config is not None:
+        settings = _merge_config(config, settings)
+    elif env_id is None:
+        raise MotorlabError("give an env id (motorlab train InvertedPendulum-v5) or --config RUN/config.toml.")
     try:
-        cfg = resolve({k: v for k, v in settings.items() if v is not None})
+        cfg = resolve(settings)
     except ValidationError as e:
         raise MotorlabError(_validation_message(e)) from None
     summary = run_train(cfg, out)
@@ -149,6 +159,18 @@ def train(
               f"return {summary['eval_return_mean']:.1f} (min {summary['eval_return_min']:.0f}) over "
               f"{summary['eval_episodes']} episodes, {summary['timesteps']:,} steps, {summary['wall_seconds']:.1f} s"
               + (f", steps_to_success {sts:,}" if sts is not None else (", not solved" if cfg.until_solved else "")))
+
+
+def _merge_config(path: Path, flags: dict) -> dict:
+    """A config.toml's settings with the given flags on top (env settings merged key by key)."""
+    import tomllib
+
+    from motorlab.runs import _read_text_file
+
+    base = _read_text_file(path, tomllib.loads, "TOML", "give the config.toml of a motorlab train run.")
+    merged = {**base, **{k: v for k, v in flags.items() if k != "env"}}
+    merged["env"] = {**base.get("env", {}), **flags.get("env", {})}
+    return merged
 
 
 def _parse_sets(items: list[str], flag: str = "--set") -> dict:
@@ -234,17 +256,64 @@ def plot(run_dir: Annotated[Path, typer.Argument(help="A run folder from train o
 def run(
     recipe: Annotated[str, typer.Argument(help="A bundled recipe name (pendulum) or a path to a TOML recipe.")],
     out: Out = None,
+    backend: Annotated[str, typer.Option(
+        help="Where the seeds of a train step with several seeds run: local (processes here) or ray.")] = "local",
+    address: Annotated[Optional[str], typer.Option(help="Ray cluster HOST:PORT for --backend ray.")] = None,
+    max_parallel: Annotated[Optional[int], typer.Option(
+        help="Seeds trained at once (default: cores // n_envs locally).")] = None,
 ):
     """Run a study from a TOML recipe: its steps, a printed table, summary.json and plots.
 
-    Recipe format: see `motorlab recipes` and motorlab/recipes/pendulum.toml.
+    Recipe format: see `motorlab recipes` and motorlab/recipes/pendulum.toml. A recipe with
+    `seeds = N` trains every train step for N seeds in parallel and reports IQMs with
+    confidence intervals; `motorlab sweep RECIPE --seeds N` repeats the whole study instead.
     """
     from motorlab.recipes import load_recipe
-    from motorlab.studies import run_study
+    from motorlab.studies import Execution, run_study
 
-    summary = run_study(load_recipe(recipe), out, console=stdout)
+    summary = run_study(load_recipe(recipe), out, console=stdout,
+                        execution=Execution(backend, address, max_parallel))
     stdout.print(f"\n[bold]Results:[/bold] {summary['study_dir']}  (report.html, table.txt, summary.json, plots/*.png, "
                  "one folder per step)")
+
+
+@app.command(epilog="Examples:\n\n"
+                    "  motorlab sweep \"train InvertedPendulum-v5 --preset fast --until-solved\" --seeds 5\n\n"
+                    "  motorlab sweep \"train InvertedPendulum-v5 --timesteps 20000\" --seeds 3 --grid lr=3e-4,1e-3 "
+                    "--grid n_envs=1,2\n\n"
+                    "  motorlab sweep pendulum --seeds 3 --grid ppo.timesteps=50000,100000   # a whole study per seed\n\n"
+                    "  motorlab sweep \"train Reacher-v5 --algo sac\" --seeds 8 --backend ray --address 10.0.0.5:6379\n\n"
+                    "Run the same command again (same --out) to resume: finished trials are kept.")
+def sweep(
+    target: Annotated[str, typer.Argument(
+        help="A recipe (bundled name or .toml file: each trial runs the whole study) or a motorlab command line "
+             "in quotes (train, evaluate, mpc, dynamics fit, ...); the sweep adds --seed and --out.")],
+    seeds: Annotated[int, typer.Option("--seeds", help="Seeds per setting: 0..N-1.")] = 5,
+    grid: Annotated[Optional[list[str]], typer.Option(
+        "--grid", help="KEY=V1,V2 (repeatable; every combination runs). Commands: KEY is an option (lr, n_envs, "
+                       "delay, normalize=true,false). Recipes: FIELD for every step that has it, or STEP.FIELD. "
+                       "Values holding commas: separate them with |, e.g. lr='linear:1e-3,0|3e-4'.")] = None,
+    backend: Annotated[str, typer.Option(
+        help="local: a pool of processes on this machine; ray: Ray Tune on a cluster (--address) or a Ray "
+             "instance started here.")] = "local",
+    address: Annotated[Optional[str], typer.Option(
+        help="Ray cluster address HOST:PORT (from `ray start --head`); every node must see --out at the same path.")] = None,
+    max_parallel: Annotated[Optional[int], typer.Option(
+        help="Trials at once (default: one per core locally; as many as the cluster's CPUs fit with ray).")] = None,
+    out: Out = None,
+):
+    """Run a command or a study for several seeds (and settings), then aggregate across seeds.
+
+    Aggregates with rliable: interquartile mean (IQM) and 95% stratified-bootstrap confidence
+    intervals of final return, success rate and steps-to-success; probability of improvement
+    between settings; performance profiles. Writes summary.json, aggregate.json, table.txt,
+    plots/ and report.html in the sweep folder, and one run folder per trial (<setting>/seed<k>/).
+    """
+    from motorlab.sweeps.sweep import run_sweep
+
+    summary = run_sweep(target, seeds, grid, backend, address, max_parallel, out, console=stdout)
+    stdout.print(f"\n[bold]Results:[/bold] {summary['sweep_dir']}  (report.html, table.txt, summary.json, "
+                 "aggregate.json, plots/*.png, <setting>/seed<k>/)")
 
 
 @app.command(epilog="Example:\n\n  motorlab zeroshot runs/sar-rl runs/rl-e2e --envs myoHandReorientID-v0 myoHandReorientOOD-v0 --episodes 500")
@@ -519,8 +588,16 @@ def main() -> None:
         err.print(f"[red]error:[/red] {escape(str(e))}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
-        err.print("[yellow]interrupted[/yellow]: the run folder has no summary.json, so it stays marked unfinished.")
-        sys.exit(130)
+        _interrupted()
+    except SystemExit as e:
+        if e.code == 130:  # typer turns Ctrl-C into a silent exit 130
+            _interrupted()
+        raise
+
+
+def _interrupted() -> None:
+    err.print("[yellow]interrupted[/yellow]: the run folder has no summary.json, so it stays marked unfinished.")
+    sys.exit(130)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,8 @@
     kind = "train"
     algo = "ppo"
     timesteps = 100000
-    seeds = [0, 1, 2]          # optional: one run per seed
+    seeds = 3                  # optional: one run per seed (0, 1, 2; or a list), run in parallel;
+                               # `seeds = N` at the top of the file applies to every train step
     until_solved = true
 
     [[steps]]
@@ -25,6 +26,7 @@ Kinds and their fields ("@step" names an earlier step's output):
                algo, preset, timesteps, seed, seeds, lr, clip_range, until_solved, ...);
                sar = "@fit-step" trains in that step's synergy space
     evaluate   policy, env, env_kwargs, delay, delay_on, history, sar, phi, episodes, seed
+               (policy = "@train-step" with several seeds: each seed's policy, aggregated)
     video      run = "@train-step" or "@evaluate-step", episodes, seed
     collect    run = "@train-step", episodes, percentile, preview, deterministic, workers, seed
     vaf        activations = "@collect-step", threshold, method, max_n
@@ -199,6 +201,7 @@ class _RecipeFile(BaseModel):
 
     name: str
     description: str = ""
+    seeds: int | list[int] | None = None  # every train step that sets none: seeds 0..N-1 (or this list)
     defaults: dict[str, Any] = Field(default_factory=dict)
     steps: list[dict[str, Any]] = Field(min_length=1)
 
@@ -303,7 +306,8 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
             raise MotorlabError(f"{where}: unknown kind {kind!r}{did_you_mean(str(kind), FIELDS)}; "
                                 f"kinds: {', '.join(FIELDS)}.")
         known = FIELDS[kind]
-        fields = {**{k: v for k, v in raw.defaults.items() if k in known},
+        fields = {**({"seeds": raw.seeds} if kind == "train" and raw.seeds is not None else {}),
+                  **{k: v for k, v in raw.defaults.items() if k in known},
                   **{k: v for k, v in fields.items() if k not in ("name", "kind")}}
         if any(s.name == name for s in steps):
             raise MotorlabError(f"{where}: another step is already named {name!r}; step names must be unique.")
@@ -328,9 +332,12 @@ def _make_step(name: str, kind: str, fields: dict, steps: list[Step]) -> Step:
     if kind == "train":
         fields = dict(fields)
         seeds = fields.pop("seeds", None)
-        if seeds is not None and (not isinstance(seeds, list) or not seeds
-                                  or not all(isinstance(x, int) and x >= 0 for x in seeds)):
-            raise MotorlabError("seeds must be a non-empty list of non-negative integers, e.g. seeds = [0, 1, 2].")
+        if isinstance(seeds, int) and not isinstance(seeds, bool) and seeds > 0:
+            seeds = list(range(seeds))  # seeds = N: 0..N-1
+        if seeds is not None and (not isinstance(seeds, list) or not seeds or len(set(seeds)) != len(seeds)
+                                  or not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in seeds)):
+            raise MotorlabError("seeds must be a count (seeds = 5: seeds 0..4) or a list of distinct "
+                                "non-negative integers (seeds = [0, 1, 2]).")
         sar = fields.get("sar")
         sar_ref = sar if isinstance(sar, str) and sar.startswith("@") else None
         if sar_ref:

@@ -166,9 +166,11 @@ class _Collector:
         steps = list(summary.get("steps") or config.get("steps") or [])
         columns: list[str] = []
         per_step: dict[str, dict[str, Any]] = {s: {} for s in steps}
+        by_length = sorted(steps, key=len, reverse=True)  # sweep settings may hold dots: "lr=0.001"
         for key, value in summary.items():
-            step, dot, rest = key.partition(".")
-            if dot and step in per_step and _scalar(value):
+            step = next((s for s in by_length if key.startswith(f"{s}.")), None)
+            if step is not None and _scalar(value):
+                rest = key[len(step) + 1:]
                 per_step[step][rest] = value
                 if rest not in columns:
                     columns.append(rest)
@@ -183,7 +185,8 @@ class _Collector:
                 runs += [self.run(d, f"{step}/{d.name}") for d in sorted(step_dir.iterdir())
                          if (d / SUMMARY).is_file()]
         table = path / "table.txt"
-        return StudyView(name=config.get("recipe", path.name), path=path, description=summary.get("description", ""),
+        name = config.get("recipe") or (f"sweep of {config['sweep']}" if "sweep" in config else path.name)
+        return StudyView(name=name, path=path, description=summary.get("description", ""),
                          steps=steps, columns=columns, rows=rows, plots=plots, runs=runs,
                          table_text=table.read_text() if table.is_file() else None)
 
@@ -192,7 +195,8 @@ def _is_study(path: Path) -> bool:
     import tomllib
 
     try:
-        return "recipe" in tomllib.loads((path / CONFIG).read_text())
+        config = tomllib.loads((path / CONFIG).read_text())
+        return "recipe" in config or "sweep" in config
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
         return False
 

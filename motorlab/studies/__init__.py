@@ -1,5 +1,5 @@
 """Studies: run a recipe's steps in order, then tabulate and plot them."""
 
-from motorlab.studies.runner import run_study
+from motorlab.studies.runner import Execution, run_study
 
-__all__ = ["run_study"]
+__all__ = ["Execution", "run_study"]

@@ -12,14 +12,17 @@ settings, so an interrupted study resumes where it stopped.
 
 from __future__ import annotations
 
+import os
 import statistics
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from rich.console import Console
 from rich.table import Table
 
+from motorlab.errors import MotorlabError
 from motorlab.recipes import Recipe, Step
 from motorlab.report.html import build_report
 from motorlab.report.plots import comparison_bars
@@ -30,6 +33,16 @@ from motorlab.runs import (atomic_write_text, finished_with, prepare_run_dir, re
 STEP_FILE = "recipe_step.toml"  # what the study asked of a step, for resuming
 HEADLINE = ("return_mean", "return_std", "return_min", "success_rate", "steps_to_success", "timesteps", "wall_seconds",
             "episode_length_mean", "falls", "episodes")
+
+
+@dataclass(frozen=True)
+class Execution:
+    """Where the seeds of a multi-seed train step run: `local` (processes on this machine, at
+    most `max_parallel` at once; default cores // n_envs) or `ray` (Ray Tune, see motorlab.sweeps)."""
+
+    backend: str = "local"
+    address: str | None = None
+    max_parallel: int | None = None
 
 
 class _Outputs:
@@ -79,26 +92,33 @@ def _upstream(step: Step, outputs: _Outputs) -> dict[str, str]:
     return {str(d): hashlib.sha256((d / "summary.json").read_bytes()).hexdigest()[:16] for d in dirs}
 
 
-def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console) -> dict[str, Any]:
+def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console,
+              execution: Execution) -> dict[str, Any]:
     """Run one step (or keep its finished result); returns its headline numbers."""
     from motorlab.rl.train import train
 
     step_dir = study_dir / step.name
     upstream = _upstream(step, outputs)
     if step.kind == "train":
-        summaries = []
         runs = _train_configs(step, study_dir, outputs)
-        for run_dir, cfg in runs:
-            asked = {"train": cfg.model_dump(), "upstream": upstream}
-            if finished_with(run_dir, asked, STEP_FILE):
-                console.print(f"      {run_dir.name}: already done with these settings; kept")
-                summaries.append(read_json(run_dir / "summary.json"))
-            else:
-                summaries.append(train(cfg, run_dir))
-                write_toml(run_dir / STEP_FILE, asked)
-            plot_run(run_dir)
+        asked = {d: {"train": cfg.model_dump(), "upstream": upstream} for d, cfg in runs}
+        kept = [d for d, _ in runs if finished_with(d, asked[d], STEP_FILE)]
+        for d in kept:
+            console.print(f"      {d.name}: already done with these settings; kept")
+        todo = [(d, cfg) for d, cfg in runs if d not in kept]
+        if len(todo) == 1 and len(runs) == 1:
+            train(todo[0][1], todo[0][0])  # one run: in this process, with its progress bar
+        elif todo:
+            _train_seeds(step, todo, execution, console)
+        for d in (d for d, _ in todo):
+            write_toml(d / STEP_FILE, asked[d])
+        for d, _ in runs:
+            plot_run(d)
         outputs.dirs[step.name] = [d for d, _ in runs]
-        return _train_headline(summaries)
+        return _seeds_headline([read_json(d / "summary.json") for d, _ in runs], "eval_")
+    refs = _policy_runs(step, outputs)
+    if len(refs) > 1:  # a policy trained with several seeds: evaluate each one
+        return _evaluate_seeds(step, refs, upstream, study_dir, console, outputs)
     config = {**_step_config(step, outputs), "upstream": upstream}
     outputs.dirs[step.name] = [step_dir]
     if finished_with(step_dir, config, STEP_FILE):
@@ -109,8 +129,77 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console) 
         write_toml(step_dir / STEP_FILE, config)
     if step.kind == "evaluate":
         plot_run(step_dir)
-        return {k: summary.get(k) for k in HEADLINE if summary.get(k) is not None}
+        return _seeds_headline([summary], "")
     return _other_headline(step, summary)
+
+
+def _train_seeds(step: Step, todo: list[tuple[Path, Any]], execution: Execution, console: Console) -> None:
+    """Train several seeds at once as sweep trials: each a `motorlab train --config` process
+    whose config the study wrote to <step>/logs/seed<k>.toml, beside its log."""
+    from motorlab.sweeps import backends
+    from motorlab.sweeps.trials import trial
+
+    n_envs = step.train.n_envs
+    parallel = execution.max_parallel or max(1, (os.cpu_count() or 1) // n_envs)
+    threads = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}  # one math thread per seed process
+    trials = []
+    for run_dir, cfg in todo:
+        logs = run_dir.parent / "logs"
+        write_toml(logs / f"{run_dir.name}.toml", cfg.model_dump())
+        argv = ["train", "--config", (logs / f"{run_dir.name}.toml").resolve(), "--out", run_dir, "--no-progress"]
+        trials.append(trial(f"{step.name}/{run_dir.name}", step.name, cfg.seed, argv, run_dir,
+                            logs / f"{run_dir.name}.log", threads))
+    where = execution.backend + (f" at {execution.address}" if execution.address else "")
+    console.print(f"      {len(trials)} seeds in parallel ({where}"
+                  + (f", {parallel} at a time)" if execution.backend == "local" else ")"))
+
+    def on_done(t: dict[str, Any], rc: int, seconds: float) -> None:
+        name = Path(t["run_dir"]).name
+        if rc == 0:
+            s = read_json(Path(t["run_dir"]) / "summary.json")
+            console.print(f"      {name}: return {s['eval_return_mean']:,.1f} ({seconds:.0f} s)")
+        else:
+            console.print(f"      {name}: failed (exit {rc}), log {t['log']}")
+
+    if execution.backend == "ray":
+        backends.run_ray(trials, execution.address, execution.max_parallel, n_envs,
+                         todo[0][0].parent / "ray", on_done)
+    else:
+        backends.run_local(trials, parallel, on_done)
+    failed = [t for t in trials if not (Path(t["run_dir"]) / "summary.json").is_file()]
+    if failed:
+        log = Path(failed[0]["log"])
+        lines = [x for x in log.read_text(errors="replace").splitlines() if x.strip()] if log.is_file() else []
+        raise MotorlabError(f"step {step.name}: {', '.join(Path(t['run_dir']).name for t in failed)} failed: "
+                            f"{lines[-1] if lines else 'no output'} (log: {log}).")
+
+
+def _policy_runs(step: Step, outputs: _Outputs) -> list[Path]:
+    """The run folders an evaluate step's "@train-step" policy names (one per seed)."""
+    return outputs.dirs[step.policy_ref] if step.kind == "evaluate" and step.policy_ref else []
+
+
+def _evaluate_seeds(step: Step, refs: list[Path], upstream: dict[str, str], study_dir: Path, console: Console,
+                    outputs: _Outputs) -> dict[str, Any]:
+    """Evaluate every seed's policy into <step>/seed<k>/; the headline aggregates over seeds."""
+    from motorlab.evaluate import evaluate_step
+
+    s = step.settings
+    summaries, dirs = [], []
+    for ref in refs:
+        run_dir = study_dir / step.name / ref.name
+        config = {"policy": str(ref), "episodes": s.episodes, "seed": s.seed, "env": s.env.model_dump(),
+                  "upstream": upstream}
+        if finished_with(run_dir, config, STEP_FILE):
+            console.print(f"      {ref.name}: already done with these settings; kept")
+            summaries.append(read_json(run_dir / "summary.json"))
+        else:
+            summaries.append(evaluate_step(str(ref), s.env, s.episodes, s.seed, run_dir))
+            write_toml(run_dir / STEP_FILE, config)
+        plot_run(run_dir)
+        dirs.append(run_dir)
+    outputs.dirs[step.name] = dirs
+    return _seeds_headline(summaries, "")
 
 
 def _step_config(step: Step, outputs: _Outputs) -> dict[str, Any]:
@@ -199,28 +288,47 @@ def _execute(step: Step, c: dict[str, Any], step_dir: Path, console: Console) ->
     raise AssertionError(step.kind)  # recipes.py admits no other kind
 
 
-def _train_headline(summaries: list[dict[str, Any]]) -> dict[str, Any]:
-    """Final evaluation of a train step; with several seeds, the mean over seeds (std across seeds)."""
+def _seeds_headline(summaries: list[dict[str, Any]], prefix: str) -> dict[str, Any]:
+    """Headline of a train (prefix "eval_": its final evaluation) or evaluate step; with several
+    seeds, the mean over seeds (std across seeds) and rliable's IQM with its 95% bootstrap CI."""
     if len(summaries) == 1:
         s = summaries[0]
-        head = {k: s.get(f"eval_{k}", s.get(k)) for k in HEADLINE}
+        head = {k: s.get(f"{prefix}{k}", s.get(k)) for k in HEADLINE}
         head["train_success_rate_last100"] = s.get("train_success_rate_last100")
-        return {k: v for k, v in head.items() if v is not None or k == "steps_to_success"}
-    means = [s["eval_return_mean"] for s in summaries]
-    solved = [s["steps_to_success"] for s in summaries]
+        return {k: v for k, v in head.items() if v is not None or (k == "steps_to_success" and prefix)}
+    from motorlab.sweeps.stats import aggregate, trial_scores
+
+    means = [s[f"{prefix}return_mean"] for s in summaries]
     rates = [s.get("train_success_rate_last100") for s in summaries]
-    return {
+    flat, _ = aggregate({"seeds": [trial_scores(s) for s in summaries]})
+    head = {
         "seeds": len(summaries),
         "return_mean": statistics.fmean(means),
         "return_std": statistics.stdev(means),
-        "return_min": min(s["eval_return_min"] for s in summaries),
-        "success_rate": statistics.fmean(s["eval_success_rate"] for s in summaries),
-        "train_success_rate_last100": statistics.fmean(rates) if None not in rates else None,
-        # a seed that never solved makes the median unknowable, not smaller
-        "steps_to_success": statistics.median(solved) if None not in solved else None,
-        "timesteps": sum(s["timesteps"] for s in summaries),
-        "wall_seconds": sum(s["wall_seconds"] for s in summaries),
+        "return_min": min(s[f"{prefix}return_min"] for s in summaries),
+        "return_iqm": flat["seeds.final_return_iqm"],
+        "return_iqm_ci_low": flat["seeds.final_return_iqm_ci_low"],
+        "return_iqm_ci_high": flat["seeds.final_return_iqm_ci_high"],
+        "success_rate": statistics.fmean(s[f"{prefix}success_rate"] for s in summaries),
+        "episodes": sum(s.get(f"{prefix}episodes", 0) for s in summaries),
     }
+    if prefix:  # training
+        solved = [s["steps_to_success"] for s in summaries]
+        head.update({
+            "train_success_rate_last100": statistics.fmean(rates) if None not in rates else None,
+            # a seed that never solved makes the median unknowable, not smaller
+            "steps_to_success": statistics.median(solved) if None not in solved else None,
+            "timesteps": sum(s["timesteps"] for s in summaries),
+            "wall_seconds": sum(s["wall_seconds"] for s in summaries),
+        })
+    else:
+        falls = [s.get("falls") for s in summaries]
+        lengths = [s.get("episode_length_mean") for s in summaries]
+        if None not in falls:
+            head["falls"] = sum(falls)
+        if None not in lengths:
+            head["episode_length_mean"] = statistics.fmean(lengths)
+    return head
 
 
 def _other_headline(step: Step, s: dict[str, Any]) -> dict[str, Any]:
@@ -290,13 +398,22 @@ def _describe(step: Step) -> str:
     return f"{what} · {', '.join(tags)}"
 
 
-def run_study(recipe: Recipe, out: Path | None = None, console: Console | None = None) -> dict[str, Any]:
+def run_study(recipe: Recipe, out: Path | None = None, console: Console | None = None,
+              execution: Execution | None = None) -> dict[str, Any]:
     """Run every step of `recipe`, write the study's table, plots and summary.json.
+
+    Args:
+        execution: where the seeds of a train step with several seeds run (default: in
+            parallel on this machine, one process per seed).
 
     Returns:
         The study summary (flat keys "<step>.<key>", plus "study_dir").
     """
     console = console or Console(stderr=True)
+    execution = execution or Execution()
+    from motorlab.sweeps.backends import check_execution
+
+    check_execution(execution.backend, execution.address, execution.max_parallel)
     study_dir = prepare_run_dir(out, recipe.name)
     write_config(study_dir, {"recipe": recipe.name, "source": recipe.source, "steps": [s.name for s in recipe.steps]})
     t0 = time.perf_counter()
@@ -305,7 +422,7 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
     for i, step in enumerate(recipe.steps, 1):
         console.print(f"[bold][{i}/{len(recipe.steps)}][/bold] {step.name}: {_describe(step)}")
         t_step = time.perf_counter()
-        results[step.name] = _run_step(step, study_dir, outputs, console)
+        results[step.name] = _run_step(step, study_dir, outputs, console, execution)
         console.print(f"      done in {time.perf_counter() - t_step:.1f} s")
     study_summary: dict[str, Any] = {"recipe": recipe.name, "description": recipe.description,
                                      "steps": [s.name for s in recipe.steps],
@@ -340,7 +457,15 @@ def _cells(step: Step, r: dict[str, Any]) -> list[str]:
             sts if isinstance(sts, str) else (f"{sts:,.0f}" if sts is not None
                                               else "not solved" if step.train.until_solved else "-"),
             fmt(r.get("wall_seconds"), "{:.1f}"),
-            f"training success (last 100 episodes) {rate:.0%}" if rate is not None else _falls_note(r)]
+            "; ".join(x for x in (_iqm_note(r), f"training success (last 100 episodes) {rate:.0%}"
+                                  if rate is not None else _falls_note(r)) if x)]
+
+
+def _iqm_note(r: dict[str, Any]) -> str:
+    """Several seeds: rliable's IQM of the return with its 95% bootstrap CI."""
+    if r.get("return_iqm") is None:
+        return ""
+    return f"return IQM {r['return_iqm']:,.1f} [{r['return_iqm_ci_low']:,.1f}, {r['return_iqm_ci_high']:,.1f}]"
 
 
 def _falls_note(r: dict[str, Any]) -> str:

@@ -1,0 +1,176 @@
+"""Where trials run. Each trial is a `python -m motorlab ...` process writing its own run
+folder and log, so the two backends differ only in who starts the processes:
+
+    local  a pool of at most K processes on this machine (K defaults to the cores)
+    ray    Ray Tune, on a running cluster (--address) or a Ray instance started here;
+           trials are Tune trials (grid_search over them), each starting the same process
+           on whichever node Tune places it. Run folders are written by absolute path, so
+           every node must see the sweep folder at the same path (a shared file system).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from motorlab.errors import MotorlabError
+from motorlab.sweeps.trials import mark_finished
+
+OnDone = Callable[[dict[str, Any], int, float], None]  # (trial, exit status, seconds)
+
+
+def _start(t: dict[str, Any]) -> subprocess.Popen:
+    log = Path(t["log"])
+    log.parent.mkdir(parents=True, exist_ok=True)
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **t["env"]}
+    with open(log, "wb") as f:  # the child keeps its own handle
+        return subprocess.Popen([sys.executable, "-m", "motorlab", *t["argv"]], stdout=f, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, env=env)
+
+
+def run_one(t: dict[str, Any]) -> int:
+    """Run one trial to the end (the Ray worker's side); marks it finished when it succeeds."""
+    proc = _start(t)
+    try:
+        rc = proc.wait()
+    except BaseException:
+        _stop([proc])
+        raise
+    if rc == 0:
+        mark_finished(t)
+    return rc
+
+
+def _stop(procs: list[subprocess.Popen], grace: float = 20.0) -> None:
+    """Ask running trials to stop as Ctrl-C would (they leave their folders visibly unfinished), then kill."""
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + grace
+    for p in procs:
+        try:
+            p.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def run_local(trials: list[dict[str, Any]], max_parallel: int, on_done: OnDone) -> None:
+    """At most `max_parallel` trial processes at a time, started in order. Polling (not a
+    thread pool) keeps Ctrl-C in this process, which then stops the running trials."""
+    pending = list(trials)
+    running: list[tuple[dict[str, Any], subprocess.Popen, float]] = []
+    try:
+        while pending or running:
+            while pending and len(running) < max_parallel:
+                t = pending.pop(0)
+                running.append((t, _start(t), time.perf_counter()))
+            time.sleep(0.1)
+            for entry in [e for e in running if e[1].poll() is not None]:
+                running.remove(entry)
+                t, proc, t0 = entry
+                if proc.returncode == 0:
+                    mark_finished(t)
+                on_done(t, proc.returncode, time.perf_counter() - t0)
+    except BaseException:
+        _stop([p for _, p, _ in running])
+        raise
+
+
+BACKENDS = ("local", "ray")
+
+
+def check_execution(backend: str, address: str | None, max_parallel: int | None) -> None:
+    """Check where trials are to run before anything is written.
+
+    Raises:
+        MotorlabError: unknown backend, --address without ray, max_parallel < 1, no cluster at address.
+    """
+    if backend not in BACKENDS:
+        raise MotorlabError(f"--backend {backend!r}: choose local (this machine) or ray (a Ray cluster).")
+    if address and backend != "ray":
+        raise MotorlabError("--address names a Ray cluster; add --backend ray.")
+    if max_parallel is not None and max_parallel < 1:
+        raise MotorlabError(f"--max-parallel {max_parallel}: give at least 1.")
+    if address:
+        check_address(address)
+
+
+def check_address(address: str) -> None:
+    """Fail in seconds, not minutes: Ray's own connect retries for a long time on a wrong address."""
+    import socket
+
+    if address == "auto":
+        return
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit():
+        raise MotorlabError(f"--address {address!r}: write HOST:PORT as `ray start --head` prints it, "
+                            "e.g. 10.0.0.5:6379.")
+    try:
+        socket.create_connection((host, int(port)), timeout=5).close()
+    except OSError as e:
+        raise MotorlabError(f"no Ray cluster answers at {address} ({e.strerror or e}); start one with "
+                            f"`ray start --head --port {port}` or check --address.") from None
+
+
+def _auth_token_available() -> bool:
+    """Ray's token sources, in its own order: RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH, ~/.ray/auth_token."""
+    path = os.environ.get("RAY_AUTH_TOKEN_PATH") or str(Path.home() / ".ray" / "auth_token")
+    return bool(os.environ.get("RAY_AUTH_TOKEN")) or Path(path).is_file()
+
+
+def _ray_trial(config: dict[str, Any]) -> None:
+    """Ray Tune's function trainable: run the trial's process, report its exit status."""
+    from ray import tune
+
+    t0 = time.perf_counter()
+    rc = run_one(config["trial"])
+    tune.report({"returncode": rc, "seconds": time.perf_counter() - t0})
+
+
+def run_ray(trials: list[dict[str, Any]], address: str | None, max_parallel: int | None, cpus_per_trial: float,
+            storage: Path, on_done: OnDone) -> None:
+    """Every trial as one Ray Tune trial (grid_search over the trial list).
+
+    Raises:
+        MotorlabError: Ray is not installed, or no cluster answers at `address`.
+    """
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    os.environ.setdefault("TUNE_DISABLE_AUTO_CALLBACK_LOGGERS", "1")  # run folders already hold the results
+    os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")
+    if address and "RAY_AUTH_MODE" not in os.environ and _auth_token_available():
+        # Clusters from `ray start` (Ray >= 2.59) require token authentication, but a client given
+        # an address only sends its token in token mode. RAY_AUTH_MODE=disabled opts out.
+        os.environ["RAY_AUTH_MODE"] = "token"
+    try:
+        import ray
+        from ray import tune
+
+        from motorlab.sweeps.ray_progress import Reporter
+    except ImportError:
+        raise MotorlabError("the ray backend needs Ray Tune: pip install 'ray[tune]==2.60.0'.") from None
+
+    try:
+        if address:
+            ray.init(address=address, logging_level="ERROR", log_to_driver=False)
+        else:
+            ray.init(num_cpus=os.cpu_count(), include_dashboard=False, logging_level="ERROR", log_to_driver=False)
+    except (ConnectionError, RuntimeError, ValueError) as e:
+        raise MotorlabError(f"cannot reach a Ray cluster at {address}: {str(e).splitlines()[0]} "
+                            "Start one with `ray start --head` or check --address (HOST:PORT).") from None
+    try:
+        tuner = tune.Tuner(
+            tune.with_resources(_ray_trial, {"cpu": cpus_per_trial}),
+            param_space={"trial": tune.grid_search(trials)},
+            tune_config=tune.TuneConfig(max_concurrent_trials=max_parallel, reuse_actors=False),
+            run_config=tune.RunConfig(name="tune", storage_path=str(Path(storage).resolve()), verbose=0,
+                                      callbacks=[Reporter(on_done)]),
+        )
+        tuner.fit()
+    finally:
+        ray.shutdown()

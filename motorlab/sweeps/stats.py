@@ -1,0 +1,136 @@
+"""Statistics across seeds with rliable (Agarwal et al., 2021): interquartile mean (IQM) with
+95% stratified-bootstrap confidence intervals, probability of improvement between settings,
+and performance profiles. Bootstraps use a fixed random state, so the same runs give the
+same numbers."""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import warnings
+from typing import Any
+
+import numpy as np
+
+REPS = 2000  # bootstrap resamples; rliable's CIs settle well before this for a handful of seeds
+CONFIDENCE = 0.95
+# metric -> higher is better; a study's metrics are "<step>.<metric>"
+DIRECTION = {"final_return": True, "success_rate": True, "steps_to_success": False}
+PROFILED = ("final_return", "success_rate")
+
+Score = tuple[float, bool]  # (value, censored: steps_to_success of a run that never solved = its budget)
+
+
+def _base(metric: str) -> str:
+    return metric.rsplit(".", 1)[-1]
+
+
+def _scores_of(summary: dict[str, Any], prefix: str, eval_prefix: str) -> dict[str, Score]:
+    out: dict[str, Score] = {}
+    for metric, keys in (("final_return", ("return_mean",)), ("success_rate", ("success_rate",))):
+        for key in keys:
+            value = summary.get(f"{prefix}{eval_prefix}{key}", summary.get(f"{prefix}{key}"))
+            if isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value):
+                out[metric] = (float(value), False)
+    if f"{prefix}steps_to_success" in summary:
+        steps = summary[f"{prefix}steps_to_success"]
+        budget = summary.get(f"{prefix}timesteps")
+        if steps is not None:
+            out["steps_to_success"] = (float(steps), False)
+        elif budget is not None:  # never solved: at least the budget (a lower bound), marked censored
+            out["steps_to_success"] = (float(budget), True)
+    return out
+
+
+def trial_scores(summary: dict[str, Any]) -> dict[str, Score]:
+    """Final return, success rate and steps-to-success of one finished trial: a run folder's
+    summary.json, or a study's ("<step>.<metric>" for each step that has them)."""
+    if "recipe" in summary and isinstance(summary.get("steps"), list):
+        return {f"{step}.{m}": v for step in summary["steps"]
+                for m, v in _scores_of(summary, f"{step}.", "").items()}
+    return _scores_of(summary, "", "eval_")
+
+
+@contextlib.contextmanager
+def _fixed_global_rng():
+    """Parts of rliable draw from NumPy's global generator (np.random.choice in its
+    independent-samples bootstrap and profiles): seed it for the call, then put it back."""
+    state = np.random.get_state()
+    np.random.seed(0)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # arch warns about degenerate resamples with one or two seeds
+            yield
+    finally:
+        np.random.set_state(state)
+
+
+def _interval(values: dict[str, np.ndarray], func) -> tuple[dict, dict]:
+    from rliable import library as rly
+
+    with _fixed_global_rng():
+        return rly.get_interval_estimates(values, func, reps=REPS, confidence_interval_size=CONFIDENCE,
+                                          random_state=np.random.RandomState(0))
+
+
+def aggregate(scores: dict[str, list[dict[str, Score]]]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """IQM, mean and CI of each metric per setting; probability of improvement for each pair
+    of settings; performance profiles of returns and success rates.
+
+    Args:
+        scores: setting label -> one dict of trial_scores per finished seed.
+
+    Returns:
+        (flat summary keys "<setting>.<metric>_iqm" etc., details for plots and aggregate.json)
+    """
+    from rliable import metrics as rm
+
+    flat: dict[str, Any] = {}
+    details: dict[str, Any] = {"metrics": {}, "probability_of_improvement": {}, "profiles": {}}
+    order = list(DIRECTION)  # return, success, steps; a study's steps in their recipe order
+    seen = list(dict.fromkeys(m for runs in scores.values() for r in runs for m in r))
+    names = sorted(seen, key=lambda m: (seen.index(m.rpartition(".")[0] + ".final_return")
+                                        if "." in m and m.rpartition(".")[0] + ".final_return" in seen else 0,
+                                        order.index(_base(m))))
+    per_metric: dict[str, dict[str, np.ndarray]] = {}
+    for metric in names:
+        values = {s: np.array([[r[metric][0]] for r in runs if metric in r]) for s, runs in scores.items()}
+        values = {s: v for s, v in values.items() if len(v)}
+        per_metric[metric] = values
+        point, ci = _interval(values, lambda x: np.array([rm.aggregate_iqm(x), rm.aggregate_mean(x)]))
+        details["metrics"][metric] = {}
+        for s, v in values.items():
+            entry = {"values": v[:, 0].tolist(), "iqm": float(point[s][0]), "mean": float(point[s][1]),
+                     "iqm_ci": [float(ci[s][0, 0]), float(ci[s][1, 0])]}
+            flat.update({f"{s}.{metric}_iqm": entry["iqm"], f"{s}.{metric}_iqm_ci_low": entry["iqm_ci"][0],
+                         f"{s}.{metric}_iqm_ci_high": entry["iqm_ci"][1], f"{s}.{metric}_mean": entry["mean"]})
+            if _base(metric) == "steps_to_success":
+                entry["unsolved"] = sum(r[metric][1] for r in scores[s] if metric in r)
+                flat[f"{s}.{metric}_unsolved"] = entry["unsolved"]
+            details["metrics"][metric][s] = entry
+        sign = 1.0 if DIRECTION[_base(metric)] else -1.0  # P(A better), whichever way "better" points
+        for a, b in itertools.combinations(values, 2):
+            p, pci = _interval({"pair": (sign * values[a], sign * values[b])}, rm.probability_of_improvement)
+            entry = {"a": a, "b": b, "p": float(p["pair"]), "ci": [float(x) for x in np.ravel(pci["pair"])]}
+            details["probability_of_improvement"].setdefault(metric, []).append(entry)
+            flat[f"{a}.{metric}_p_better_than[{b}]"] = entry["p"]
+    for metric, values in per_metric.items():
+        if _base(metric) in PROFILED and values:
+            details["profiles"][metric] = _profile(values)
+    for s, runs in scores.items():
+        flat[f"{s}.seeds"] = len(runs)
+    return flat, details
+
+
+def _profile(values: dict[str, np.ndarray]) -> dict[str, Any]:
+    """Fraction of runs scoring above tau, for taus across the observed range (rliable's score
+    distribution), with its bootstrap band."""
+    from rliable import library as rly
+
+    every = np.concatenate([v[:, 0] for v in values.values()])
+    lo, hi = float(every.min()), float(every.max())
+    taus = np.linspace(lo - 1e-9, hi + 1e-9 if hi > lo else lo + 1.0, 51)
+    with _fixed_global_rng():
+        point, ci = rly.create_performance_profile(values, taus, reps=REPS)
+    return {"tau": taus.tolist(), **{s: {"fraction": point[s].tolist(), "low": ci[s][0].tolist(),
+                                         "high": ci[s][1].tolist()} for s in values}}

@@ -1,0 +1,207 @@
+"""`motorlab sweep TARGET --seeds N [--grid key=v1,v2 ...]`: every seed of every setting, then
+statistics across seeds.
+
+    <sweep>/<setting>/seed<k>/   one run folder per trial (a study folder when TARGET is a recipe)
+    <sweep>/logs/<setting>-seed<k>.log   each trial's output
+    <sweep>/recipes/             the recipe variant each trial ran (recipe targets)
+    <sweep>/summary.json         "<setting>.<metric>_iqm", "_iqm_ci_low", "_iqm_ci_high", "_mean", ...
+    <sweep>/aggregate.json       per-seed values, probability of improvement, performance profiles
+    <sweep>/plots/*.png, table.txt, report.html
+    <sweep>/ray/                 Ray Tune's own records (ray backend)
+
+Run the same command again into the same --out to resume: finished trials are kept.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from motorlab.errors import MotorlabError
+from motorlab.runs import atomic_write_text, read_json, run_path, write_config, write_json, write_summary
+from motorlab.sweeps import backends
+from motorlab.sweeps.grid import parse_grid, settings
+from motorlab.sweeps.stats import aggregate, trial_scores
+from motorlab.sweeps.trials import command_trials, is_finished, recipe_trials
+
+def _recipe_path(target: str) -> Path | None:
+    """The recipe file TARGET names, or None when TARGET is a command line."""
+    from motorlab.recipes import bundled, find_recipe
+
+    if len(target.split()) == 1 and (target.endswith(".toml") or target in bundled()):
+        return find_recipe(target)
+    return None
+
+
+def _seeds(seeds: int | list[int]) -> list[int]:
+    if isinstance(seeds, int):
+        if seeds < 1:
+            raise MotorlabError(f"--seeds {seeds}: give at least 1 seed (seeds 0..N-1).")
+        return list(range(seeds))
+    if not seeds or any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
+        raise MotorlabError("seeds must be distinct non-negative integers.")
+    return list(seeds)
+
+
+def plan(target: str, seeds: int | list[int], grid: list[str] | None, sweep_dir: Path,
+         threads: dict[str, str] | None = None) -> list[dict[str, Any]]:
+    """The sweep's trials, every command line checked before any runs.
+
+    Raises:
+        MotorlabError: bad grid syntax, an option or recipe field the target does not have,
+            an unknown command or recipe.
+    """
+    combos = settings(parse_grid(grid))
+    seed_list = _seeds(seeds)
+    recipe = _recipe_path(target)
+    if recipe is not None:
+        return recipe_trials(recipe, combos, seed_list, sweep_dir, threads or {})
+    return command_trials(target, combos, seed_list, sweep_dir, threads or {})
+
+
+def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = None, backend: str = "local",
+              address: str | None = None, max_parallel: int | None = None, out: Path | None = None,
+              console: Console | None = None) -> dict[str, Any]:
+    """Run every seed of every setting of `target` (a motorlab command line or a recipe) and
+    aggregate final return, success rate and steps-to-success across seeds with rliable.
+
+    Returns:
+        The summary (also `<sweep>/summary.json`), plus "sweep_dir".
+
+    Raises:
+        MotorlabError: bad settings (before anything runs); trials that failed (after the
+            others finished and the summary of those that did was written).
+    """
+    console = console or Console(stderr=True)
+    backends.check_execution(backend, address, max_parallel)
+    parallel = max_parallel or ((os.cpu_count() or 1) if backend == "local" else None)
+    # Several trials per machine: one math thread each, or they fight over the cores.
+    threads = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if parallel != 1 else {}
+    sweep_dir = run_path(out, "sweep")
+    trials = plan(target, seeds, grid, sweep_dir, threads)
+    labels = list(dict.fromkeys(t["setting"] for t in trials))
+    write_config(sweep_dir, {"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [],
+                             "settings": labels, "backend": backend, "address": address, "max_parallel": max_parallel})
+    (sweep_dir / "summary.json").unlink(missing_ok=True)  # unfinished until the aggregate is written
+    todo = [t for t in trials if not is_finished(t)]
+    kept = len(trials) - len(todo)
+    console.print(f"sweep: {len(trials)} trials ({len(labels)} setting{'s' * (len(labels) > 1)} × "
+                  f"{len(trials) // len(labels)} seeds)" + (f", {kept} already finished, kept" if kept else "")
+                  + (f"; running {len(todo)} on {backend}" + (f" ({parallel} at a time)" if parallel else "")
+                     if todo else ""))
+    failed: list[dict[str, Any]] = []
+    t0 = time.perf_counter()
+    if todo:
+        with Progress(TextColumn("[bold]sweep[/bold]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=console, transient=True) as bar:
+            task = bar.add_task("trials", total=len(todo))
+
+            def on_done(t: dict[str, Any], rc: int, seconds: float) -> None:
+                bar.advance(task)
+                if rc == 0:
+                    scores = trial_scores(read_json(Path(t["run_dir"]) / "summary.json"))
+                    ret = scores.get("final_return")
+                    console.print(f"  [green]✓[/green] {t['name']}" + (f": final return {ret[0]:,.1f}" if ret else "")
+                                  + f" ({seconds:.0f} s)")
+                else:
+                    failed.append(t)
+                    console.print(f"  [red]✗[/red] {t['name']} failed (exit {rc}): {_last_line(Path(t['log']))}")
+
+            try:
+                if backend == "local":
+                    backends.run_local(todo, parallel, on_done)
+                else:
+                    backends.run_ray(todo, address, max_parallel, 1, sweep_dir / "ray", on_done)
+            except KeyboardInterrupt:
+                console.print("sweep interrupted: finished trials are kept; run the same command again to resume.")
+                raise
+    done = [t for t in trials if is_finished(t)]
+    failed = [t for t in trials if not is_finished(t)]  # also those a Ray worker lost without reporting
+    summary = _write_results(target, trials, done, sweep_dir, time.perf_counter() - t0, console)
+    if failed:
+        raise MotorlabError(f"{len(failed)} of {len(trials)} trials failed ({', '.join(t['name'] for t in failed)}); "
+                            f"see {Path(failed[0]['log'])}. Fix the cause and run the same command again: "
+                            "finished trials are kept.")
+    return summary
+
+
+def _last_line(log: Path) -> str:
+    try:
+        lines = [x for x in log.read_text(errors="replace").splitlines() if x.strip()]
+    except OSError:
+        return f"no log at {log}"
+    return (lines[-1][:200] if lines else "no output") + f"  (log: {log})"
+
+
+def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[str, Any]], sweep_dir: Path,
+                   wall: float, console: Console) -> dict[str, Any]:
+    from motorlab.report import sweep_plots
+    from motorlab.report.html import build_report
+
+    labels = list(dict.fromkeys(t["setting"] for t in trials))
+    scores = {s: [trial_scores(read_json(Path(t["run_dir"]) / "summary.json")) for t in done if t["setting"] == s]
+              for s in labels}
+    scores = {s: v for s, v in scores.items() if v}
+    flat, details = aggregate(scores) if scores else ({}, {"metrics": {}, "probability_of_improvement": {},
+                                                            "profiles": {}})
+    summary = {"sweep": target, "description": f"{len(labels)} settings × {len(trials) // max(1, len(labels))} "
+               "seeds; IQM and 95% stratified-bootstrap CIs (rliable)", "steps": labels, "trials": len(trials),
+               "finished": len(done), "failed": len(trials) - len(done), "wall_seconds": round(wall, 2), **flat}
+    write_json(sweep_dir / "aggregate.json", {"runs": {s: [t["run_dir"] for t in done if t["setting"] == s]
+                                                       for s in labels}, **details})
+    title = f"sweep of {Path(target).name if _recipe_path(target) else target}"
+    title = title if len(title) <= 60 else title[:57] + "..."
+    if details["metrics"]:
+        sweep_plots.interval_estimates(details["metrics"], sweep_dir / "plots" / "iqm.png", title)
+    if details["probability_of_improvement"]:
+        sweep_plots.improvement(details["probability_of_improvement"], sweep_dir / "plots" / "improvement.png", title)
+    if details["profiles"]:
+        sweep_plots.performance_profiles(details["profiles"], sweep_dir / "plots" / "profiles.png", title)
+    rows = _rows(details["metrics"])
+    atomic_write_text(sweep_dir / "table.txt", _plain(rows))
+    write_summary(sweep_dir, summary)
+    console.print(_table(title, rows))
+    build_report([sweep_dir], sweep_dir / "report.html")
+    summary["sweep_dir"] = str(sweep_dir)
+    return summary
+
+
+COLUMNS = ["setting", "metric", "seeds", "IQM", "95% CI", "mean", "per seed"]
+
+
+def _rows(metrics: dict[str, dict[str, Any]]) -> list[list[str]]:
+    def f(v: float, metric: str) -> str:
+        if metric.endswith("success_rate"):
+            return f"{v:.0%}"
+        return f"{v:,.0f}" if metric.endswith("steps_to_success") else f"{v:,.1f}"
+
+    rows = []
+    for metric, per_setting in metrics.items():
+        for s, e in per_setting.items():
+            seeds = str(len(e["values"])) + (f" ({e['unsolved']} unsolved)" if e.get("unsolved") else "")
+            rows.append([s, metric, seeds, f(e["iqm"], metric), f"[{f(e['iqm_ci'][0], metric)}, "
+                         f"{f(e['iqm_ci'][1], metric)}]", f(e["mean"], metric),
+                         " ".join(f(v, metric) for v in e["values"])])
+    return rows
+
+
+def _table(title: str, rows: list[list[str]]) -> Table:
+    table = Table(title=f"{title}: across seeds")
+    for c in COLUMNS:
+        table.add_column(c, justify="left" if c in ("setting", "metric", "per seed") else "right")
+    for r in rows:
+        table.add_row(*r)
+    return table
+
+
+def _plain(rows: list[list[str]]) -> str:
+    rows = [COLUMNS, *rows]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(COLUMNS))]
+    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows) + "\n"
+

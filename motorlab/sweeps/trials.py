@@ -1,0 +1,204 @@
+"""Trials: one seed of one setting, as one motorlab command line that writes one run folder.
+
+A trial is plain data (a dict of strings and lists) so that any backend can run it: a
+local process pool, or a Ray Tune worker on another machine that shares the file system.
+Its command line is `python -m motorlab ARGV`, so a trial behaves exactly like the same
+command typed by hand, and its run folder is the same either way.
+
+A finished trial leaves `sweep_trial.toml` (its command line) beside its summary.json; a
+sweep run again into the same folder skips those trials and runs the rest.
+"""
+
+from __future__ import annotations
+
+import shlex
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.runs import finished_with, write_toml
+from motorlab.sweeps.grid import label
+
+TRIAL_FILE = "sweep_trial.toml"
+# Commands that train or evaluate and take --seed and --out: the ones a sweep can repeat.
+SWEEPABLE = ("train", "evaluate", "mpc", "dynamics collect", "dynamics fit", "dynamics check", "synergies collect",
+             "synergies fit", "zeroshot", "video")
+
+
+def trial(name: str, setting: str, seed: int, argv: list[str], run_dir: Path, log: Path,
+          env: dict[str, str] | None = None, fingerprint: str = "") -> dict[str, Any]:
+    """`fingerprint`: a hash of inputs the command line only names (a recipe file's text)."""
+    return {"name": name, "setting": setting, "seed": seed, "argv": [str(a) for a in argv],
+            "run_dir": str(Path(run_dir).resolve()), "log": str(Path(log).resolve()), "env": env or {},
+            "fingerprint": fingerprint}
+
+
+def _marker(t: dict[str, Any]) -> dict[str, Any]:
+    return {"argv": t["argv"], "fingerprint": t["fingerprint"]}
+
+
+def is_finished(t: dict[str, Any]) -> bool:
+    """The trial's run folder finished with this very command line (and recipe text)."""
+    return finished_with(Path(t["run_dir"]), _marker(t), TRIAL_FILE)
+
+
+def mark_finished(t: dict[str, Any]) -> None:
+    write_toml(Path(t["run_dir"]) / TRIAL_FILE, _marker(t))
+
+
+def _command(words: list[str]):
+    """The click command for `words` ("train ...", "dynamics fit ..."), and how many words name it."""
+    import typer
+
+    from motorlab.cli import app
+
+    group = typer.main.get_command(app)
+    names = [" ".join(words[:2]), words[0]] if len(words) > 1 else [words[0]] if words else []
+    for name in names:
+        if name in SWEEPABLE:
+            cmd = group
+            for part in name.split():
+                cmd = cmd.commands[part]
+            return cmd, len(name.split())
+    given = " ".join(words[:2]) if words else ""
+    raise MotorlabError(f"cannot sweep {given!r}: give a recipe (name or .toml file) or one of the commands "
+                        f"{', '.join(SWEEPABLE)}, quoted, e.g. motorlab sweep \"train InvertedPendulum-v5 "
+                        f"--preset fast\" --seeds 5{did_you_mean(given, SWEEPABLE)}")
+
+
+def _option_args(cmd, key: str, value: str) -> list[str]:
+    """`--grid key=value` as command-line words: --key value, or the switch for booleans."""
+    flag = "--" + key.lstrip("-").replace("_", "-")
+    for p in cmd.params:
+        if flag in getattr(p, "opts", []) or flag in getattr(p, "secondary_opts", []):
+            if getattr(p, "is_flag", False):
+                on = value.lower() in ("1", "true", "yes", "on")
+                if not on and value.lower() not in ("0", "false", "no", "off"):
+                    raise MotorlabError(f"--grid {key}: {flag} is a switch; give true or false, not {value!r}.")
+                if p.secondary_opts:
+                    return [p.opts[0] if on else p.secondary_opts[0]]
+                return [flag] if on else []
+            return [flag, value]
+    options = [o for p in cmd.params for o in getattr(p, "opts", []) if o.startswith("--")]
+    raise MotorlabError(f"--grid {key}: `motorlab {cmd.name}` has no option {flag}"
+                        f"{did_you_mean(flag, options)}; see motorlab {cmd.name} --help.")
+
+
+def _check_parses(cmd, argv: list[str], where: str) -> None:
+    """Parse (not run) the command line, so a typo fails before any trial starts."""
+    try:
+        cmd.make_context(f"motorlab {cmd.name}", list(argv), resilient_parsing=False)
+    except Exception as e:  # typer's vendored click raises its own UsageError classes
+        message = e.format_message() if hasattr(e, "format_message") else str(e)
+        raise MotorlabError(f"{where}: {message}") from None
+
+
+def command_trials(command: str, settings: list[dict[str, str]], seeds: list[int], sweep_dir: Path,
+                   threads: dict[str, str]) -> list[dict[str, Any]]:
+    """Trials of a motorlab command line: each adds its setting's options, --seed and --out."""
+    try:
+        words = shlex.split(command)
+    except ValueError as e:
+        raise MotorlabError(f"cannot read the command {command!r}: {e}.") from None
+    if words[:1] == ["motorlab"]:
+        words = words[1:]
+    cmd, n = _command(words)
+    args = words[n:]
+    for fixed in ("--seed", "--out"):
+        if any(a == fixed or a.startswith(fixed + "=") for a in args):
+            raise MotorlabError(f"the sweep sets {fixed} of every trial itself; drop {fixed} from the command.")
+    head = words[:n]
+    out = []
+    for setting in settings:
+        extra = [w for k, v in setting.items() for w in _option_args(cmd, k, v)]
+        name = label(setting)
+        argv_seed0 = [*args, *extra, "--seed", "0", "--out", "x"]
+        _check_parses(cmd, argv_seed0, f"setting {name}")
+        if "progress" in {p.name for p in cmd.params}:
+            extra.append("--no-progress")  # bars belong to the sweep, not to each trial's log
+        for s in seeds:
+            run_dir = sweep_dir / name / f"seed{s}"
+            out.append(trial(f"{name}/seed{s}", name, s, [*head, *args, *extra, "--seed", str(s), "--out", run_dir],
+                             run_dir, sweep_dir / "logs" / f"{name}-seed{s}.log", threads))
+    return out
+
+
+def _toml_value(text: str) -> Any:
+    """A grid value as TOML reads it (numbers, booleans, arrays, inline tables), else the plain string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def recipe_variant(data: dict[str, Any], setting: dict[str, str], seed: int, source: str) -> dict[str, Any]:
+    """The recipe's TOML data with the setting's fields set and every step's seed set to `seed`.
+
+    Keys: FIELD (every step whose kind has it) or STEP.FIELD (one step).
+
+    Raises:
+        MotorlabError: a step name or field the recipe does not have.
+    """
+    from motorlab.recipes import FIELDS
+
+    data = {**data, "steps": [dict(s) for s in data.get("steps", [])]}
+    data.pop("seeds", None)  # one seed per trial: the sweep's
+    defaults = {k: v for k, v in data.get("defaults", {}).items() if k != "seeds"}
+    data["defaults"] = defaults
+    steps = data["steps"]
+    names = [str(s.get("name", f"step{i + 1}")) for i, s in enumerate(steps)]
+    for key, text in setting.items():
+        step_name, dot, field = key.rpartition(".")
+        value = _toml_value(text)
+        targets = [i for i, n in enumerate(names) if n == step_name] if dot else range(len(steps))
+        if dot and not targets:
+            raise MotorlabError(f"--grid {key}: {source} has no step {step_name!r}{did_you_mean(step_name, names)}; "
+                                f"steps: {', '.join(names)}.")
+        hit = [i for i in targets if field in FIELDS.get(steps[i].get("kind", "train"), ())]
+        if not hit:
+            where = f"step {step_name!r}" if dot else "any step"
+            raise MotorlabError(f"--grid {key}: {where} of {source} has no field {field!r}"
+                                f"{did_you_mean(field, set().union(*FIELDS.values()))}.")
+        for i in hit:
+            steps[i][field] = value
+    for s in steps:
+        kind = s.get("kind", "train")
+        s.pop("seeds", None)
+        if "seed" in FIELDS.get(kind, ()):
+            s["seed"] = seed
+    return data
+
+
+def recipe_trials(path: Path, settings: list[dict[str, str]], seeds: list[int], sweep_dir: Path,
+                  threads: dict[str, str]) -> list[dict[str, Any]]:
+    """Trials of a whole study: each runs `motorlab run` on a variant of the recipe written
+    to <sweep>/recipes/, with the setting applied and all seeds set to the trial's."""
+    import hashlib
+
+    import tomli_w
+
+    from motorlab.recipes import parse_recipe
+    from motorlab.runs import atomic_write_text
+
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise MotorlabError(f"cannot read recipe {path}: {e}") from None
+    planned = []  # every variant is built (and the first of each setting validated) before any file is written
+    for setting in settings:
+        name = label(setting)
+        for k, s in enumerate(seeds):
+            text = tomli_w.dumps(recipe_variant(data, setting, s, str(path)))
+            if k == 0:
+                parse_recipe(text, f"{path} with {name}")
+            planned.append((name, s, text))
+    out = []
+    for name, s, text in planned:
+        recipe_file = sweep_dir / "recipes" / f"{name}-seed{s}.toml"
+        atomic_write_text(recipe_file, text)
+        run_dir = sweep_dir / name / f"seed{s}"
+        out.append(trial(f"{name}/seed{s}", name, s, ["run", recipe_file.resolve(), "--out", run_dir], run_dir,
+                         sweep_dir / "logs" / f"{name}-seed{s}.log", threads,
+                         hashlib.sha256(text.encode()).hexdigest()[:16]))
+    return out
