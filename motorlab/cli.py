@@ -364,7 +364,7 @@ def compare(
     out: Out = None,
 ):
     """Learning curves (return and success vs env steps) of settings across seeds: mean and 95% band, PNG."""
-    from motorlab.report.compare import compare_curves
+    from motorlab.report.compare import compare_curves, group_statistics
     from motorlab.runs import prepare_run_dir, write_config, write_summary
 
     groups = {}
@@ -376,7 +376,8 @@ def compare(
     run_dir = prepare_run_dir(out, "compare")
     result = compare_curves(groups, run_dir / "plots" / "learning_curves.png", title)
     write_config(run_dir, {"groups": {k: [str(r) for r in v] for k, v in groups.items()}, "title": title})
-    write_summary(run_dir, {f"{label}.{k}": v for label, r in result.items() for k, v in r.items()})
+    write_summary(run_dir, {**{f"{label}.{k}": v for label, r in result.items() for k, v in r.items()},
+                            **group_statistics(groups)})
     stdout.print(f"written: {run_dir}/plots/learning_curves.png")
 
 

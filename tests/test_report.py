@@ -122,7 +122,8 @@ def test_study_report_opens_cleanly_and_shows_the_summary_numbers(study, browser
         assert shown[key] == (pytest.approx(value), fmt(value)), key
 
     runs = {"pid": study / "pid", "ppo/seed0": study / "ppo" / "seed0", "ppo/seed1": study / "ppo" / "seed1",
-            "ppo-eval": study / "ppo-eval", "video": study / "video"}
+            "ppo-eval/seed0": study / "ppo-eval" / "seed0", "ppo-eval/seed1": study / "ppo-eval" / "seed1",
+            "video": study / "video"}  # an evaluation of a two-seed step evaluates both seeds
     for label, run_dir in runs.items():
         cells = opened.cells(f'table.run[data-run="{label}"]')
         for key, value in _numbers(read_summary(run_dir)).items():

@@ -149,7 +149,14 @@ def test_compare_cli(pendulum_runs, tmp_path):
     assert_png(out / "plots" / "learning_curves.png")
     s = read_summary(out)
     assert s["A.seeds"] == 2 and s["B.seeds"] == 1
-    assert set(s) == {f"{g}.{k}" for g in "AB" for k in ("seeds", "final_episode_return", "final_episode_success")}
+    curves = ("seeds", "final_episode_return", "final_episode_success")
+    stats = [f"{m}_{x}" for m in ("final_return", "success_rate") for x in ("iqm", "iqm_ci_low", "iqm_ci_high", "mean")]
+    assert set(s) == ({f"{g}.{k}" for g in "AB" for k in (*curves, *stats)}
+                      | {"A.final_return_p_better_than[B]", "A.success_rate_p_better_than[B]"})
+    a = [read_summary(r)["eval_return_mean"] for r in (r0, r1)]
+    assert s["A.final_return_iqm"] == pytest.approx(np.mean(a))  # rliable's IQM of two seeds: their mean
+    b = read_summary(r2)["eval_return_mean"]
+    assert s["A.final_return_p_better_than[B]"] == pytest.approx(np.mean([(x > b) + 0.5 * (x == b) for x in a]))
     # the final value is a running mean of episode returns, so it lies within them
     returns = [float(r["episode_return"]) for r in episode_rows(read_metrics_rows(r2)[1])]
     assert min(returns) <= s["B.final_episode_return"] <= max(returns)

@@ -8,13 +8,14 @@ seeds; the band is the t-interval of that mean (none for a single seed).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy import stats
 
 from motorlab.errors import MotorlabError
 from motorlab.report.plots import STYLE, _save, plt, steps_axis
-from motorlab.runs import read_metrics, require_run_dir
+from motorlab.runs import read_json, read_metrics, require_run_dir
 
 GRID_POINTS = 100
 
@@ -84,3 +85,17 @@ def compare_curves(groups: dict[str, list[Path]], path: Path, title: str = "Lear
         fig.suptitle(f"{title} — mean and 95% confidence band over seeds", fontsize=11)
         _save(fig, path)
     return result
+
+
+def group_statistics(groups: dict[str, list[Path | str]]) -> dict[str, Any]:
+    """rliable across each group's seeds: IQM with 95% CI of the final evaluation return and
+    success rate, and the probability that one group beats another (e.g. SAR-RL vs RL-E2E).
+
+    Returns:
+        Flat keys "<group>.final_return_iqm", "..._iqm_ci_low", "<A>.final_return_p_better_than[<B>]", ...
+    """
+    from motorlab.sweeps.stats import aggregate, trial_scores
+
+    scores = {g: [trial_scores(read_json(Path(d) / "summary.json")) for d in ds] for g, ds in groups.items()}
+    flat, _ = aggregate(scores)
+    return {k: v for k, v in flat.items() if "steps_to_success" not in k and not k.endswith(".seeds")}

@@ -20,13 +20,13 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
-from rich.table import Table
 
 from motorlab.errors import MotorlabError
 from motorlab.recipes import Recipe, Step
 from motorlab.report.html import build_report
 from motorlab.report.plots import comparison_bars
 from motorlab.report.run import plot_run
+from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import (atomic_write_text, finished_with, prepare_run_dir, read_json, write_config, write_summary,
                            write_toml)
 
@@ -257,13 +257,14 @@ def _execute(step: Step, c: dict[str, Any], step_dir: Path, console: Console) ->
         return zeroshot([Path(d) for d in c["runs"].values()], c["envs"], c["episodes"], c["seed"], step_dir,
                         console=console, labels=list(c["runs"]))
     if step.kind == "compare":
-        from motorlab.report.compare import compare_curves
+        from motorlab.report.compare import compare_curves, group_statistics
 
         run = prepare_run_dir(step_dir, "compare")
         result = compare_curves({g: [Path(d) for d in ds] for g, ds in c["groups"].items()},
                                 run / "plots" / "learning_curves.png", c["title"])
         write_config(run, c)
         summary = {f"{label}.{k}": v for label, r in result.items() for k, v in r.items()}
+        summary.update(group_statistics(c["groups"]))
         write_summary(run, summary)
         return summary
     if step.kind == "dynamics-collect":
@@ -431,9 +432,10 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
         study_summary.update({f"{name}.{k}": v for k, v in head.items()})
     _figures(recipe, results, study_dir)
     rows = [_cells(s, results[s.name]) for s in recipe.steps]
-    atomic_write_text(study_dir / "table.txt", _plain_table(rows))
+    atomic_write_text(study_dir / "table.txt", plain_table(COLUMNS, rows))
     write_summary(study_dir, study_summary)
-    console.print(_table(recipe, rows))
+    console.print(rich_table(f"{recipe.name}: {recipe.description}" if recipe.description else recipe.name,
+                             COLUMNS, rows, left=("step", "what", "notes")))
     build_report([study_dir], study_dir / "report.html")
     study_summary["study_dir"] = str(study_dir)
     return study_summary
@@ -505,21 +507,6 @@ def _note(step: Step, r: dict[str, Any]) -> str:
 
 
 COLUMNS = ["step", "what", "return (mean ± sd)", "min return", "success", "steps to success", "train s", "notes"]
-
-
-def _table(recipe: Recipe, rows: list[list[str]]) -> Table:
-    table = Table(title=f"{recipe.name}: {recipe.description}" if recipe.description else recipe.name)
-    for c in COLUMNS:
-        table.add_column(c, justify="left" if c in ("step", "what", "notes") else "right")
-    for row in rows:
-        table.add_row(*row)
-    return table
-
-
-def _plain_table(rows: list[list[str]]) -> str:
-    rows = [COLUMNS, *rows]
-    widths = [max(len(str(r[i])) for r in rows) for i in range(len(COLUMNS))]
-    return "\n".join("  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows) + "\n"
 
 
 def _figures(recipe: Recipe, results: dict[str, dict[str, Any]], study_dir: Path) -> None:

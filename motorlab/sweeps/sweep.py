@@ -21,9 +21,9 @@ from typing import Any
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
 
 from motorlab.errors import MotorlabError
+from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import atomic_write_text, read_json, run_path, write_config, write_json, write_summary
 from motorlab.sweeps import backends
 from motorlab.sweeps.grid import parse_grid, settings
@@ -164,9 +164,9 @@ def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[st
     if details["profiles"]:
         sweep_plots.performance_profiles(details["profiles"], sweep_dir / "plots" / "profiles.png", title)
     rows = _rows(details["metrics"])
-    atomic_write_text(sweep_dir / "table.txt", _plain(rows))
+    atomic_write_text(sweep_dir / "table.txt", plain_table(COLUMNS, rows))
     write_summary(sweep_dir, summary)
-    console.print(_table(title, rows))
+    console.print(rich_table(f"{title}: across seeds", COLUMNS, rows, left=("setting", "metric", "per seed")))
     build_report([sweep_dir], sweep_dir / "report.html")
     summary["sweep_dir"] = str(sweep_dir)
     return summary
@@ -189,19 +189,3 @@ def _rows(metrics: dict[str, dict[str, Any]]) -> list[list[str]]:
                          f"{f(e['iqm_ci'][1], metric)}]", f(e["mean"], metric),
                          " ".join(f(v, metric) for v in e["values"])])
     return rows
-
-
-def _table(title: str, rows: list[list[str]]) -> Table:
-    table = Table(title=f"{title}: across seeds")
-    for c in COLUMNS:
-        table.add_column(c, justify="left" if c in ("setting", "metric", "per seed") else "right")
-    for r in rows:
-        table.add_row(*r)
-    return table
-
-
-def _plain(rows: list[list[str]]) -> str:
-    rows = [COLUMNS, *rows]
-    widths = [max(len(r[i]) for r in rows) for i in range(len(COLUMNS))]
-    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows) + "\n"
-
