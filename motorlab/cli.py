@@ -83,6 +83,11 @@ def train(
     config: Annotated[Optional[Path], typer.Option(
         "--config", help="Start from a run's config.toml (repeat a run, or run one a sweep or study planned); "
                          "flags given here override it.")] = None,
+    resume: Annotated[Optional[Path], typer.Option(
+        "--resume", help="Continue the interrupted run in this folder from its last checkpoint, to the same "
+                         "total budget, with its own settings.")] = None,
+    checkpoint_every: Annotated[Optional[int], typer.Option(
+        help="Env steps between checkpoints for --resume (default: a tenth of the budget; 0: none).")] = None,
     algo: Annotated[Optional[str], typer.Option(
         help="ppo | sac | td3 (Stable-Baselines3) | lqr (model-based: linear model + LQR).")] = None,
     preset: Annotated[Optional[str], typer.Option(
@@ -140,11 +145,15 @@ def train(
         "algo": algo, "preset": preset, "timesteps": timesteps, "seed": seed, "lr": lr, "clip_range": clip_range,
         "until_solved": until_solved or None, "solve_episodes": solve_episodes, "solve_return": solve_return,
         "eval_every": eval_every, "n_envs": n_envs, "normalize": normalize, "device": device, "progress": progress,
+        "checkpoint_every": checkpoint_every,
         "env": _env_overrides(env_id, delay, delay_on, history, reward, sar, phi, env_arg),
     }
     if hp:
         settings["hyperparams"] = _parse_sets(hp)
     settings = {k: v for k, v in settings.items() if v is not None}
+    if resume is not None:
+        _resume_run(resume, settings, config, out)
+        return
     if config is not None:
         settings = _merge_config(config, settings)
     elif env_id is None:
@@ -159,6 +168,29 @@ def train(
               f"return {summary['eval_return_mean']:.1f} (min {summary['eval_return_min']:.0f}) over "
               f"{summary['eval_episodes']} episodes, {summary['timesteps']:,} steps, {summary['wall_seconds']:.1f} s"
               + (f", steps_to_success {sts:,}" if sts is not None else (", not solved" if cfg.until_solved else "")))
+
+
+def _resume_run(run_dir: Path, settings: dict, config: Path | None, out: Path | None) -> None:
+    from motorlab.rl.config import resolve
+    from motorlab.rl.train import train as run_train
+    from motorlab.runs import is_complete
+
+    given = [k for k, v in settings.items() if k not in ("progress", "env") or (k == "env" and v)]
+    if given or config is not None or out is not None:
+        raise MotorlabError(f"--resume continues {run_dir} with the settings in its config.toml; "
+                            "drop the other settings (and --out, --config).")
+    if not (run_dir / "config.toml").is_file():
+        raise MotorlabError(f"{run_dir} is not a training run folder (no config.toml); give the --out of the "
+                            "interrupted motorlab train.")
+    if is_complete(run_dir):
+        raise MotorlabError(f"{run_dir} finished already (it has summary.json); there is nothing to resume.")
+    cfg = resolve({**_merge_config(run_dir / "config.toml", {}), "progress": settings.get("progress", True)})
+    summary = run_train(cfg, run_dir, resume=True)
+    start = summary["resumed_from"]
+    stdout.print(f"[green]done[/green] {summary['run_dir']}: "
+                 + (f"resumed at {start:,} steps; " if start else "no checkpoint yet, started over; ")
+                 + f"return {summary['eval_return_mean']:.1f} over {summary['eval_episodes']} episodes, "
+                 f"{summary['timesteps']:,} steps")
 
 
 def _merge_config(path: Path, flags: dict) -> dict:

@@ -202,13 +202,21 @@ def require_run_dir(path: Path) -> Path:
 
 
 class MetricsWriter:
-    """Append rows to metrics.csv, one whole line per write, flushed at once,
-    so an interrupted run never leaves a torn row."""
+    """Append rows to metrics.csv, one whole line per write, flushed at once.
 
-    def __init__(self, path: Path, fields: list[str]):
+    `keep_until` (resuming from a checkpoint at that step): keep the rows written up to it
+    and append after them; rows past it (redone after the resume) and a line torn by a kill
+    are dropped first, so the file never holds a duplicated or torn row."""
+
+    def __init__(self, path: Path, fields: list[str], keep_until: int | None = None):
         self.path = Path(path)
         self.fields = fields
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        if keep_until is not None and self.path.is_file():
+            atomic_write_text(self.path, _rows_until(self.path, fields, keep_until))
+            self._f = open(self.path, "a", newline="")
+            self._writer = csv.DictWriter(self._f, fieldnames=fields, extrasaction="ignore")
+            return
         self._f = open(self.path, "w", newline="")
         self._writer = csv.DictWriter(self._f, fieldnames=fields, extrasaction="ignore")
         self._writer.writeheader()
@@ -220,6 +228,26 @@ class MetricsWriter:
 
     def close(self) -> None:
         self._f.close()
+
+
+def _rows_until(path: Path, fields: list[str], steps: int) -> str:
+    """metrics.csv's header and its whole rows with timesteps <= steps."""
+    text = path.read_text(errors="replace")
+    lines = text.split("\n")
+    if not text.endswith("\n"):
+        lines = lines[:-1]  # the last line was cut short
+    header = ",".join(fields)
+    kept = [header]
+    for line in lines[1:]:
+        cells = next(csv.reader([line]), [])
+        if len(cells) != len(fields):
+            continue
+        try:
+            if float(cells[0]) <= steps:
+                kept.append(line.rstrip("\r"))
+        except ValueError:
+            continue
+    return "\r\n".join(kept) + "\r\n"  # csv's own line ending
 
 
 def read_metrics(run_dir: Path) -> list[dict[str, float]]:

@@ -62,6 +62,8 @@ class TrainConfig(BaseModel):
     # Small MLPs train fastest on one CPU thread; more threads contend with the envs.
     torch_threads: int = Field(1, ge=1, description="CPU threads for PyTorch")
     progress: bool = True
+    checkpoint_every: int | None = Field(None, ge=0, description="env steps between checkpoints for --resume "
+                                         "(default: a tenth of the budget; 0: none)")
     hyperparams: dict[str, Any] = Field(default_factory=dict, description="extra keyword arguments for the SB3 algorithm")
     lqr: LQRSettings = Field(default_factory=LQRSettings)
 

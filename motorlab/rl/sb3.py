@@ -30,10 +30,13 @@ class TrackingCallback(BaseCallback):
     ones every `eval_every` steps.
     """
 
-    def __init__(self, tracker: Tracker, eval_every: int, on_policy: bool, until_solved: bool):
+    def __init__(self, tracker: Tracker, eval_every: int, on_policy: bool, until_solved: bool,
+                 run_dir: Path | None = None, checkpoint_every: int = 0, start: int = 0):
         super().__init__()
         self.tracker, self.eval_every, self.on_policy, self.until_solved = tracker, eval_every, on_policy, until_solved
-        self.next_eval = eval_every
+        self.next_eval = (start // eval_every + 1) * eval_every if start else eval_every
+        self.run_dir, self.checkpoint_every = run_dir, checkpoint_every
+        self.next_checkpoint = (start // checkpoint_every + 1) * checkpoint_every if checkpoint_every else None
         self.solved = False
 
     def _on_training_start(self) -> None:
@@ -51,9 +54,17 @@ class TrackingCallback(BaseCallback):
             self.next_eval = (self.num_timesteps // self.eval_every + 1) * self.eval_every
             self.solved = self.tracker.evaluate(self.num_timesteps, self.policy_now()) or self.solved
 
+    def _maybe_checkpoint(self) -> None:
+        if self.next_checkpoint is not None and self.num_timesteps >= self.next_checkpoint:
+            from motorlab.rl.checkpoint import save_checkpoint
+
+            save_checkpoint(self.run_dir, self.model, self.tracker.state())
+            self.next_checkpoint = (self.num_timesteps // self.checkpoint_every + 1) * self.checkpoint_every
+
     def _on_rollout_start(self) -> None:
-        if self.on_policy:
+        if self.on_policy:  # between updates: the cleanest place to evaluate and to checkpoint
             self._maybe_evaluate()
+            self._maybe_checkpoint()
 
     def _on_step(self) -> bool:
         for i, info in enumerate(self.locals.get("infos", [])):
@@ -64,6 +75,7 @@ class TrackingCallback(BaseCallback):
                                      success=self.outcome.end(i, ret), fault=info.get("numerical_fault"))
         if not self.on_policy:
             self._maybe_evaluate()
+            self._maybe_checkpoint()
         return not (self.until_solved and self.solved)
 
 
@@ -124,14 +136,20 @@ def check_hyperparams(algo: str, params: dict) -> dict:
 
 
 def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, tracker: Tracker) -> int:
-    """Train `model` (from build_model), save model.zip (for continuing) and the
+    """Train `model` (from build_model; restored from a checkpoint when resuming) to the
+    budget, checkpointing as it goes; save model.zip (for continuing with SB3) and the
     pickle-free policy. Returns env steps used."""
     on_policy = cfg.algo == "ppo"
     eval_every = cfg.eval_every or (model.n_steps * cfg.n_envs if on_policy else 1000)
-    callback = TrackingCallback(tracker, eval_every, on_policy, cfg.until_solved)
-    model.learn(total_timesteps=cfg.timesteps, callback=callback, progress_bar=cfg.progress,
-                tb_log_name=cfg.algo.upper())
+    every = cfg.checkpoint_every if cfg.checkpoint_every is not None else max(1, cfg.timesteps // 10)
+    start = int(model.num_timesteps)
+    callback = TrackingCallback(tracker, eval_every, on_policy, cfg.until_solved, run_dir, every, start)
+    if start < cfg.timesteps and not (cfg.until_solved and tracker.steps_to_success is not None):
+        # resumed: SB3 counts on from num_timesteps; the schedules see the same total budget
+        model.learn(total_timesteps=cfg.timesteps - start, callback=callback, progress_bar=cfg.progress,
+                    tb_log_name=cfg.algo.upper(), reset_num_timesteps=start == 0)
     steps = int(model.num_timesteps)
+    callback.solved = callback.solved or (cfg.until_solved and tracker.steps_to_success is not None)
     if tracker.last_eval_steps < steps and not callback.solved:
         # The last update used every step so far and has not been evaluated yet.
         tracker.evaluate(steps, callback.policy_now())

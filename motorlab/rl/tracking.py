@@ -33,13 +33,15 @@ class Tracker:
         solve_return: return every evaluation episode must reach (None: no target).
     """
 
-    def __init__(self, cfg: TrainConfig, run_dir: Path, solve_return: float | None):
+    def __init__(self, cfg: TrainConfig, run_dir: Path, solve_return: float | None, resume: dict | None = None):
         self.cfg = cfg
         self.solve_return = solve_return
         self.evaluator = Evaluator(cfg.env, cfg.solve_episodes, cfg.seed + EVAL_SEED_OFFSET)
-        self.metrics = MetricsWriter(Path(run_dir) / METRICS, METRIC_FIELDS)
+        steps = resume["steps"] if resume else None
+        self.metrics = MetricsWriter(Path(run_dir) / METRICS, METRIC_FIELDS, keep_until=steps)
         self.faults_log = Path(run_dir) / "faults.log"
-        self.faults_log.unlink(missing_ok=True)
+        if resume is None:
+            self.faults_log.unlink(missing_ok=True)
         self.tb = SummaryWriter(str(Path(run_dir) / "tensorboard" / "motorlab"))
         self.t0 = time.perf_counter()
         self.recent = deque(maxlen=100)
@@ -49,6 +51,21 @@ class Tracker:
         self.steps_to_success: int | None = None
         self.last_eval_steps = -1
         self.evaluations = 0
+        if resume is not None:
+            self.restore(resume["tracker"])
+
+    def state(self) -> dict:
+        """What a checkpoint keeps of the tracker (JSON)."""
+        return {"wall": self.wall(), "recent": list(self.recent), "recent_success": list(self.recent_success),
+                "episodes": self.episodes, "faults": self.faults, "steps_to_success": self.steps_to_success,
+                "last_eval_steps": self.last_eval_steps, "evaluations": self.evaluations}
+
+    def restore(self, state: dict) -> None:
+        self.t0 = time.perf_counter() - state["wall"]
+        self.recent.extend(state["recent"])
+        self.recent_success.extend(state["recent_success"])
+        for key in ("episodes", "faults", "steps_to_success", "last_eval_steps", "evaluations"):
+            setattr(self, key, state[key])
 
     def wall(self) -> float:
         return time.perf_counter() - self.t0

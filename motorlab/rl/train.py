@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -51,8 +52,12 @@ def _train_lqr(cfg: TrainConfig, run_dir: Path, tracker: Tracker) -> int:
     return steps
 
 
-def train(cfg: TrainConfig, out: Path | None = None) -> dict[str, Any]:
+def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> dict[str, Any]:
     """Train one policy as `cfg` says and write its run folder.
+
+    Args:
+        resume: continue the run in `out` from its last checkpoint (SB3 algorithms; an LQR
+            run, or one killed before its first checkpoint, starts over).
 
     Returns:
         The summary (also in `run_dir/summary.json`): `steps_to_success` (int, or None
@@ -75,15 +80,23 @@ def train(cfg: TrainConfig, out: Path | None = None) -> dict[str, Any]:
         from motorlab.rl.sb3 import build_model, train_sb3
 
         model = build_model(cfg, run_dir)  # SB3 checks its settings here, before the folder is touched
+    record = None
+    if resume and model is not None:
+        from motorlab.rl.checkpoint import has_checkpoint, load_checkpoint
+
+        if has_checkpoint(run_dir):
+            record = load_checkpoint(run_dir, model)
     prepare_run_dir(run_dir, f"train-{cfg.algo}")
+    if record is None:
+        shutil.rmtree(run_dir / "checkpoint", ignore_errors=True)  # another run's, not to be resumed into this one
     write_config(run_dir, cfg.model_dump())
-    tracker = Tracker(cfg, run_dir, solve_return)
+    tracker = Tracker(cfg, run_dir, solve_return, resume=record)
     try:
         if model is None:
             steps = _train_lqr(cfg, run_dir, tracker)
         else:
             steps = train_sb3(cfg, model, run_dir, tracker)
-        wall = time.perf_counter() - t0
+        wall = time.perf_counter() - t0 + (record["tracker"]["wall"] if record else 0.0)
         # Reload from disk, so the reported numbers are those of the saved files.
         final = tracker.evaluator.run(load_policy_files(run_dir)).summary()
     finally:
@@ -106,11 +119,13 @@ def train(cfg: TrainConfig, out: Path | None = None) -> dict[str, Any]:
         "train_episodes": tracker.episodes,
         "train_success_rate_last100": tracker.success_rate(),
         "numerical_faults": tracker.faults,
+        "resumed_from": record["steps"] if record else None,
         "eval_seed": cfg.seed + EVAL_SEED_OFFSET,
         **{f"eval_{k}": v for k, v in final.items() if k != "episode_lengths"},
         "eval_episode_lengths": final["episode_lengths"],
     }
     write_summary(run_dir, summary)
+    shutil.rmtree(run_dir / "checkpoint", ignore_errors=True)  # finished: nothing left to resume (replay buffers are big)
     from motorlab.report.run import plot_learning_curve
 
     plot_learning_curve(run_dir)  # people would rather look at the curve than read metrics.csv
