@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from safetensors.numpy import load_file
 
 from helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli
 from motorlab.errors import MotorlabError
@@ -92,13 +93,18 @@ def test_sac_checkpoint_restores_buffer_normalization_and_networks(tmp_path):
         np.testing.assert_array_equal(model.replay_buffer.observations[: len(z["observations"])], z["observations"])
     with np.load(folder / record["files"]["normalize"]) as z:
         np.testing.assert_array_equal(model.get_env().obs_rms.mean, z["mean"])
+    saved = load_file(folder / record["files"]["model"])
+    for name, value in model.policy.state_dict().items():  # the networks, as saved
+        np.testing.assert_array_equal(value.numpy(), saved[f"params/policy/{name}"], err_msg=name)
+    assert model.actor.optimizer.state_dict()["state"]  # Adam's moments came back too
     model.get_env().close()
     assert_ok(run_cli("train", "--resume", out, "--no-progress"))
     assert read_summary(out)["timesteps"] == 900
 
 
 def test_checkpoint_never_unpickles_objects(tmp_path):
-    """A model file swapped for a pickle of an arbitrary object is refused, not executed."""
+    """A model file swapped for a pickle of an arbitrary object is refused, not executed:
+    checkpoints are safetensors and JSON, never unpickled."""
     from motorlab.rl.checkpoint import load_checkpoint
     from motorlab.rl.config import resolve
     from motorlab.rl.sb3 import build_model
@@ -111,9 +117,11 @@ def test_checkpoint_never_unpickles_objects(tmp_path):
         def __reduce__(self):
             return (os.system, (f"touch {marker}",))
 
-    (folder / "model-1.pt").write_bytes(pickle.dumps(Exploit()))
-    (folder / "latest.json").write_text(json.dumps({"steps": 1, "n_updates": 0, "episode_num": 0,
-                                                    "files": {"model": "model-1.pt"}, "tracker": {}}))
+    (folder / "model-1.safetensors").write_bytes(pickle.dumps(Exploit()))
+    (folder / "model-1.json").write_text("{}")
+    (folder / "latest.json").write_text(json.dumps({"steps": 1, "n_updates": 0, "episode_num": 0, "tracker": {},
+                                                    "files": {"model": "model-1.safetensors",
+                                                              "model_json": "model-1.json"}}))
     model = build_model(resolve({"env": {"id": ENV_ID}}), tmp_path / "scratch")
     with pytest.raises(MotorlabError, match="damaged"):
         load_checkpoint(tmp_path / "run", model)

@@ -2,25 +2,26 @@
 that was killed (even with SIGKILL) to the same total budget.
 
     RUN_DIR/checkpoint/latest.json         step counter, tracker state, the files below (written last)
-    RUN_DIR/checkpoint/model-<steps>.pt    networks and optimizers: torch state dicts, read back with
-                                           torch.load(weights_only=True), which refuses arbitrary objects
+    RUN_DIR/checkpoint/model-<steps>.safetensors   networks' and optimizers' tensors
+    RUN_DIR/checkpoint/model-<steps>.json  the rest of their state dicts (optimizer settings, step counts)
     RUN_DIR/checkpoint/buffer-<steps>.npz  the replay buffer (SAC, TD3): plain arrays
     RUN_DIR/checkpoint/normalize-<steps>.npz   VecNormalize's running mean, variance and count
 
-SB3's own model.zip is not used here: loading it unpickles. Each file is written atomically
+Nothing here is a pickle: SB3's own model.zip and torch.save files unpickle when loaded, so
+state dicts are split into tensors (safetensors) and plain values (JSON). Each file is written atomically
 and latest.json names a complete set, so a kill at any moment leaves the previous checkpoint
 usable. Episodes in progress at the checkpoint are not restored: resumed training starts new ones.
 """
 
 from __future__ import annotations
 
-import io
-import pickle  # only for its error class: torch.load(weights_only=True) raises pickle.UnpicklingError
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import safetensors.torch
 import torch
+from safetensors import SafetensorError
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import VecNormalize
 
@@ -38,12 +39,13 @@ def save_checkpoint(run_dir: Path, model: BaseAlgorithm, tracker_state: dict[str
     steps = int(model.num_timesteps)
     tag = f"{steps:012d}"
     _, variables = model._get_torch_save_params()
-    blob = {"params": model.get_parameters(),
-            "variables": {name: _attr(model, name).detach().cpu().clone() for name in variables}}
-    buf = io.BytesIO()
-    torch.save(blob, buf)
-    files = {"model": f"model-{tag}.pt"}
-    atomic_write_bytes(folder / files["model"], buf.getvalue())
+    tensors: dict[str, torch.Tensor] = {}
+    structure = {"params": _split(model.get_parameters(), "params", tensors),
+                 "variables": {name: _split(_attr(model, name).detach().cpu(), f"variables/{name}", tensors)
+                               for name in variables}}
+    files = {"model": f"model-{tag}.safetensors", "model_json": f"model-{tag}.json"}
+    atomic_write_bytes(folder / files["model"], safetensors.torch.save(tensors))
+    write_json(folder / files["model_json"], structure)
     rb = getattr(model, "replay_buffer", None)
     if rb is not None:
         files["buffer"] = f"buffer-{tag}.npz"
@@ -78,10 +80,11 @@ def load_checkpoint(run_dir: Path, model: BaseAlgorithm) -> dict[str, Any]:
     folder = Path(run_dir) / FOLDER
     record = read_json(folder / LATEST)
     try:
-        blob = torch.load(folder / record["files"]["model"], weights_only=True)  # tensors and numbers only
-        model.set_parameters(blob["params"], exact_match=True)
-        for name, value in blob["variables"].items():
-            _attr(model, name).data.copy_(value)
+        tensors = safetensors.torch.load((folder / record["files"]["model"]).read_bytes())
+        structure = read_json(folder / record["files"]["model_json"])
+        model.set_parameters(_join(structure["params"], tensors), exact_match=True)
+        for name, node in structure["variables"].items():
+            _attr(model, name).data.copy_(_join(node, tensors))
         if "buffer" in record["files"]:
             rb = model.replay_buffer
             with np.load(folder / record["files"]["buffer"], allow_pickle=False) as z:
@@ -94,13 +97,39 @@ def load_checkpoint(run_dir: Path, model: BaseAlgorithm) -> dict[str, Any]:
             venv = model.get_env()
             with np.load(folder / record["files"]["normalize"], allow_pickle=False) as z:
                 venv.obs_rms.mean, venv.obs_rms.var, venv.obs_rms.count = z["mean"], z["var"], float(z["count"])
-    except (OSError, KeyError, ValueError, RuntimeError, EOFError, pickle.UnpicklingError) as e:
+    except (OSError, KeyError, TypeError, ValueError, RuntimeError, MotorlabError, SafetensorError) as e:
         raise MotorlabError(f"the checkpoint in {folder} is damaged or from other settings ({type(e).__name__}: "
                             f"{str(e).splitlines()[0] if str(e) else ''}); delete {folder} to start the run over.") from None
     model.num_timesteps = int(record["steps"])
     model._n_updates = record["n_updates"]
     model._episode_num = record["episode_num"]
     return record
+
+
+def _split(obj: Any, key: str, tensors: dict[str, torch.Tensor]) -> Any:
+    """A nested state dict as JSON, its tensors moved to `tensors` under path-like keys.
+    Dicts keep their key types (optimizer states are keyed by int), tuples become lists."""
+    if isinstance(obj, torch.Tensor):
+        tensors[key] = obj.detach().cpu().contiguous()
+        return {"tensor": key}
+    if isinstance(obj, dict):
+        return {"dict": [[k, _split(v, f"{key}/{k}", tensors)] for k, v in obj.items()]}
+    if isinstance(obj, (list, tuple)):
+        return {"list": [_split(v, f"{key}/{i}", tensors) for i, v in enumerate(obj)]}
+    if obj is None or isinstance(obj, (bool, int, float, str)):
+        return {"value": obj}
+    raise TypeError(f"cannot checkpoint a {type(obj).__name__} at {key}")
+
+
+def _join(node: dict[str, Any], tensors: dict[str, torch.Tensor]) -> Any:
+    """The inverse of _split."""
+    if "tensor" in node:
+        return tensors[node["tensor"]]
+    if "dict" in node:
+        return {k: _join(v, tensors) for k, v in node["dict"]}
+    if "list" in node:
+        return [_join(v, tensors) for v in node["list"]]
+    return node["value"]
 
 
 def _attr(model: BaseAlgorithm, dotted: str):
