@@ -168,10 +168,8 @@ def _train_seeds(step: Step, todo: list[tuple[Path, Any]], execution: Execution,
         backends.run_local(trials, parallel, on_done)
     failed = [t for t in trials if not (Path(t["run_dir"]) / "summary.json").is_file()]
     if failed:
-        log = Path(failed[0]["log"])
-        lines = [x for x in log.read_text(errors="replace").splitlines() if x.strip()] if log.is_file() else []
         raise MotorlabError(f"step {step.name}: {', '.join(Path(t['run_dir']).name for t in failed)} failed: "
-                            f"{lines[-1] if lines else 'no output'} (log: {log}).")
+                            f"{backends.last_line(failed[0]['log'])}.")
 
 
 def _policy_runs(step: Step, outputs: _Outputs) -> list[Path]:

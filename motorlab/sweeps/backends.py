@@ -33,6 +33,15 @@ def _start(t: dict[str, Any]) -> subprocess.Popen:
                                 stdin=subprocess.DEVNULL, env=env)
 
 
+def last_line(log: Path) -> str:
+    """A failed trial's last words, and where to read the rest."""
+    try:
+        lines = [x for x in Path(log).read_text(errors="replace").splitlines() if x.strip()]
+    except OSError:
+        return f"no log at {log}"
+    return (lines[-1][:200] if lines else "no output") + f"  (log: {log})"
+
+
 def run_one(t: dict[str, Any]) -> int:
     """Run one trial to the end (the Ray worker's side); marks it finished when it succeeds."""
     proc = _start(t)

@@ -87,11 +87,10 @@ def aggregate(scores: dict[str, list[dict[str, Score]]]) -> tuple[dict[str, Any]
 
     flat: dict[str, Any] = {}
     details: dict[str, Any] = {"metrics": {}, "probability_of_improvement": {}, "profiles": {}}
-    order = list(DIRECTION)  # return, success, steps; a study's steps in their recipe order
+    # a study's steps in their recipe order; within each: return, success, steps
     seen = list(dict.fromkeys(m for runs in scores.values() for r in runs for m in r))
-    names = sorted(seen, key=lambda m: (seen.index(m.rpartition(".")[0] + ".final_return")
-                                        if "." in m and m.rpartition(".")[0] + ".final_return" in seen else 0,
-                                        order.index(_base(m))))
+    steps = list(dict.fromkeys(m.rpartition(".")[0] for m in seen))
+    names = sorted(seen, key=lambda m: (steps.index(m.rpartition(".")[0]), list(DIRECTION).index(_base(m))))
     per_metric: dict[str, dict[str, np.ndarray]] = {}
     for metric in names:
         values = {s: np.array([[r[metric][0]] for r in runs if metric in r]) for s, runs in scores.items()}

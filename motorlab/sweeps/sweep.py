@@ -95,7 +95,6 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
                   f"{len(trials) // len(labels)} seeds)" + (f", {kept} already finished, kept" if kept else "")
                   + (f"; running {len(todo)} on {backend}" + (f" ({parallel} at a time)" if parallel else "")
                      if todo else ""))
-    failed: list[dict[str, Any]] = []
     t0 = time.perf_counter()
     if todo:
         with Progress(TextColumn("[bold]sweep[/bold]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -110,8 +109,7 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
                     console.print(f"  [green]✓[/green] {t['name']}" + (f": final return {ret[0]:,.1f}" if ret else "")
                                   + f" ({seconds:.0f} s)")
                 else:
-                    failed.append(t)
-                    console.print(f"  [red]✗[/red] {t['name']} failed (exit {rc}): {_last_line(Path(t['log']))}")
+                    console.print(f"  [red]✗[/red] {t['name']} failed (exit {rc}): {backends.last_line(t['log'])}")
 
             try:
                 if backend == "local":
@@ -129,14 +127,6 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
                             f"see {Path(failed[0]['log'])}. Fix the cause and run the same command again: "
                             "finished trials are kept.")
     return summary
-
-
-def _last_line(log: Path) -> str:
-    try:
-        lines = [x for x in log.read_text(errors="replace").splitlines() if x.strip()]
-    except OSError:
-        return f"no log at {log}"
-    return (lines[-1][:200] if lines else "no output") + f"  (log: {log})"
 
 
 def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[str, Any]], sweep_dir: Path,
