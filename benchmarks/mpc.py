@@ -109,7 +109,7 @@ def main() -> None:
         fitted = fit_step(tmp / "data", seed=args.seed, out=tmp / "model", progress=False)
         env = make_env(EnvConfig(id="Reacher-v5"), shaped=False)
         policy = build_policy(env, "Reacher-v5", tmp / "model", seed=args.seed)
-        returns, distances, _, per_env_ms = run_episodes("Reacher-v5", policy, args.episodes, 10_000 + args.seed, 1,
+        returns, distances, _, per_env_ms, _ = run_episodes("Reacher-v5", policy, args.episodes, 10_000 + args.seed, 1,
                                                          progress=False)
         pipeline = time.perf_counter() - start
         ours = {"return_mean": float(returns.mean()), "return_std": float(returns.std()),

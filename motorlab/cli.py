@@ -168,6 +168,15 @@ def train(
               f"return {summary['eval_return_mean']:.1f} (min {summary['eval_return_min']:.0f}) over "
               f"{summary['eval_episodes']} episodes, {summary['timesteps']:,} steps, {summary['wall_seconds']:.1f} s"
               + (f", steps_to_success {sts:,}" if sts is not None else (", not solved" if cfg.until_solved else "")))
+    _warn_faults(summary)
+
+
+def _warn_faults(summary: dict) -> None:
+    """One line when episodes ended on a numerical fault (they are counted and listed, not fatal)."""
+    n = summary.get("numerical_faults") or 0
+    if n:
+        err.print(f"[yellow]warning[/yellow]: {n} episode{'s' if n > 1 else ''} ended on a numerical fault "
+                  f"(NaN/Inf or a diverging simulation); reasons in {summary['run_dir']}/faults.log", soft_wrap=True)
 
 
 def _resume_run(run_dir: Path, settings: dict, config: Path | None, out: Path | None) -> None:
@@ -191,6 +200,7 @@ def _resume_run(run_dir: Path, settings: dict, config: Path | None, out: Path | 
                  + (f"resumed at {start:,} steps; " if start else "no checkpoint yet, started over; ")
                  + f"return {summary['eval_return_mean']:.1f} over {summary['eval_episodes']} episodes, "
                  f"{summary['timesteps']:,} steps")
+    _warn_faults(summary)
 
 
 def _merge_config(path: Path, flags: dict) -> dict:
@@ -258,6 +268,7 @@ def evaluate(
                   str(s["falls"]))
     stdout.print(table)
     stdout.print(f"written: {s['run_dir']}/summary.json")
+    _warn_faults(s)
 
 
 @app.command(epilog="Examples:\n\n  motorlab report runs/pendulum            # -> runs/pendulum/report.html\n\n"
@@ -348,6 +359,43 @@ def sweep(
                  "aggregate.json, plots/*.png, <setting>/seed<k>/)")
 
 
+@app.command(epilog="Examples:\n\n  motorlab export runs/ppo --out share/ppo          # only the files safe to send\n\n"
+                    "  motorlab export ppo_pendulum.zip --trust --env InvertedPendulum-v5 --out runs/imported\n\n"
+                    "  motorlab export sac.zip --vecnormalize vec_normalize.pkl --trust --env Hopper-v5 --out runs/sac")
+def export(
+    source: Annotated[Path, typer.Argument(help="A run folder, or an SB3 zip written by model.save.")],
+    out: Annotated[Path, typer.Option("--out", help="The folder to write.")],
+    trust: Annotated[bool, typer.Option("--trust", help="Allow unpickling an SB3 zip / VecNormalize file "
+                                                       "(they can run code); needed for a zip only.")] = False,
+    env: Annotated[Optional[str], typer.Option(help="Env id an SB3 zip's policy acts in (checked, and recorded "
+                                                   "so that evaluate needs no --env).")] = None,
+    vecnormalize: Annotated[Optional[Path], typer.Option(
+        help="VecNormalize.save's file, if the zip's policy saw normalized observations.")] = None,
+    algo: Annotated[Optional[str], typer.Option(help="ppo (also A2C), sac or td3 (default: read from the zip).")] = None,
+):
+    """Write a policy folder that is safe to share: no pickle in it.
+
+    From a run folder: copies policy.json, policy.safetensors, config.toml, summary.json, metrics.csv,
+    plots and videos, and leaves out model.zip (a pickle), checkpoint/ and tensorboard/.
+    From an SB3 zip (with --trust): loads it once and writes policy.json + policy.safetensors,
+    which `motorlab evaluate`, `video` and `synergies collect` read without unpickling.
+    """
+    from motorlab.export import export_run, export_sb3_zip
+
+    if source.is_dir():
+        if env or vecnormalize or algo or trust:
+            raise MotorlabError(f"{source} is a run folder: it is exported as it is, without --trust, --env, "
+                                "--vecnormalize or --algo (those are for SB3 zips).")
+        s = export_run(source, out)
+        stdout.print(f"exported {len(s['exported_files'])} files (no pickle) -> {s['run_dir']}")
+    else:
+        s = export_sb3_zip(source, out, trust, env, vecnormalize, algo)
+        stdout.print(f"{s['algo'].upper()} policy ({s['num_timesteps']:,} steps"
+                     + (", normalized observations" if s["observation_normalized"] else "")
+                     + f") -> {s['run_dir']}/policy.json, policy.safetensors"
+                     + ("" if env else f"; evaluate it with --env ENV_ID"))
+
+
 @app.command(epilog="Example:\n\n  motorlab zeroshot runs/sar-rl runs/rl-e2e --envs myoHandReorientID-v0 myoHandReorientOOD-v0 --episodes 500")
 def zeroshot(
     run_dirs: Annotated[list[Path], typer.Argument(help="Training run folders to compare.")],
@@ -369,6 +417,7 @@ def zeroshot(
     envs = [e for item in [*envs, *map(str, moved)] for e in item.split(",") if e]
     s = run_zeroshot(run_dirs, envs, episodes, seed, out, console=stdout)
     stdout.print(f"written: {s['run_dir']}/summary.json, {s['run_dir']}/plots/zeroshot.png")
+    _warn_faults(s)
 
 
 @app.command(epilog="Example:\n\n  MUJOCO_GL=egl motorlab video runs/play --episodes 5 --camera hand_side_inter")
@@ -435,6 +484,7 @@ def synergies_collect(
     s = collect(run_dir, episodes, percentile, preview, seed, deterministic, workers, out=out)
     stdout.print(f"kept {s['episodes_kept']} episodes (return >= {s['threshold']:.3g}), {s['samples']:,} samples "
                  f"x {s['n_muscles']} muscles -> {s['run_dir']}/activations.npz")
+    _warn_faults(s)
 
 
 @synergies.command("vaf", epilog="Example:\n\n  motorlab synergies vaf runs/collect/activations.npz --threshold 0.8")
@@ -530,6 +580,7 @@ def dynamics_collect(
     s = collect_step(env_id, episodes, policy, workers, seed, state, simulator, out)
     stdout.print(f"{s['transitions']:,} transitions ({s['state_size']} state, {s['action_size']} action entries) "
                  f"at {s['transitions_per_second']:,.0f}/s via {s['simulator']} -> {s['run_dir']}/transitions.npz")
+    _warn_faults(s)
 
 
 @dynamics.command("fit", epilog="Examples:\n\n  motorlab dynamics fit runs/reacher-data --out runs/reacher-model\n\n"
@@ -601,6 +652,7 @@ def mpc(
     stdout.print(f"return {s['return_mean']:.2f} ± {s['return_std']:.2f}, final distance "
                  f"{s['final_distance_mean'] * 1000:.1f} mm (mean), planning {s['plan_ms_median']:.2f} ms/step "
                  f"(median) over {s['episodes']} episodes -> {s['run_dir']}")
+    _warn_faults(s)
 
 
 @app.command()

@@ -13,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from motorlab.envs import EnvConfig, env_dt, make_env, max_return
+from motorlab.faults import fault_of, write_faults_log
 
 
 class Policy(Protocol):
@@ -33,6 +34,7 @@ class Rollouts:
     aborted: bool = False
     faults: int = 0  # episodes ended by a numerical fault (NaN/Inf, diverging simulation)
     falls: int = 0  # episodes the env terminated before the time limit (a fall, for balancing tasks)
+    fault_log: list[str] = field(default_factory=list)  # one line per faulted episode: its seed and reason
     observations: list[np.ndarray] = field(default_factory=list)  # per episode, when recorded
     actions: list[np.ndarray] = field(default_factory=list)
     dt: float = 0.0
@@ -139,7 +141,8 @@ class Evaluator:
         lengths = np.zeros(n, dtype=int)
         success = np.zeros(n, dtype=bool)
         outcome = EpisodeSuccess(n, self.target)
-        faults = falls = 0
+        falls = 0
+        fault_log: list[str] = []
         traces_o = [[o] for o in obs] if record else []
         traces_a: list[list] = [[] for _ in range(n)] if record else []
         while active.any():
@@ -156,14 +159,16 @@ class Evaluator:
                 if terminated or truncated:
                     active[i] = False
                     success[i] = bool(outcome.end(i, returns[i]))
-                    faults += "numerical_fault" in info
-                    falls += bool(terminated) and "numerical_fault" not in info
+                    fault = fault_of(info)
+                    if fault:
+                        fault_log.append(f"seed={first + i} length={lengths[i]}: {fault}")
+                    falls += bool(terminated) and not fault
                     if stop_below is not None and returns[i] < stop_below:
                         done = ~active
-                        return Rollouts(returns[done], lengths[done], success[done], aborted=True, faults=faults,
-                                        falls=falls, dt=self.dt)
+                        return Rollouts(returns[done], lengths[done], success[done], aborted=True,
+                                        faults=len(fault_log), falls=falls, fault_log=fault_log, dt=self.dt)
         return Rollouts(
-            returns, lengths, success, faults=faults, falls=falls, dt=self.dt,
+            returns, lengths, success, faults=len(fault_log), falls=falls, fault_log=fault_log, dt=self.dt,
             observations=[np.array(t) for t in traces_o], actions=[np.array(t) for t in traces_a],
         )
 
@@ -190,7 +195,7 @@ def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, recor
         return parts[0]
     return Rollouts(np.concatenate([p.returns for p in parts]), np.concatenate([p.lengths for p in parts]),
                     np.concatenate([p.success for p in parts]), faults=sum(p.faults for p in parts),
-                    falls=sum(p.falls for p in parts),
+                    falls=sum(p.falls for p in parts), fault_log=[line for p in parts for line in p.fault_log],
                     observations=[o for p in parts for o in p.observations],
                     actions=[a for p in parts for a in p.actions], dt=parts[0].dt)
 
@@ -259,6 +264,7 @@ def evaluate_step(policy_spec: str, env_cfg: EnvConfig, episodes: int, seed: int
     write_config(run_dir, {"policy": policy_spec, "episodes": episodes, "seed": seed, "env": env_cfg.model_dump()})
     summary = {"policy": policy_spec, "env_id": env_cfg.id, "delay": env_cfg.delay, "history": env_cfg.history,
                "seed": seed, "max_return": target, **result.summary()}
+    write_faults_log(run_dir, result.fault_log)
     write_summary(run_dir, summary)
     summary["run_dir"] = str(run_dir)
     return summary

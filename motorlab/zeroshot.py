@@ -15,6 +15,7 @@ from rich.table import Table
 
 from motorlab.envs import EnvConfig, check_env_id
 from motorlab.evaluate import evaluate, trained_env_settings
+from motorlab.faults import write_faults_log
 from motorlab.errors import MotorlabError
 from motorlab.policies import load_run_policy
 from motorlab.report.plots import grouped_bars
@@ -44,13 +45,16 @@ def zeroshot(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: i
     if len(set(names)) < len(names):
         names = [str(r) for r in runs]
     results: dict[str, dict[str, dict]] = {}
+    fault_log: list[str] = []
     for name, run in zip(names, runs):
         base = trained_env_settings(run)
         policy = load_run_policy(run)
         results[name] = {}
         for env_id in envs:
             cfg = EnvConfig.model_validate({**base, "id": env_id})
-            results[name][env_id] = evaluate(policy, cfg, episodes, seed).summary()
+            rollouts = evaluate(policy, cfg, episodes, seed)
+            results[name][env_id] = rollouts.summary()
+            fault_log += [f"{name} on {env_id}: {line}" for line in rollouts.fault_log]
     out_dir = prepare_run_dir(out, "zeroshot")
     write_config(out_dir, {"runs": [str(r) for r in runs], "envs": envs, "episodes": episodes, "seed": seed})
     grouped_bars(envs, {n: [results[n][e]["success_rate"] for e in envs] for n in names}, "success rate",
@@ -74,6 +78,8 @@ def zeroshot(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: i
             r = results[n][env_id]
             for key in ("success_rate", "return_mean", "return_std", "numerical_faults"):
                 summary[f"{n}.{env_id}.{key}"] = r[key]
+    summary["numerical_faults"] = len(fault_log)
+    write_faults_log(out_dir, fault_log)
     write_summary(out_dir, summary)
     summary["run_dir"] = str(out_dir)
     return summary

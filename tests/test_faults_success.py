@@ -3,12 +3,17 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import gymnasium as gym
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
 from helpers import episode_rows, read_metrics_rows, read_summary
 from motorlab.envs import EnvConfig, make_env
+from motorlab.cli import app
+from motorlab.dynamics.collect import collect_step
 from motorlab.evaluate import EpisodeSuccess, Evaluator, evaluate
 from motorlab.policies import ZeroPolicy
 from motorlab.rl.config import TrainConfig
@@ -33,6 +38,7 @@ class FaultyEnv(gym.Env):
         self.t = 0
         self.faulty = False
         self.what = "observation"
+        self.data = SimpleNamespace(act=np.zeros(2))  # stands in for MuJoCo's muscle activations
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
@@ -45,6 +51,7 @@ class FaultyEnv(gym.Env):
 
     def step(self, action):
         self.t += 1
+        self.data.act[:] = self.t / EPISODE_STEPS
         obs, reward = np.full(3, self.t / EPISODE_STEPS, np.float32), 1.0
         if self.faulty and self.t == FAULT_STEP:
             if self.what == "reward":
@@ -143,11 +150,74 @@ def test_evaluator_counts_faults_per_run():
     assert result.faults == sum(expected_faults(range(100, 106)))
 
 
-def test_training_survives_numerical_faults(tmp_path):
+def test_evaluate_command_logs_faulted_episodes(tmp_path):
+    """`motorlab evaluate` (in this process, where the faulty env is registered): faults.log names
+    each faulted episode's seed and reason, summary.json counts them, stderr says so in one line."""
+    episodes = 12
+    faulty = np.array(expected_faults(range(episodes)))
+    result = CliRunner().invoke(app, ["evaluate", "zero", "--env", FAULTY_ID, "--episodes", str(episodes),
+                                      "--out", str(tmp_path / "eval")])
+    assert result.exit_code == 0, result.output
+    assert read_summary(tmp_path / "eval")["numerical_faults"] == faulty.sum()
+    log = (tmp_path / "eval" / "faults.log").read_text().splitlines()
+    assert [int(line.split()[0].removeprefix("seed=")) for line in log] == list(np.flatnonzero(faulty))
+    assert all(f"length={FAULT_STEP}: non-finite observation" in line for line in log)
+    warning = [line for line in result.stderr.splitlines() if "numerical fault" in line]
+    assert len(warning) == 1 and f"{faulty.sum()} episodes" in warning[0] and "faults.log" in warning[0]
+
+
+def test_evaluate_without_faults_writes_no_faults_log(tmp_path):
+    result = CliRunner().invoke(app, ["evaluate", "zero", "--env", SOLVED_ONCE_ID, "--episodes", "3",
+                                      "--out", str(tmp_path / "eval")])
+    assert result.exit_code == 0, result.output
+    assert read_summary(tmp_path / "eval")["numerical_faults"] == 0
+    assert not (tmp_path / "eval" / "faults.log").exists() and "numerical fault" not in result.stderr
+
+
+def test_dynamics_collect_drops_the_faulted_step(tmp_path):
+    """Transitions stop before the step that diverged: every kept transition is finite, a faulty
+    episode keeps its FAULT_STEP - 1 good steps and ends there, and the faults are logged."""
+    from motorlab.dynamics.transitions import load_transitions
+
+    episodes = 10
+    faulty = np.array(expected_faults(range(episodes)))
+    summary = collect_step(FAULTY_ID, episodes, workers=1, out=tmp_path / "data", progress=False)
+    data = load_transitions(tmp_path / "data")
+    lengths = np.bincount(data.episode, minlength=episodes)
+    np.testing.assert_array_equal(lengths, np.where(faulty, FAULT_STEP - 1, EPISODE_STEPS))
+    ends = np.flatnonzero(np.diff(data.episode, append=episodes))  # the last row of each episode
+    assert data.dones[ends].all() and data.dones.sum() == episodes
+    assert summary["numerical_faults"] == data.meta["numerical_faults"] == faulty.sum()
+    assert len((tmp_path / "data" / "faults.log").read_text().splitlines()) == faulty.sum()
+
+
+@pytest.fixture(scope="module")
+def faulty_run(tmp_path_factory):
     cfg = TrainConfig(env=EnvConfig(id=FAULTY_ID), algo="ppo", timesteps=256, seed=0, progress=False,
                       solve_episodes=2, hyperparams={"n_steps": 64, "batch_size": 32})
-    summary = train(cfg, tmp_path / "run")
-    run = tmp_path / "run"
+    run = tmp_path_factory.mktemp("faulty") / "run"
+    return run, train(cfg, run)
+
+
+def test_synergy_collect_never_keeps_a_faulted_episode(faulty_run, tmp_path):
+    from motorlab.synergy.collect import collect
+
+    run, _ = faulty_run
+    summary = collect(run, episodes=4, percentile=0.0, preview=6, workers=1, out=tmp_path / "c", progress=False)
+    with np.load(tmp_path / "c" / "activations.npz", allow_pickle=False) as f:
+        seeds, episode, acts = f["seeds"], f["episode"], f["activations"]
+    preview_faulty = expected_faults(range(6))
+    tried = expected_faults(range(6, 6 + summary["episodes_tried"]))
+    assert not any(expected_faults(seeds.tolist()))  # kept episodes are the healthy ones
+    assert np.bincount(episode).tolist() == [EPISODE_STEPS] * 4 and np.isfinite(acts).all()
+    assert summary["numerical_faults"] == sum(preview_faulty) + sum(tried) > 0
+    log = (tmp_path / "c" / "faults.log").read_text().splitlines()
+    assert len(log) == summary["numerical_faults"] and sum(line.startswith("preview") for line in log) == sum(
+        preview_faulty)
+
+
+def test_training_survives_numerical_faults(faulty_run):
+    run, summary = faulty_run
     assert read_summary(run)["numerical_faults"] == summary["numerical_faults"] > 0
     header, rows = read_metrics_rows(run)
     assert "numerical_fault" in header

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -22,6 +22,7 @@ from motorlab.dynamics.rewards import reward_for
 from motorlab.dynamics.state import layout_for, xy_columns
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
+from motorlab.faults import fault_of, write_faults_log
 from motorlab.runs import MetricsWriter, atomic_write_npz, prepare_run_dir, write_config, write_summary
 
 # Tuned on Reacher-v5 (benchmarks/mpc.py): ~4 ms per control step on one core, return ~-3.6.
@@ -53,12 +54,21 @@ def _distance(layout, obs: np.ndarray) -> float:
     return float(np.linalg.norm(layout.state(obs)[xy] - layout.goal(obs)))
 
 
-def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, parallel: int, progress: bool = True):
+class MPCEpisodes(NamedTuple):
+    returns: np.ndarray  # (episodes,)
+    distances: np.ndarray  # (episodes, steps + 1), fingertip-to-target, padded with each episode's last
+    call_ms: np.ndarray  # planning time of each call (all parallel envs at once)
+    per_env_ms: np.ndarray  # the same per env
+    fault_log: list[str]  # one line per episode ended by a numerical fault
+
+
+def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, parallel: int,
+                 progress: bool = True) -> MPCEpisodes:
     """Episodes of `policy`, `parallel` at a time: returns, per-step distances, planning times."""
     from rich.progress import Progress
 
     envs = [make_env(EnvConfig(id=env_id), shaped=False) for _ in range(parallel)]
-    returns, distances, call_ms, per_env_ms = [], [], [], []
+    returns, distances, call_ms, per_env_ms, fault_log = [], [], [], [], []
     with Progress(disable=not progress) as bar:
         task = bar.add_task(f"MPC on {env_id}", total=episodes)
         for first in range(0, episodes, parallel):
@@ -75,11 +85,13 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
                 call_ms.append(ms)
                 per_env_ms.append(ms / len(group))
                 for i in np.flatnonzero(live):
-                    o, r, terminated, truncated, _ = group[i].step(actions[i])
+                    o, r, terminated, truncated, info = group[i].step(actions[i])
                     obs[i] = o
                     ret[i] += r
                     dist[i].append(_distance(policy.layout, o))
                     live[i] = not (terminated or truncated)
+                    if fault_of(info):
+                        fault_log.append(f"seed={seed + first + i} length={len(dist[i]) - 1}: {fault_of(info)}")
             returns.extend(ret)
             distances.extend(dist)
             bar.advance(task, len(group))
@@ -87,7 +99,7 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
         e.close()
     length = max(len(d) for d in distances)
     padded = np.array([d + [d[-1]] * (length - len(d)) for d in distances])
-    return np.array(returns), padded, np.array(call_ms), np.array(per_env_ms)
+    return MPCEpisodes(np.array(returns), padded, np.array(call_ms), np.array(per_env_ms), fault_log)
 
 
 def mpc_step(env_id: str, model_path: Path, episodes: int = 50, horizon: int | None = None,
@@ -109,7 +121,8 @@ def mpc_step(env_id: str, model_path: Path, episodes: int = 50, horizon: int | N
     parallel = min(parallel, episodes)
     run = prepare_run_dir(out, "mpc")
     start = time.perf_counter()
-    returns, distances, call_ms, per_env_ms = run_episodes(env_id, policy, episodes, seed, parallel, progress)
+    returns, distances, call_ms, per_env_ms, fault_log = run_episodes(env_id, policy, episodes, seed, parallel,
+                                                                       progress)
     wall = time.perf_counter() - start
     final = distances[:, -1]
     metrics = MetricsWriter(run / "metrics.csv", ["episode", "return", "final_distance"])
@@ -126,7 +139,8 @@ def mpc_step(env_id: str, model_path: Path, episodes: int = 50, horizon: int | N
                "final_distance_mean": float(final.mean()),
                "final_distance_median": float(np.median(final)), "plan_ms_median": float(np.median(per_env_ms)),
                "plan_call_ms_median": float(np.median(call_ms)), "parallel": parallel, "optimizer": optimizer,
-               **resolved, "wall_seconds": wall}
+               **resolved, "wall_seconds": wall, "numerical_faults": len(fault_log)}
+    write_faults_log(run, fault_log)
     if video:
         summary["video"] = str(_video(env_id, policy, run / "videos" / "episode_0.mp4", seed))
     write_config(run, {"env": env_id, "model": str(model_path), "episodes": episodes, "optimizer": optimizer,

@@ -26,6 +26,7 @@ from motorlab.dynamics.state import StateLayout, layout_for
 from motorlab.dynamics.transitions import TRANSITIONS, Transitions
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
+from motorlab.faults import fault_of, write_faults_log
 from motorlab.runs import prepare_run_dir, write_config, write_summary
 
 CHUNK = 1000  # episodes per batched MuJoCo rollout: bounds memory, paces the progress bar
@@ -52,12 +53,16 @@ def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers
     rng = np.random.default_rng(seed)
     steps = env.spec.max_episode_steps or 50
     low, high = env.action_space.low, env.action_space.high
-    parts = []
+    parts, faults = [], []
     for start in range(0, episodes, CHUNK):
         n = min(CHUNK, episodes - start)
         qpos, qvel = sample_initial_states(env, n, rng)
         actions = rng.uniform(low, high, size=(n, steps, len(low)))
         obs, rewards = rollout_reacher(env, qpos, qvel, actions, threads=workers)
+        bad = ~(np.isfinite(obs).all(axis=(1, 2)) & np.isfinite(rewards).all(axis=1))
+        faults += [f"seed={seed} episode={start + i}: non-finite observation or reward" for i in np.flatnonzero(bad)]
+        obs, rewards, actions, ids = obs[~bad], rewards[~bad], actions[~bad], np.arange(start, start + n)[~bad]
+        n = len(ids)
         # equal-length episodes: whole-array state extraction, no per-episode Python
         rows = n * steps
         dones = np.zeros((n, steps), dtype=bool)
@@ -66,9 +71,9 @@ def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers
             states=layout.state(obs[:, :-1]).reshape(rows, -1), next_states=layout.state(obs[:, 1:]).reshape(rows, -1),
             goals=layout.goal(obs[:, :-1]).reshape(rows, -1), actions=actions.reshape(rows, -1),
             rewards=rewards.reshape(rows), terminated=np.zeros(rows, dtype=bool), dones=dones.reshape(rows),
-            episode=np.repeat(np.arange(start, start + n), steps)))
-        bar.advance(task, n)
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+            episode=np.repeat(ids, steps)))
+        bar.advance(task, len(bad))
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, faults
 
 
 # ---- the Gymnasium pool: any env, random actions or a trained policy --------------
@@ -94,18 +99,24 @@ def _run_episode(seed: int) -> tuple:
         policy.reset(1)
     low, high = env.action_space.low, env.action_space.high
     observations, actions, rewards, terminated, truncated = [obs], [], [], [], []
-    done = False
+    fault, done = None, False
     while not done:
         action = rng.uniform(low, high) if policy is None else np.asarray(policy.act(obs[None])[0])
-        obs, reward, term, trunc, _ = env.step(action)
+        obs, reward, term, trunc, info = env.step(action)
+        fault = fault_of(info)
+        if fault:  # the step that diverged is not a transition of the dynamics; the episode ends before it
+            if truncated:
+                truncated[-1] = True
+            break
+        done = term or trunc
         observations.append(obs)
         actions.append(action)
         rewards.append(reward)
         terminated.append(term)
         truncated.append(trunc)
-        done = term or trunc
-    return (np.array(observations, dtype=np.float64), np.array(actions, dtype=np.float64), np.array(rewards),
-            np.array(terminated), np.array(truncated))
+    return (np.array(observations, dtype=np.float64), np.array(actions, dtype=np.float64).reshape(len(actions), -1),
+            np.array(rewards, dtype=np.float64), np.array(terminated, dtype=bool), np.array(truncated, dtype=bool),
+            fault)
 
 
 def _collect_pool(env_cfg: EnvConfig, policy_dir: str | None, episodes: int, seed: int, layout: StateLayout,
@@ -126,7 +137,8 @@ def _collect_pool(env_cfg: EnvConfig, policy_dir: str | None, episodes: int, see
     finally:
         if workers > 1:
             pool.terminate()
-    return _episode_arrays(*zip(*results), layout=layout, episode_ids=range(episodes))
+    faults = [f"seed={s} length={len(r[1]) + 1}: {r[-1]}" for s, r in zip(seeds, results) if r[-1]]
+    return _episode_arrays(*zip(*(r[:-1] for r in results)), layout=layout, episode_ids=range(episodes)), faults
 
 
 def collect_transitions(env_id: str, episodes: int, policy: str = "random", workers: int | None = None,
@@ -175,15 +187,19 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
     with Progress(disable=not progress, transient=False) as bar:
         task = bar.add_task(f"{env_id} episodes", total=episodes)
         if fast:
-            arrays = _collect_reacher(env, episodes, seed, layout, workers, bar, task)
+            arrays, faults = _collect_reacher(env, episodes, seed, layout, workers, bar, task)
         else:
-            arrays = _collect_pool(env_cfg, policy_dir, episodes, seed, layout, workers, bar, task)
+            arrays, faults = _collect_pool(env_cfg, policy_dir, episodes, seed, layout, workers, bar, task)
+    if len(arrays["states"]) == 0:
+        raise MotorlabError(f"every episode of {env_id} ended on a numerical fault before its first step "
+                            f"({faults[0].split(': ', 1)[1]}); nothing to collect.")
     seconds = time.perf_counter() - start
     meta = {"env_id": env_id, "state_layout": layout.name, "state_labels": list(layout.labels),
             "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),
             "action_low": env.action_space.low.tolist(), "action_high": env.action_space.high.tolist(),
             "policy": policy_dir or "random", "seed": seed, "episodes": episodes,
-            "simulator": "mujoco.rollout" if fast else "gymnasium", "workers": workers, "seconds": seconds}
+            "simulator": "mujoco.rollout" if fast else "gymnasium", "workers": workers, "seconds": seconds,
+            "numerical_faults": len(faults), "fault_log": faults}
     env.close()
     return Transitions(**arrays, meta=meta).check()
 
@@ -195,6 +211,7 @@ def collect_step(env_id: str, episodes: int, policy: str = "random", workers: in
     data = collect_transitions(env_id, episodes, policy, workers, seed, state, simulator, progress)
     run = prepare_run_dir(out, "dynamics-collect")
     data.save(run / TRANSITIONS)
+    write_faults_log(run, data.meta["fault_log"])
     write_config(run, {"env": env_id, "episodes": episodes, "policy": policy, "workers": workers, "seed": seed,
                        "state": state, "simulator": simulator})
     seconds = data.meta["seconds"]
@@ -202,7 +219,8 @@ def collect_step(env_id: str, episodes: int, policy: str = "random", workers: in
                "transitions_per_second": len(data) / seconds, "collect_seconds": seconds,
                "simulator": data.meta["simulator"], "state_layout": data.meta["state_layout"],
                "state_size": int(data.states.shape[1]), "action_size": int(data.actions.shape[1]),
-               "return_mean": float(np.bincount(data.episode, weights=data.rewards).mean())}
+               "return_mean": float(np.bincount(data.episode, weights=data.rewards)[np.unique(data.episode)].mean()),
+               "numerical_faults": data.meta["numerical_faults"]}
     write_summary(run, summary)
     summary["run_dir"] = str(run)
     return summary

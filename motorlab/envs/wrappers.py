@@ -13,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from motorlab.errors import MotorlabError
+from motorlab.faults import FAULT_KEY
 
 DelayOn = Literal["action", "observation", "both"]
 
@@ -171,6 +172,6 @@ class NumericalGuard(gym.Wrapper, gym.utils.RecordConstructorArgs):
             self._warnings = count
         if fault is None:
             return obs, reward, terminated, truncated, info
-        info["numerical_fault"] = fault
+        info[FAULT_KEY] = fault
         obs = np.where(np.isfinite(obs), obs, 0.0).astype(np.asarray(obs).dtype)
         return obs, 0.0, True, truncated, info

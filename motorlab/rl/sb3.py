@@ -12,6 +12,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNorm
 
 from motorlab.envs import make_env
 from motorlab.evaluate import EpisodeSuccess
+from motorlab.faults import fault_of
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.policies import SB3Policy, save_sb3_policy
 from motorlab.rl.config import TrainConfig
@@ -72,7 +73,7 @@ class TrackingCallback(BaseCallback):
             if "episode" in info:
                 ret = float(info["episode"]["r"])
                 self.tracker.episode(self.num_timesteps, ret, int(info["episode"]["l"]),
-                                     success=self.outcome.end(i, ret), fault=info.get("numerical_fault"))
+                                     success=self.outcome.end(i, ret), fault=fault_of(info))
         if not self.on_policy:
             self._maybe_evaluate()
             self._maybe_checkpoint()

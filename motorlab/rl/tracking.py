@@ -15,11 +15,12 @@ import numpy as np
 from torch.utils.tensorboard import SummaryWriter
 
 from motorlab.evaluate import Evaluator, Policy
+from motorlab.faults import FAULT_KEY, FAULTS_LOG
 from motorlab.rl.config import TrainConfig
 from motorlab.runs import METRICS, MetricsWriter
 
 METRIC_FIELDS = ["timesteps", "wall_seconds", "episode_return", "episode_length", "episode_success",
-                 "success_rate_100", "eval_return_mean", "eval_return_min", "eval_success_rate", "numerical_fault"]
+                 "success_rate_100", "eval_return_mean", "eval_return_min", "eval_success_rate", FAULT_KEY]
 
 EVAL_SEED_OFFSET = 10_000  # evaluation episodes never share seeds with training episodes
 
@@ -39,7 +40,7 @@ class Tracker:
         self.evaluator = Evaluator(cfg.env, cfg.solve_episodes, cfg.seed + EVAL_SEED_OFFSET)
         steps = resume["steps"] if resume else None
         self.metrics = MetricsWriter(Path(run_dir) / METRICS, METRIC_FIELDS, keep_until=steps)
-        self.faults_log = Path(run_dir) / "faults.log"
+        self.faults_log = Path(run_dir) / FAULTS_LOG
         if resume is None:
             self.faults_log.unlink(missing_ok=True)
         self.tb = SummaryWriter(str(Path(run_dir) / "tensorboard" / "motorlab"))
@@ -84,7 +85,7 @@ class Tracker:
             self.tb.add_scalar("train/success_rate_100", row["success_rate_100"], steps)
         if fault:
             self.faults += 1
-            row["numerical_fault"] = 1
+            row[FAULT_KEY] = 1
             self.tb.add_scalar("train/numerical_faults", self.faults, steps)
             with open(self.faults_log, "a") as f:  # the reason, one line per faulted episode
                 f.write(f"timesteps={steps} episode_return={ret:.6g} length={length}: {fault}\n")

@@ -22,6 +22,7 @@ from rich.progress import Progress
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.evaluate import EpisodeSuccess, trained_env_settings
+from motorlab.faults import fault_of, write_faults_log
 from motorlab.runs import atomic_write_npz, prepare_run_dir, require_run_dir, write_config, write_summary
 
 ACTIVATIONS = "activations.npz"
@@ -34,6 +35,7 @@ class Episode:
     length: int
     solved: bool
     activations: np.ndarray  # (length, n_muscles)
+    fault: str | None = None  # the numerical fault that ended it; such episodes are never kept
 
 
 def muscle_activations(env) -> np.ndarray:
@@ -84,7 +86,7 @@ def _run_episode(seed: int) -> Episode:
         outcome.step(0, info)
         ret += float(reward)
         done = terminated or truncated
-    return Episode(seed, ret, len(acts), bool(outcome.end(0, ret)), np.stack(acts))
+    return Episode(seed, ret, len(acts), bool(outcome.end(0, ret)), np.stack(acts), fault_of(info))
 
 
 def _episodes(seeds: list[int], workers: int, init_args: tuple):
@@ -135,12 +137,19 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
     init_args = (str(run_dir), cfg.model_dump(), deterministic)
 
     kept: list[Episode] = []
+    fault_log: list[str] = []  # faulted episodes neither set the threshold nor are kept: their activations diverged
     with Progress(disable=not progress, transient=False) as bar:
         task = bar.add_task("preview episodes", total=preview)
         preview_returns = []
         for ep in _episodes([seed + i for i in range(preview)], workers, init_args):
-            preview_returns.append(ep.ret)
+            if ep.fault:
+                fault_log.append(f"preview seed={ep.seed} length={ep.length}: {ep.fault}")
+            else:
+                preview_returns.append(ep.ret)
             bar.advance(task)
+        if not preview_returns:
+            raise MotorlabError(f"all {preview} preview episodes ended on a numerical fault "
+                                f"({fault_log[0].split(': ', 1)[1]}); check the env and the policy's run.")
         preview_returns = np.array(preview_returns)
         threshold = float(np.percentile(preview_returns, percentile))
         task = bar.add_task(f"episodes with return >= {threshold:.2f}", total=episodes)
@@ -148,7 +157,9 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
         tried = 0
         for ep in _episodes(seeds, workers, init_args):
             tried += 1
-            if ep.ret >= threshold:
+            if ep.fault:
+                fault_log.append(f"seed={ep.seed} length={ep.length}: {ep.fault}")
+            elif ep.ret >= threshold:
                 kept.append(ep)
                 bar.advance(task)
                 if len(kept) == episodes:
@@ -171,7 +182,8 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
                "episodes_kept": len(kept), "episodes_requested": episodes, "episodes_tried": tried,
                "threshold": threshold, "preview_return_mean": float(preview_returns.mean()),
                "kept_return_mean": float(np.mean([e.ret for e in kept])),
-               "kept_success_rate": float(np.mean([e.solved for e in kept]))}
+               "kept_success_rate": float(np.mean([e.solved for e in kept])), "numerical_faults": len(fault_log)}
+    write_faults_log(run, fault_log)
     write_summary(run, summary)
     summary["run_dir"] = str(run)
     return summary
