@@ -304,6 +304,7 @@ def run(
     address: Annotated[Optional[str], typer.Option(help="Ray cluster HOST:PORT for --backend ray.")] = None,
     max_parallel: Annotated[Optional[int], typer.Option(
         help="Seeds trained at once (default: cores // n_envs locally).")] = None,
+    check: Annotated[bool, typer.Option("--check", help="Only validate the recipe and list its steps; run nothing.")] = False,
 ):
     """Run a study from a TOML recipe: its steps, a printed table, summary.json and plots.
 
@@ -314,7 +315,12 @@ def run(
     from motorlab.recipes import load_recipe
     from motorlab.studies import Execution, run_study
 
-    summary = run_study(load_recipe(recipe), out, console=stdout,
+    study = load_recipe(recipe)
+    if check:
+        stdout.print(f"{study.source}: valid, {len(study.steps)} steps: "
+                     + ", ".join(f"{st.name} ({st.kind})" for st in study.steps))
+        return
+    summary = run_study(study, out, console=stdout,
                         execution=Execution(backend, address, max_parallel))
     stdout.print(f"\n[bold]Results:[/bold] {summary['study_dir']}  (report.html, table.txt, summary.json, plots/*.png, "
                  "one folder per step)")
@@ -666,18 +672,34 @@ def recipes():
 
 
 def main() -> None:
-    """Entry point: run the app, turning user mistakes into one-line errors."""
+    """Entry point: run the app, turning user mistakes into one-line errors.
+
+    Click's own mistakes (unknown option, a value of the wrong type, a missing argument) are
+    caught here too, instead of in Click's standalone mode, which prints them in a box under
+    the usage text: every mistake reads the same, `error: ...` on one line, exit status 2."""
+    from typer._click import exceptions as click_errors  # typer vendors its click
+
     try:
-        app()
+        code = app(standalone_mode=False, prog_name="motorlab")
+    except click_errors.NoArgsIsHelpError:
+        sys.exit(2)  # a command group given no command: its help was printed
+    except click_errors.UsageError as e:
+        where = e.ctx.command_path if e.ctx is not None else "motorlab"
+        _error(f"{e.format_message()} (see `{where} --help`)")
+    except click_errors.ClickException as e:
+        _error(e.format_message(), e.exit_code)
     except MotorlabError as e:
-        err.print(f"[red]error:[/red] {escape(str(e))}", highlight=False, soft_wrap=True)
-        sys.exit(2)
+        _error(str(e))
     except KeyboardInterrupt:
         _interrupted()
-    except SystemExit as e:
-        if e.code == 130:  # typer turns Ctrl-C into a silent exit 130
-            _interrupted()
-        raise
+    if code == 130:  # typer turns Ctrl-C into exit code 130
+        _interrupted()
+    sys.exit(code if isinstance(code, int) else 0)
+
+
+def _error(message: str, code: int = 2) -> None:
+    err.print(f"[red]error:[/red] {escape(message)}", highlight=False, soft_wrap=True)
+    sys.exit(code)
 
 
 def _interrupted() -> None:

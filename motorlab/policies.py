@@ -163,7 +163,12 @@ def _load_sb3(run_dir: Path, meta: dict) -> SB3Policy:
     kwargs = _decode(meta.get("policy_kwargs") or {})
     if meta.get("use_sde") is not None:
         kwargs["use_sde"] = meta["use_sde"]
-    policy = cls(_unbox(meta["observation_space"]), _unbox(meta["action_space"]), lambda _: 0.0, **kwargs)
+    try:
+        policy = cls(_unbox(meta["observation_space"]), _unbox(meta["action_space"]), lambda _: 0.0, **kwargs)
+    except (RuntimeError, MemoryError, TypeError, ValueError, KeyError, AssertionError) as e:
+        # a damaged policy.json (a negative or absurd layer width, a wrong keyword) fails in torch or SB3
+        raise MotorlabError(f"{run_dir / POLICY_JSON} does not describe a network SB3 can build "
+                            f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}); re-run training.") from None
     path = Path(run_dir) / POLICY_WEIGHTS
     try:
         tensors = load_file(str(path))

@@ -163,3 +163,27 @@ def test_fast_predict_equals_predict(members):
     a = torch.as_tensor(rng.uniform(-1, 1, (64, 2)), dtype=torch.float32)
     with torch.no_grad():
         torch.testing.assert_close(model.fast_predict()(s, a), model.predict(s, a), rtol=1e-5, atol=1e-5)
+
+
+def test_damaged_model_json_is_checked_against_the_weights_before_allocating(reacher_data, tmp_path):
+    """A model.json whose sizes were edited (a width of 10^12 would ask torch for terabytes) is
+    refused from the weights file's header, before any tensor is made."""
+    import json
+
+    model, _ = fit_model(reacher_data, epochs=1, batch_size=500, progress=False)
+    model.save(tmp_path)
+    doc = json.loads((tmp_path / "model.json").read_text())
+    for field, value, message in (("hidden", [10**12], "does not match model.safetensors"),
+                                  ("members", 10**9, "does not match model.safetensors"),
+                                  ("hidden", [0], "sizes must be positive"),
+                                  ("state_size", "eight", "not a motorlab forward model")):
+        broken = json.loads(json.dumps(doc))
+        broken["architecture"][field] = value
+        (tmp_path / "model.json").write_text(json.dumps(broken))
+        with pytest.raises(MotorlabError, match=message):
+            load_model(tmp_path)
+    broken = json.loads(json.dumps(doc))
+    broken["state_labels"] = ["x"]
+    (tmp_path / "model.json").write_text(json.dumps(broken))
+    with pytest.raises(MotorlabError, match="state_labels should be a list of 8 names"):
+        load_model(tmp_path)

@@ -289,3 +289,30 @@ def test_train_config_repeats_a_run(ppo_run, tmp_path):
     assert second["eval_return_mean"] == first["eval_return_mean"]  # same settings and seed: same numbers
     assert (out / "config.toml").read_text() == (ppo_run / "config.toml").read_text()
     assert_one_line_error(run_cli("train", "--config", tmp_path / "none.toml"), "none.toml is missing")
+
+
+def test_interrupted_training_trial_resumes_from_its_checkpoint(tmp_path):
+    """A trial interrupted mid-training is continued with `train --resume` by the next run of the
+    same sweep: only the rest of its budget is trained, to the same total."""
+    out = tmp_path / "sweep"
+    target = ("train InvertedPendulum-v5 --algo ppo --timesteps 8192 --checkpoint-every 1024 "
+              "--set n_steps=512 --set batch_size=128 --solve-episodes 2")
+    args = [sys.executable, "-m", "motorlab", "sweep", target, "--seeds", "1", "--out", str(out)]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    latest = out / "default" / "seed0" / "checkpoint" / "latest.json"
+    deadline = time.monotonic() + 120
+    while not latest.exists() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.1)
+    assert latest.exists(), proc.communicate()
+    os.killpg(proc.pid, signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, (stdout, stderr)
+    run = out / "default" / "seed0"
+    assert not (run / "summary.json").exists()
+
+    assert_ok(run_cli("sweep", target, "--seeds", "1", "--out", out))
+    summary = read_summary(run)
+    assert summary["resumed_from"] >= 1024 and summary["timesteps"] == 8192
+    assert (run / "sweep_trial.toml").is_file()
+    assert "resumed at" in (out / "logs" / "default-seed0.log").read_text()

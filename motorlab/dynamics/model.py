@@ -18,6 +18,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from motorlab.dynamics.transitions import check_meta
 from motorlab.errors import MotorlabError
 from motorlab.runs import atomic_write_bytes, read_json, write_json
 
@@ -188,6 +189,28 @@ class ForwardModel(nn.Module):
             **self.meta, "metrics": metrics or {}})
 
 
+def _check_weight_shapes(folder: Path, sizes: tuple) -> None:
+    """The tensors in model.safetensors have the shapes model.json's architecture implies
+    (read from the file's header; the model is built on the meta device, allocating nothing)."""
+    from safetensors import SafetensorError, safe_open
+
+    try:
+        with safe_open(str(folder / MODEL_WEIGHTS), "pt") as f:
+            stored = {k: tuple(f.get_slice(k).get_shape()) for k in f.keys()}
+    except FileNotFoundError:
+        raise MotorlabError(f"{folder / MODEL_WEIGHTS} is missing; re-run `motorlab dynamics fit`.") from None
+    except (SafetensorError, OSError, ValueError) as e:
+        raise MotorlabError(f"{folder / MODEL_WEIGHTS} is damaged ({str(e).splitlines()[0]}); "
+                            "re-run `motorlab dynamics fit`.") from None
+    with torch.device("meta"):
+        expected = {k: tuple(v.shape) for k, v in ForwardModel(*sizes).state_dict().items()}
+    if stored != expected:
+        wrong = sorted(k for k in expected.keys() | stored.keys() if stored.get(k) != expected.get(k))
+        raise MotorlabError(f"{folder / MODEL_JSON}'s architecture does not match {MODEL_WEIGHTS} "
+                            f"({wrong[0]}: {stored.get(wrong[0])} stored, {expected.get(wrong[0])} expected); "
+                            "re-run `motorlab dynamics fit`.")
+
+
 def load_model(path: Path, env_id: str | None = None, state_layout: str | None = None) -> ForwardModel:
     """A forward model from a folder holding model.json + model.safetensors (or from model.json itself).
 
@@ -209,12 +232,18 @@ def load_model(path: Path, env_id: str | None = None, state_layout: str | None =
         if meta.get("format") != FORMAT:
             raise KeyError("format")
         arch = meta["architecture"]
-        model = ForwardModel(int(arch["state_size"]), int(arch["action_size"]), tuple(int(h) for h in arch["hidden"]),
-                             int(arch["members"]), meta={k: v for k, v in meta.items()
-                                                         if k not in ("format", "architecture", "metrics")})
-    except (KeyError, TypeError, ValueError) as e:
+        sizes = (int(arch["state_size"]), int(arch["action_size"]), tuple(int(h) for h in arch["hidden"]),
+                 int(arch["members"]))
+        if min(sizes[0], sizes[1], sizes[3], *sizes[2]) < 1:
+            raise ValueError("architecture: sizes must be positive")
+    except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise MotorlabError(f"{folder / MODEL_JSON} is not a motorlab forward model (bad or missing {e}); "
                             "re-run `motorlab dynamics fit`.") from None
+    check_meta(meta, sizes[0], str(folder / MODEL_JSON), "re-run `motorlab dynamics fit`.")
+    if not isinstance(meta.get("metrics", {}), dict):
+        raise MotorlabError(f"{folder / MODEL_JSON}: metrics should be an object; re-run `motorlab dynamics fit`.")
+    _check_weight_shapes(folder, sizes)  # before allocating: a damaged model.json must not ask for terabytes
+    model = ForwardModel(*sizes, meta={k: v for k, v in meta.items() if k not in ("format", "architecture", "metrics")})
     try:
         model.load_state_dict(load_file(folder / MODEL_WEIGHTS))
     except FileNotFoundError:

@@ -22,6 +22,7 @@ from motorlab.runs import atomic_write_npz
 
 TRANSITIONS = "transitions.npz"
 _ARRAYS = ("states", "actions", "next_states", "rewards", "dones", "terminated", "episode", "goals")
+_TABLES = ("states", "actions", "next_states", "goals")  # 2-D; the others hold one entry per row
 
 
 @dataclass
@@ -48,11 +49,17 @@ class Transitions:
 
     def check(self, source: str = "transitions") -> Transitions:
         """Shapes agree and every number is finite, or one clear MotorlabError."""
-        n = len(self.states)
         fix = "re-run `motorlab dynamics collect`."
-        if self.states.ndim != 2 or self.actions.ndim != 2 or self.goals.ndim != 2:
-            raise MotorlabError(f"{source}: states, actions and goals must be 2-D (rows x entries), got shapes "
-                                f"{self.states.shape}, {self.actions.shape}, {self.goals.shape}; {fix}")
+        for name in _ARRAYS:
+            arr = np.asarray(getattr(self, name))
+            ndim = 2 if name in _TABLES else 1
+            kinds = {"dones": "biu", "terminated": "biu", "episode": "iu"}.get(name, "fiu")
+            if arr.ndim != ndim or arr.dtype.kind not in kinds:
+                what = "2-D (rows x entries)" if ndim == 2 else "1-D (one per row)"
+                raise MotorlabError(f"{source}: {name} must be a {what} array of "
+                                    f"{ {'biu': 'flags', 'iu': 'integers'}.get(kinds, 'numbers')}, got shape {arr.shape} "
+                                    f"of {arr.dtype}; {fix}")
+        n = len(self.states)
         if n == 0:
             raise MotorlabError(f"{source} holds no transitions; collect at least one episode.")
         if self.next_states.shape != self.states.shape:
@@ -67,11 +74,28 @@ class Transitions:
                 row = int(np.argwhere(bad)[0][0])
                 raise MotorlabError(f"{source}: {name} holds NaN or Inf ({int(bad.sum())} entries, first in row {row}); "
                                     f"drop those episodes or {fix}")
-        labels = self.meta.get("state_labels")
-        if labels is not None and len(labels) != self.states.shape[1]:
-            raise MotorlabError(f"{source}: meta names {len(labels)} state entries but states have "
-                                f"{self.states.shape[1]}; {fix}")
+        check_meta(self.meta, self.states.shape[1], source, fix)
         return self
+
+
+def check_meta(meta: dict, state_size: int, source: str, fix: str) -> None:
+    """The descriptive fields that transitions.npz and model.json share have the right types:
+    env id and layout name strings, one label per state entry."""
+    def bad(field: str, want: str) -> MotorlabError:
+        return MotorlabError(f"{source}: {field} should be {want}, got {meta.get(field)!r}; {fix}")
+
+    if not isinstance(meta.get("env_id"), str) or not meta["env_id"]:
+        raise bad("env_id", "an env id such as 'Reacher-v5'")
+    if not isinstance(meta.get("state_layout"), str):
+        raise bad("state_layout", "a layout name (reacher, observation)")
+    for field, size in (("state_labels", state_size), ("goal_labels", None)):
+        labels = meta.get(field)
+        if labels is not None and (not isinstance(labels, list) or not all(isinstance(x, str) for x in labels)
+                                   or (size is not None and len(labels) != size)):
+            raise bad(field, f"a list of {size if size is not None else ''} names".replace("  ", " "))
+    obs_dim = meta.get("obs_dim")
+    if obs_dim is not None and (not isinstance(obs_dim, int) or isinstance(obs_dim, bool) or obs_dim < 1):
+        raise bad("obs_dim", "a positive integer")
 
 
 def load_transitions(path: Path) -> Transitions:

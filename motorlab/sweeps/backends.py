@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from motorlab.errors import MotorlabError
-from motorlab.sweeps.trials import mark_finished
+from motorlab.sweeps.trials import launch_argv, mark_finished, mark_started
 
 OnDone = Callable[[dict[str, Any], int, float], None]  # (trial, exit status, seconds)
 
@@ -28,8 +28,10 @@ def _start(t: dict[str, Any]) -> subprocess.Popen:
     log = Path(t["log"])
     log.parent.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **t["env"]}
-    with open(log, "wb") as f:  # the child keeps its own handle
-        return subprocess.Popen([sys.executable, "-m", "motorlab", *t["argv"]], stdout=f, stderr=subprocess.STDOUT,
+    argv = launch_argv(t)  # `train --resume` where an interrupted start left a checkpoint
+    mark_started(t)
+    with open(log, "ab" if argv != t["argv"] else "wb") as f:  # the child keeps its own handle
+        return subprocess.Popen([sys.executable, "-m", "motorlab", *argv], stdout=f, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, env=env)
 
 

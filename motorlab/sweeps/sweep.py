@@ -39,10 +39,13 @@ def _recipe_path(target: str) -> Path | None:
     return None
 
 
+MAX_SEEDS = 10_000  # far beyond any study; a typo such as --seeds 1000000 should fail, not plan for hours
+
+
 def _seeds(seeds: int | list[int]) -> list[int]:
     if isinstance(seeds, int):
-        if seeds < 1:
-            raise MotorlabError(f"--seeds {seeds}: give at least 1 seed (seeds 0..N-1).")
+        if not 1 <= seeds <= MAX_SEEDS:
+            raise MotorlabError(f"--seeds {seeds}: give between 1 and {MAX_SEEDS:,} seeds (seeds 0..N-1).")
         return list(range(seeds))
     if not seeds or any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
         raise MotorlabError("seeds must be distinct non-negative integers.")

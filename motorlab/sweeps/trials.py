@@ -17,10 +17,11 @@ from pathlib import Path
 from typing import Any
 
 from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.runs import finished_with, write_toml
+from motorlab.runs import _config_toml, finished_with, is_complete, write_toml
 from motorlab.sweeps.grid import label
 
 TRIAL_FILE = "sweep_trial.toml"
+STARTED_FILE = "sweep_trial_started.toml"  # the command line a trial's folder was started with
 # Commands that train or evaluate and take --seed and --out: the ones a sweep can repeat.
 SWEEPABLE = ("train", "evaluate", "mpc", "dynamics collect", "dynamics fit", "dynamics check", "synergies collect",
              "synergies fit", "zeroshot", "video")
@@ -45,6 +46,30 @@ def is_finished(t: dict[str, Any]) -> bool:
 
 def mark_finished(t: dict[str, Any]) -> None:
     write_toml(Path(t["run_dir"]) / TRIAL_FILE, _marker(t))
+
+
+def mark_started(t: dict[str, Any]) -> None:
+    write_toml(Path(t["run_dir"]) / STARTED_FILE, _marker(t))
+
+
+def launch_argv(t: dict[str, Any]) -> list[str]:
+    """The command line that runs `t`: its own, or `train --resume RUN_DIR` when an interrupted
+    start of this very command line left a training checkpoint (then only the rest of the budget
+    is trained; the result is the same run folder)."""
+    import tomllib
+
+    from motorlab.rl.checkpoint import FOLDER, LATEST
+
+    run_dir = Path(t["run_dir"])
+    if t["argv"][:1] != ["train"] or is_complete(run_dir) or not (run_dir / FOLDER / LATEST).is_file():
+        return t["argv"]
+    try:
+        started = tomllib.loads((run_dir / STARTED_FILE).read_text())
+    except (OSError, ValueError):
+        return t["argv"]
+    if started != tomllib.loads(_config_toml(_marker(t))):
+        return t["argv"]  # the folder was started by another command line: start over
+    return ["train", "--resume", str(run_dir), "--no-progress"]
 
 
 def _command(words: list[str]):
