@@ -32,12 +32,16 @@ class Rollouts:
     lengths: np.ndarray
     success: np.ndarray
     aborted: bool = False
-    faults: int = 0  # episodes ended by a numerical fault (NaN/Inf, diverging simulation)
     falls: int = 0  # episodes the env terminated before the time limit (a fall, for balancing tasks)
     fault_log: list[str] = field(default_factory=list)  # one line per faulted episode: its seed and reason
     observations: list[np.ndarray] = field(default_factory=list)  # per episode, when recorded
     actions: list[np.ndarray] = field(default_factory=list)
     dt: float = 0.0
+
+    @property
+    def faults(self) -> int:
+        """Episodes ended by a numerical fault (NaN/Inf, diverging simulation)."""
+        return len(self.fault_log)
 
     def summary(self) -> dict:
         r = self.returns
@@ -166,9 +170,9 @@ class Evaluator:
                     if stop_below is not None and returns[i] < stop_below:
                         done = ~active
                         return Rollouts(returns[done], lengths[done], success[done], aborted=True,
-                                        faults=len(fault_log), falls=falls, fault_log=fault_log, dt=self.dt)
+                                        falls=falls, fault_log=fault_log, dt=self.dt)
         return Rollouts(
-            returns, lengths, success, faults=len(fault_log), falls=falls, fault_log=fault_log, dt=self.dt,
+            returns, lengths, success, falls=falls, fault_log=fault_log, dt=self.dt,
             observations=[np.array(t) for t in traces_o], actions=[np.array(t) for t in traces_a],
         )
 
@@ -194,7 +198,7 @@ def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, recor
     if len(parts) == 1:
         return parts[0]
     return Rollouts(np.concatenate([p.returns for p in parts]), np.concatenate([p.lengths for p in parts]),
-                    np.concatenate([p.success for p in parts]), faults=sum(p.faults for p in parts),
+                    np.concatenate([p.success for p in parts]),
                     falls=sum(p.falls for p in parts), fault_log=[line for p in parts for line in p.fault_log],
                     observations=[o for p in parts for o in p.observations],
                     actions=[a for p in parts for a in p.actions], dt=parts[0].dt)

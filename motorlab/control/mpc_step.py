@@ -90,8 +90,9 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
                     ret[i] += r
                     dist[i].append(_distance(policy.layout, o))
                     live[i] = not (terminated or truncated)
-                    if fault_of(info):
-                        fault_log.append(f"seed={seed + first + i} length={len(dist[i]) - 1}: {fault_of(info)}")
+                    fault = fault_of(info)
+                    if fault:
+                        fault_log.append(f"seed={seed + first + i} length={len(dist[i]) - 1}: {fault}")
             returns.extend(ret)
             distances.extend(dist)
             bar.advance(task, len(group))

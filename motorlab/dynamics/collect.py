@@ -114,7 +114,7 @@ def _run_episode(seed: int) -> tuple:
         rewards.append(reward)
         terminated.append(term)
         truncated.append(trunc)
-    return (np.array(observations, dtype=np.float64), np.array(actions, dtype=np.float64).reshape(len(actions), -1),
+    return (np.array(observations, dtype=np.float64), np.array(actions, dtype=np.float64).reshape(-1, *low.shape),
             np.array(rewards, dtype=np.float64), np.array(terminated, dtype=bool), np.array(truncated, dtype=bool),
             fault)
 
