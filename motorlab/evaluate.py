@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from motorlab.envs import EnvConfig, env_dt, make_env, max_return
-from motorlab.faults import fault_of, write_faults_log
+from motorlab.faults import fault_line, fault_of, write_faults_log
 
 
 class Policy(Protocol):
@@ -165,7 +165,7 @@ class Evaluator:
                     success[i] = bool(outcome.end(i, returns[i]))
                     fault = fault_of(info)
                     if fault:
-                        fault_log.append(f"seed={first + i} length={lengths[i]}: {fault}")
+                        fault_log.append(fault_line(first + i, lengths[i], fault))
                     falls += bool(terminated) and not fault
                     if stop_below is not None and returns[i] < stop_below:
                         done = ~active

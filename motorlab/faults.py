@@ -19,6 +19,11 @@ def fault_of(info: dict) -> str | None:
     return info.get(FAULT_KEY)
 
 
+def fault_line(seed: int, length: int, reason: str) -> str:
+    """One faults.log line: the episode's reset seed (to replay it), its length and the reason."""
+    return f"seed={seed} length={length}: {reason}"
+
+
 def write_faults_log(run_dir: Path, lines: list[str]) -> None:
     """faults.log in `run_dir` with one line per faulted episode (no file when none faulted)."""
     from motorlab.runs import atomic_write_text

@@ -137,15 +137,17 @@ def write_config(run_dir: Path, config: dict[str, Any]) -> None:
 def finished_with(run_dir: Path, config: dict[str, Any], filename: str = CONFIG) -> bool:
     """True when run_dir finished (summary.json) with exactly these settings, as written to TOML
     in `filename` (config.toml by default)."""
+    return is_complete(run_dir) and toml_holds(Path(run_dir) / filename, config)
+
+
+def toml_holds(path: Path, config: dict[str, Any]) -> bool:
+    """True when the TOML file at `path` holds exactly `config` (False if missing or damaged)."""
     import tomllib
 
-    path = Path(run_dir) / filename
-    if not is_complete(run_dir) or not path.is_file():
-        return False
     try:
-        return tomllib.loads(path.read_text()) == tomllib.loads(_config_toml(config))
-    except (ValueError, UnicodeDecodeError):
-        return False  # damaged: run the step again
+        return tomllib.loads(Path(path).read_text()) == tomllib.loads(_config_toml(config))
+    except (OSError, ValueError, UnicodeDecodeError):
+        return False  # missing or damaged: run the step again
 
 
 def write_toml(path: Path, config: dict[str, Any]) -> None:

@@ -22,7 +22,7 @@ from motorlab.dynamics.rewards import reward_for
 from motorlab.dynamics.state import layout_for, xy_columns
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.faults import fault_of, write_faults_log
+from motorlab.faults import fault_line, fault_of, write_faults_log
 from motorlab.runs import MetricsWriter, atomic_write_npz, prepare_run_dir, write_config, write_summary
 
 # Tuned on Reacher-v5 (benchmarks/mpc.py): ~4 ms per control step on one core, return ~-3.6.
@@ -92,7 +92,7 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
                     live[i] = not (terminated or truncated)
                     fault = fault_of(info)
                     if fault:
-                        fault_log.append(f"seed={seed + first + i} length={len(dist[i]) - 1}: {fault}")
+                        fault_log.append(fault_line(seed + first + i, len(dist[i]) - 1, fault))
             returns.extend(ret)
             distances.extend(dist)
             bar.advance(task, len(group))

@@ -26,7 +26,7 @@ from motorlab.dynamics.state import StateLayout, layout_for
 from motorlab.dynamics.transitions import TRANSITIONS, Transitions
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.faults import fault_of, write_faults_log
+from motorlab.faults import fault_line, fault_of, write_faults_log
 from motorlab.runs import prepare_run_dir, write_config, write_summary
 
 CHUNK = 1000  # episodes per batched MuJoCo rollout: bounds memory, paces the progress bar
@@ -137,7 +137,7 @@ def _collect_pool(env_cfg: EnvConfig, policy_dir: str | None, episodes: int, see
     finally:
         if workers > 1:
             pool.terminate()
-    faults = [f"seed={s} length={len(r[1]) + 1}: {r[-1]}" for s, r in zip(seeds, results) if r[-1]]
+    faults = [fault_line(s, len(r[1]) + 1, r[-1]) for s, r in zip(seeds, results) if r[-1]]
     return _episode_arrays(*zip(*(r[:-1] for r in results)), layout=layout, episode_ids=range(episodes)), faults
 
 
@@ -192,7 +192,7 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
             arrays, faults = _collect_pool(env_cfg, policy_dir, episodes, seed, layout, workers, bar, task)
     if len(arrays["states"]) == 0:
         raise MotorlabError(f"every episode of {env_id} ended on a numerical fault before its first step "
-                            f"({faults[0].split(': ', 1)[1]}); nothing to collect.")
+                            f"(first: {faults[0]}); nothing to collect.")
     seconds = time.perf_counter() - start
     meta = {"env_id": env_id, "state_layout": layout.name, "state_labels": list(layout.labels),
             "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),

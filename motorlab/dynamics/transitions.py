@@ -92,7 +92,7 @@ def check_meta(meta: dict, state_size: int, source: str, fix: str) -> None:
         labels = meta.get(field)
         if labels is not None and (not isinstance(labels, list) or not all(isinstance(x, str) for x in labels)
                                    or (size is not None and len(labels) != size)):
-            raise bad(field, f"a list of {size if size is not None else ''} names".replace("  ", " "))
+            raise bad(field, f"a list of {size} names" if size is not None else "a list of names")
     obs_dim = meta.get("obs_dim")
     if obs_dim is not None and (not isinstance(obs_dim, int) or isinstance(obs_dim, bool) or obs_dim < 1):
         raise bad("obs_dim", "a positive integer")

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.runs import _config_toml, finished_with, is_complete, write_toml
+from motorlab.runs import finished_with, is_complete, toml_holds, write_toml
 from motorlab.sweeps.grid import label
 
 TRIAL_FILE = "sweep_trial.toml"
@@ -56,20 +56,13 @@ def launch_argv(t: dict[str, Any]) -> list[str]:
     """The command line that runs `t`: its own, or `train --resume RUN_DIR` when an interrupted
     start of this very command line left a training checkpoint (then only the rest of the budget
     is trained; the result is the same run folder)."""
-    import tomllib
-
     from motorlab.rl.checkpoint import FOLDER, LATEST
 
     run_dir = Path(t["run_dir"])
-    if t["argv"][:1] != ["train"] or is_complete(run_dir) or not (run_dir / FOLDER / LATEST).is_file():
-        return t["argv"]
-    try:
-        started = tomllib.loads((run_dir / STARTED_FILE).read_text())
-    except (OSError, ValueError):
-        return t["argv"]
-    if started != tomllib.loads(_config_toml(_marker(t))):
-        return t["argv"]  # the folder was started by another command line: start over
-    return ["train", "--resume", str(run_dir), "--no-progress"]
+    if (t["argv"][:1] == ["train"] and not is_complete(run_dir) and (run_dir / FOLDER / LATEST).is_file()
+            and toml_holds(run_dir / STARTED_FILE, _marker(t))):  # else: another command line started it
+        return ["train", "--resume", str(run_dir), "--no-progress"]
+    return t["argv"]
 
 
 def _command(words: list[str]):

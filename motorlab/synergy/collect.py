@@ -22,7 +22,7 @@ from rich.progress import Progress
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.evaluate import EpisodeSuccess, trained_env_settings
-from motorlab.faults import fault_of, write_faults_log
+from motorlab.faults import fault_line, fault_of, write_faults_log
 from motorlab.runs import atomic_write_npz, prepare_run_dir, require_run_dir, write_config, write_summary
 
 ACTIVATIONS = "activations.npz"
@@ -143,13 +143,13 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
         preview_returns = []
         for ep in _episodes([seed + i for i in range(preview)], workers, init_args):
             if ep.fault:
-                fault_log.append(f"preview seed={ep.seed} length={ep.length}: {ep.fault}")
+                fault_log.append("preview " + fault_line(ep.seed, ep.length, ep.fault))
             else:
                 preview_returns.append(ep.ret)
             bar.advance(task)
         if not preview_returns:
             raise MotorlabError(f"all {preview} preview episodes ended on a numerical fault "
-                                f"({fault_log[0].split(': ', 1)[1]}); check the env and the policy's run.")
+                                f"(first: {fault_log[0]}); check the env and the policy's run.")
         preview_returns = np.array(preview_returns)
         threshold = float(np.percentile(preview_returns, percentile))
         task = bar.add_task(f"episodes with return >= {threshold:.2f}", total=episodes)
@@ -158,7 +158,7 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
         for ep in _episodes(seeds, workers, init_args):
             tried += 1
             if ep.fault:
-                fault_log.append(f"seed={ep.seed} length={ep.length}: {ep.fault}")
+                fault_log.append(fault_line(ep.seed, ep.length, ep.fault))
             elif ep.ret >= threshold:
                 kept.append(ep)
                 bar.advance(task)
