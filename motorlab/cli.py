@@ -45,15 +45,19 @@ Delay = Annotated[Optional[float], typer.Option(
 DelayOn = Annotated[Optional[str], typer.Option(
     "--delay-on", help="What the delay filters: both (default: actuation and perception), action or observation.")]
 History = Annotated[Optional[int], typer.Option("--history", help="Stack the last K observations (K=1: none).")]
+Success = Annotated[Optional[str], typer.Option(
+    "--success", help="When an episode counts as a success, from the env's per-step flag (MyoSuite: "
+                      "info['solved']): any (solved at any step), final (solved at its last step), or auto "
+                      "(default: final for MyoSuite's walking tasks, any otherwise).")]
 EnvArgs = Annotated[Optional[list[str]], typer.Option(
     "--env-arg", help="Env keyword argument KEY=VALUE (VALUE as JSON), repeatable: --env-arg time_limit=5 "
                       "--env-arg 'init_rand={\"pitch\": 0.1}' (Upkie).")]
 
 
 def _env_overrides(env: str | None, delay, delay_on, history, reward=None, sar=None, phi=None,
-                   env_args: list[str] | None = None) -> dict:
+                   env_args: list[str] | None = None, success: str | None = None) -> dict:
     given = {"id": env, "delay": delay, "delay_on": delay_on, "history": history, "reward": reward,
-             "sar": str(sar) if sar else None, "phi": phi,
+             "sar": str(sar) if sar else None, "phi": phi, "success": success,
              "kwargs": _parse_sets(env_args, "--env-arg") if env_args else None}
     return {k: v for k, v in given.items() if v is not None}
 
@@ -128,6 +132,7 @@ def train(
     hp: Annotated[Optional[list[str]], typer.Option(
         "--set", help="Extra SB3 hyperparameter KEY=VALUE (VALUE as JSON), repeatable: --set n_steps=1024.")] = None,
     env_arg: EnvArgs = None,
+    success: Success = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")] = True,
 ):
     """Train a policy on ENV_ID and write a run folder.
@@ -146,7 +151,7 @@ def train(
         "until_solved": until_solved or None, "solve_episodes": solve_episodes, "solve_return": solve_return,
         "eval_every": eval_every, "n_envs": n_envs, "normalize": normalize, "device": device, "progress": progress,
         "checkpoint_every": checkpoint_every,
-        "env": _env_overrides(env_id, delay, delay_on, history, reward, sar, phi, env_arg),
+        "env": _env_overrides(env_id, delay, delay_on, history, reward, sar, phi, env_arg, success),
     }
     if hp:
         settings["hyperparams"] = _parse_sets(hp)
@@ -240,6 +245,7 @@ def evaluate(
     delay_on: DelayOn = None,
     history: History = None,
     env_arg: EnvArgs = None,
+    success: Success = None,
     episodes: Annotated[int, typer.Option(help="Evaluation episodes.")] = 10,
     seed: Seed = 0,
     out: Out = None,
@@ -255,7 +261,8 @@ def evaluate(
     from motorlab.evaluate import evaluate_step, resolve_env
 
     try:
-        env_cfg = resolve_env(policy, _env_overrides(env, delay, delay_on, history, env_args=env_arg))
+        env_cfg = resolve_env(policy, _env_overrides(env, delay, delay_on, history, env_args=env_arg,
+                                                           success=success))
     except ValidationError as e:
         raise MotorlabError(_validation_message(e)) from None
     s = evaluate_step(policy, env_cfg, episodes, seed, out)

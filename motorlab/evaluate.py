@@ -6,6 +6,7 @@ Returns are the task's own returns (reward shaping is for training only).
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -70,31 +71,53 @@ def step_success(info: dict) -> bool | None:
     return None
 
 
+# MyoSuite's walking tasks (myoLegWalk-v0, myoLeg{Hilly,Rough,Stair}TerrainWalk-v0): their
+# "solved" is "upright and within 0.5 m/s of the commanded speed" at that step, which a body
+# falling forward also meets for a moment before it is counted as fallen.
+_STATE_SUCCESS_IDS = re.compile(r"^myoLeg.*Walk")
+
+
+def success_mode(env_cfg: EnvConfig) -> str:
+    """How episodes of this env count as successes: "any" step solved, or the "final" step.
+
+    Args:
+        env_cfg: its `success` setting; "auto" means "final" for MyoSuite's walking tasks
+            and "any" for everything else (the SAR study's manipulation tasks).
+    """
+    if env_cfg.success != "auto":
+        return env_cfg.success
+    return "final" if _STATE_SUCCESS_IDS.match(env_cfg.id) else "any"
+
+
 class EpisodeSuccess:
-    """Per-episode "solved at any step", for a batch of episodes.
+    """Per-episode success for a batch of episodes, from the env's per-step flag:
+    "solved at any step" (mode "any") or "solved at the last step" (mode "final").
 
     Envs without a success flag count an episode as a success when its return
     reaches the task's maximum (InvertedPendulum: 1000).
     """
 
-    def __init__(self, n: int, target: float | None):
+    def __init__(self, n: int, target: float | None, mode: str = "any"):
+        if mode not in ("any", "final"):
+            raise ValueError(f"success mode {mode!r}: any or final")
         self.target = target
-        self.any = np.zeros(n, dtype=bool)
+        self.final = mode == "final"
+        self.solved = np.zeros(n, dtype=bool)
         self.flagged = np.zeros(n, dtype=bool)
 
     def step(self, i: int, info: dict) -> None:
         flag = step_success(info)
         if flag is not None:
             self.flagged[i] = True
-            self.any[i] |= flag
+            self.solved[i] = flag if self.final else self.solved[i] | flag
 
     def end(self, i: int, ret: float) -> bool | None:
         """Outcome of row i's finished episode (None: unknowable), and restart the row."""
         if self.flagged[i]:
-            result = bool(self.any[i])
+            result = bool(self.solved[i])
         else:
             result = None if self.target is None else bool(ret >= self.target)
-        self.any[i] = self.flagged[i] = False
+        self.solved[i] = self.flagged[i] = False
         return result
 
 
@@ -144,7 +167,7 @@ class Evaluator:
         returns = np.zeros(n)
         lengths = np.zeros(n, dtype=int)
         success = np.zeros(n, dtype=bool)
-        outcome = EpisodeSuccess(n, self.target)
+        outcome = EpisodeSuccess(n, self.target, success_mode(self.env_cfg))
         falls = 0
         fault_log: list[str] = []
         traces_o = [[o] for o in obs] if record else []
@@ -267,7 +290,7 @@ def evaluate_step(policy_spec: str, env_cfg: EnvConfig, episodes: int, seed: int
     run_dir = prepare_run_dir(out, "evaluate")
     write_config(run_dir, {"policy": policy_spec, "episodes": episodes, "seed": seed, "env": env_cfg.model_dump()})
     summary = {"policy": policy_spec, "env_id": env_cfg.id, "delay": env_cfg.delay, "history": env_cfg.history,
-               "seed": seed, "max_return": target, **result.summary()}
+               "seed": seed, "max_return": target, "success_mode": success_mode(env_cfg), **result.summary()}
     write_faults_log(run_dir, result.fault_log)
     write_summary(run_dir, summary)
     summary["run_dir"] = str(run_dir)

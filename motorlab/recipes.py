@@ -22,10 +22,10 @@
     delay = 0.2
 
 Kinds and their fields ("@step" names an earlier step's output):
-    train      every `motorlab train` setting (env, env_kwargs, delay, delay_on, history, reward, sar, phi,
+    train      every `motorlab train` setting (env, env_kwargs, delay, delay_on, history, reward, sar, phi, success,
                algo, preset, timesteps, seed, seeds, lr, clip_range, until_solved, ...);
                sar = "@fit-step" trains in that step's synergy space
-    evaluate   policy, env, env_kwargs, delay, delay_on, history, sar, phi, episodes, seed
+    evaluate   policy, env, env_kwargs, delay, delay_on, history, sar, phi, success, episodes, seed
                (policy = "@train-step" with several seeds: each seed's policy, aggregated)
     video      run = "@train-step" or "@evaluate-step", episodes, seed
     collect    run = "@train-step", episodes, percentile, preview, deterministic, workers, seed
@@ -56,7 +56,8 @@ from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.rl.config import TrainConfig, resolve
 
 ENV_KEYS = {"env": "id", "delay": "delay", "delay_on": "delay_on", "history": "history", "reward": "reward",
-            "sar": "sar", "phi": "phi", "env_kwargs": "kwargs"}
+            "sar": "sar", "phi": "phi", "env_kwargs": "kwargs",
+            "success": "success"}
 
 
 class _Strict(BaseModel):

@@ -1,5 +1,6 @@
 """Numerical faults end an episode instead of a run, and are counted; success is
-"solved at any step"; the training success rate is over the last 100 episodes."""
+"solved at any step" (manipulation) or "solved at the last step" (MyoSuite's walking tasks);
+the training success rate is over the last 100 episodes."""
 
 from __future__ import annotations
 
@@ -10,11 +11,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from helpers import episode_rows, read_metrics_rows, read_summary
+from helpers import assert_one_line_error, episode_rows, read_metrics_rows, read_summary, run_cli
 from motorlab.envs import EnvConfig, make_env
 from motorlab.cli import app
 from motorlab.dynamics.collect import collect_step
-from motorlab.evaluate import EpisodeSuccess, Evaluator, evaluate
+from motorlab.evaluate import EpisodeSuccess, Evaluator, evaluate, success_mode
 from motorlab.policies import ZeroPolicy
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.tracking import Tracker
@@ -255,6 +256,55 @@ def test_episode_success_is_solved_at_any_step():
     assert EpisodeSuccess(1, target=10.0).end(0, ret=10.0) is True
     assert EpisodeSuccess(1, target=10.0).end(0, ret=9.0) is False
     assert EpisodeSuccess(1, target=None).end(0, ret=1e9) is None
+
+
+def test_final_success_is_solved_at_the_last_step():
+    outcome = EpisodeSuccess(3, target=None, mode="final")
+    for flags in ((False, True, False), (True, True, True), (False, False, True)):
+        for i, flag in enumerate(flags):  # row 0 solved mid-episode only, row 1 throughout, row 2 at the end
+            outcome.step(i, {"solved": flag})
+    for i, flag in enumerate((True, True, False)):
+        outcome.step(i, {"solved": flag})  # last step of every row
+    assert [outcome.end(i, ret=0.0) for i in range(3)] == [True, True, False]
+    assert EpisodeSuccess(1, target=10.0, mode="final").end(0, ret=10.0) is True  # no flag: the return decides
+    with pytest.raises(ValueError, match="any or final"):
+        EpisodeSuccess(1, target=None, mode="sometimes")
+
+
+@pytest.mark.parametrize("env_id, setting, mode", [
+    ("myoLegWalk-v0", "auto", "final"), ("myoLegRoughTerrainWalk-v0", "auto", "final"),
+    ("myoLegStairTerrainWalk-v0", "auto", "final"), ("myoHandReorient100-v0", "auto", "any"),
+    ("InvertedPendulum-v5", "auto", "any"), ("myoLegWalk-v0", "any", "any"), ("myoHandReorient8-v0", "final", "final")])
+def test_success_mode_is_final_for_walking_unless_set(env_id, setting, mode):
+    assert success_mode(EnvConfig(id=env_id, success=setting)) == mode
+
+
+def test_evaluate_final_success_ignores_a_mid_episode_solve():
+    cfg = EnvConfig(id=SOLVED_ONCE_ID, success="final")
+    result = evaluate(ZeroPolicy(make_env(cfg).action_space), cfg, 4, seed=0)
+    assert result.summary()["success_rate"] == 0.0  # solved at step 3 of 8 only
+
+
+def test_falling_forward_is_not_walking(tmp_path):
+    """MyoSuite's walking "solved" means upright within 0.5 m/s of the commanded speed; a
+    body falling forward meets it for a moment. Counted at any step, a policy that falls in
+    every episode scores 100%; counted at the last step (the default for walking), 0%."""
+    runs = {}
+    for mode in ("auto", "any"):
+        proc = run_cli("evaluate", "zero", "--env", "myoLegWalk-v0", "--episodes", "3", "--success", mode,
+                       "--out", tmp_path / mode)
+        assert proc.returncode == 0, proc.stderr
+        runs[mode] = read_summary(tmp_path / mode)
+    assert runs["auto"]["falls"] == runs["any"]["falls"] == 3
+    assert runs["auto"]["success_mode"] == "final" and runs["auto"]["success_rate"] == 0.0
+    assert runs["any"]["success_mode"] == "any" and runs["any"]["success_rate"] == 1.0
+
+
+def test_bad_success_setting_is_one_line(tmp_path):
+    proc = run_cli("evaluate", "zero", "--env", "InvertedPendulum-v5", "--success", "sometimes",
+                   "--out", tmp_path / "out")
+    assert_one_line_error(proc, "--success")
+    assert not (tmp_path / "out").exists()
 
 
 def test_evaluate_success_counts_a_mid_episode_solve():

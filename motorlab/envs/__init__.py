@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import logging
 import warnings
-from typing import Any
+from typing import Any, Literal
 
 import gymnasium as gym
 from pathlib import Path
@@ -57,6 +57,12 @@ class EnvConfig(BaseModel):
     phi: float = Field(1.0, gt=0, le=1, description="synergy weight: 1 = synergies only, <1 = blend with raw actions")
     kwargs: dict[str, Any] = Field(default_factory=dict,
                                    description="keyword arguments for the env (gymnasium.make), e.g. Upkie's time_limit")
+    # How an episode's success is read from the env's per-step flag (info["solved"]): "any" step
+    # (manipulation: the object reached its goal once), or the "final" step (walking: upright and
+    # at the commanded speed when the episode ended). "auto" picks final for MyoSuite's walking
+    # tasks, whose flag is a state, not an event: under "any", even a policy that falls forward
+    # is counted as walking once (see motorlab.evaluate.success_mode).
+    success: Literal["auto", "any", "final"] = "auto"
 
     @field_validator("sar")
     @classmethod

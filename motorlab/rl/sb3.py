@@ -11,7 +11,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 from motorlab.envs import make_env
-from motorlab.evaluate import EpisodeSuccess
+from motorlab.evaluate import EpisodeSuccess, success_mode
 from motorlab.faults import fault_of
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.policies import SB3Policy, save_sb3_policy
@@ -41,7 +41,8 @@ class TrackingCallback(BaseCallback):
         self.solved = False
 
     def _on_training_start(self) -> None:
-        self.outcome = EpisodeSuccess(self.training_env.num_envs, self.tracker.solve_return)
+        self.outcome = EpisodeSuccess(self.training_env.num_envs, self.tracker.solve_return,
+                                      success_mode(self.tracker.cfg.env))
 
     def policy_now(self) -> SB3Policy:
         # SB3Policy switches the network to eval mode; SB3 switches it back in train().

@@ -22,6 +22,7 @@ from rich.progress import Progress
 from motorlab.control.lqr import learn_lqr
 from motorlab.envs import make_env, max_return
 from motorlab.errors import MotorlabError
+from motorlab.evaluate import success_mode
 from motorlab.policies import load_policy_files, save_controller
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker
@@ -118,6 +119,7 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
         "evaluations": tracker.evaluations,
         "train_episodes": tracker.episodes,
         "train_success_rate_last100": tracker.success_rate(),
+        "success_mode": success_mode(cfg.env),
         "numerical_faults": tracker.faults,
         "resumed_from": record["steps"] if record else None,
         "eval_seed": cfg.seed + EVAL_SEED_OFFSET,

@@ -21,7 +21,7 @@ from rich.progress import Progress
 
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.evaluate import EpisodeSuccess, trained_env_settings
+from motorlab.evaluate import EpisodeSuccess, success_mode, trained_env_settings
 from motorlab.faults import fault_line, fault_of, write_faults_log
 from motorlab.runs import atomic_write_npz, prepare_run_dir, require_run_dir, write_config, write_summary
 
@@ -69,6 +69,7 @@ def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool) -> None:
     from motorlab.envs import max_return
 
     _worker["target"] = max_return(cfg.id)
+    _worker["success"] = success_mode(cfg)
 
 
 def _run_episode(seed: int) -> Episode:
@@ -78,7 +79,7 @@ def _run_episode(seed: int) -> Episode:
     torch.manual_seed(seed)  # stochastic actions repeat for the same seed
     obs, _ = env.reset(seed=seed)
     policy.reset(1)
-    outcome = EpisodeSuccess(1, _worker["target"])
+    outcome = EpisodeSuccess(1, _worker["target"], _worker["success"])
     acts, ret, done = [], 0.0, False
     while not done:
         obs, reward, terminated, truncated, info = env.step(policy.act(obs[None])[0])
