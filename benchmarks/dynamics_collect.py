@@ -115,8 +115,11 @@ def main() -> None:
         "motorlab_transitions_per_second": rate, "motorlab_rates": rates,
         "reference_transitions_per_second": ref_rate, "reference_seconds": ref_seconds,
         "ratio": rate / ref_rate, "target_ratio": TARGET_RATIO, "target_rate": TARGET_RATE,
-        "meets_target": rate >= TARGET_RATE and rate / ref_rate >= TARGET_RATIO
-                        and check["exact_start_max_joint_diff"] == 0.0,
+        # The 200k/s is 5x the 41k/s its reference made on the machine it was measured on.
+        # The reference is Python-bound and motorlab is bound by MuJoCo's RK4 step, so the ratio
+        # moves from machine to machine: both verdicts are printed.
+        "meets_ratio_target": rate / ref_rate >= TARGET_RATIO and check["exact_start_max_joint_diff"] == 0.0,
+        "meets_rate_target": rate >= TARGET_RATE,
         **check,
     }, indent=2))
 

@@ -311,6 +311,9 @@ def run(
     address: Annotated[Optional[str], typer.Option(help="Ray cluster HOST:PORT for --backend ray.")] = None,
     max_parallel: Annotated[Optional[int], typer.Option(
         help="Seeds trained at once (default: cores // n_envs locally).")] = None,
+    parallel_steps: Annotated[Optional[int], typer.Option(
+        help="Train steps that need nothing from each other (e.g. SAR-RL's chain and RL-E2E) run at once, "
+             "each its own process, at most this many (default: the recipe's parallel_steps, else 1).")] = None,
     check: Annotated[bool, typer.Option("--check", help="Only validate the recipe and list its steps; run nothing.")] = False,
 ):
     """Run a study from a TOML recipe: its steps, a printed table, summary.json and plots.
@@ -328,7 +331,7 @@ def run(
                      + ", ".join(f"{st.name} ({st.kind})" for st in study.steps))
         return
     summary = run_study(study, out, console=stdout,
-                        execution=Execution(backend, address, max_parallel))
+                        execution=Execution(backend, address, max_parallel, parallel_steps))
     stdout.print(f"\n[bold]Results:[/bold] {summary['study_dir']}  (report.html, table.txt, summary.json, plots/*.png, "
                  "one folder per step)")
 

@@ -2,6 +2,8 @@
 
     name = "pendulum"
     description = "..."
+    parallel_steps = 2         # optional: train steps that need nothing from each other run at once,
+                               # each its own process, at most 2 (default 1: one step after another)
 
     [defaults]                 # fields every step gets unless it sets them (where its kind has them)
     env = "InvertedPendulum-v5"
@@ -194,6 +196,7 @@ class Recipe(BaseModel):
     name: str
     description: str = ""
     source: str = ""
+    parallel_steps: int = 1
     steps: list[Step]
 
 
@@ -203,6 +206,7 @@ class _RecipeFile(BaseModel):
     name: str
     description: str = ""
     seeds: int | list[int] | None = None  # every train step that sets none: seeds 0..N-1 (or this list)
+    parallel_steps: int = Field(1, ge=1)  # train steps that need nothing from each other, run at once
     defaults: dict[str, Any] = Field(default_factory=dict)
     steps: list[dict[str, Any]] = Field(min_length=1)
 
@@ -326,7 +330,8 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
         if env is not None:
             _check_env(env, where)
         steps.append(step)
-    return Recipe(name=raw.name, description=raw.description, source=source, steps=steps)
+    return Recipe(name=raw.name, description=raw.description, source=source, parallel_steps=raw.parallel_steps,
+                  steps=steps)
 
 
 def _make_step(name: str, kind: str, fields: dict, steps: list[Step]) -> Step:

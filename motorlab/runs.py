@@ -252,6 +252,24 @@ def _rows_until(path: Path, fields: list[str], steps: int) -> str:
     return "\r\n".join(kept) + "\r\n"  # csv's own line ending
 
 
+def last_timesteps(run_dir: Path) -> int:
+    """Env steps of the last whole row of a run's metrics.csv so far (0 when there is none):
+    how far a training running in another process has got. Reads only the file's tail."""
+    path = Path(run_dir) / METRICS
+    try:
+        with open(path, "rb") as f:
+            f.seek(max(0, path.stat().st_size - 4096))
+            lines = f.read().decode(errors="replace").split("\n")[:-1]  # the part after the last newline may be torn
+    except OSError:
+        return 0
+    for line in reversed(lines):
+        try:
+            return int(float(line.split(",", 1)[0]))
+        except ValueError:
+            continue  # the header, or a line cut by the 4 KB window
+    return 0
+
+
 def read_metrics(run_dir: Path) -> list[dict[str, float]]:
     """metrics.csv as a list of rows with float values (missing values as NaN)."""
     path = Path(run_dir) / METRICS

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import statistics
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,8 +28,9 @@ from motorlab.report.html import build_report
 from motorlab.report.plots import comparison_bars
 from motorlab.report.run import plot_run
 from motorlab.report.tables import plain_table, rich_table
-from motorlab.runs import (atomic_write_text, finished_with, prepare_run_dir, read_json, write_config, write_summary,
-                           write_toml)
+from motorlab.studies.schedule import Overlaps, run_overlapped, step_inputs
+from motorlab.runs import (atomic_write_text, finished_with, last_timesteps, prepare_run_dir, read_json, write_config,
+                           write_summary, write_toml)
 
 STEP_FILE = "recipe_step.toml"  # what the study asked of a step, for resuming
 HEADLINE = ("return_mean", "return_std", "return_min", "success_rate", "steps_to_success", "timesteps", "wall_seconds",
@@ -43,6 +45,7 @@ class Execution:
     backend: str = "local"
     address: str | None = None
     max_parallel: int | None = None
+    parallel_steps: int | None = None  # train steps run at once (default: the recipe's parallel_steps)
 
 
 class _Outputs:
@@ -74,7 +77,12 @@ def _train_configs(step: Step, study_dir: Path, outputs: _Outputs) -> list[tuple
             update={"sar": str((outputs.one(step.sar_ref) / "sar.npz").resolve())})})
     if not step.seeds:
         return [(study_dir / step.name, cfg)]
-    return [(study_dir / step.name / f"seed{s}", cfg.model_copy(update={"seed": s})) for s in step.seeds]
+    return [(d, cfg.model_copy(update={"seed": s})) for d, s in zip(_run_dirs(step, study_dir), step.seeds)]
+
+
+def _run_dirs(step: Step, study_dir: Path) -> list[Path]:
+    """A train step's run folders: <step>/, or <step>/seed<k>/ for each of several seeds."""
+    return [study_dir / step.name / f"seed{s}" for s in step.seeds] if step.seeds else [study_dir / step.name]
 
 
 def _upstream(step: Step, outputs: _Outputs) -> dict[str, str]:
@@ -83,18 +91,18 @@ def _upstream(step: Step, outputs: _Outputs) -> dict[str, str]:
     inputs were redone is redone too, even when its own settings did not change."""
     import hashlib
 
-    from motorlab.recipes import _refs
-
-    names = [step.sar_ref[1:]] if step.sar_ref else []
-    if step.settings is not None:
-        names += [r for value in step.settings.model_dump().values() for r in _refs(value)]
-    dirs = [d for name in names for d in outputs.dirs[name]]
+    dirs = [d for name in step_inputs(step) for d in outputs.dirs[name]]
     return {str(d): hashlib.sha256((d / "summary.json").read_bytes()).hexdigest()[:16] for d in dirs}
 
 
-def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console,
-              execution: Execution) -> dict[str, Any]:
-    """Run one step (or keep its finished result); returns its headline numbers."""
+def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, execution: Execution,
+              detached: bool = False, stop: threading.Event | None = None) -> dict[str, Any]:
+    """Run one step (or keep its finished result); returns its headline numbers.
+
+    Args:
+        detached: a train step runs as its own process even with one seed (it runs beside
+            other steps; see studies/schedule.py), and stops when `stop` is set.
+    """
     from motorlab.rl.train import train
 
     step_dir = study_dir / step.name
@@ -106,12 +114,15 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console,
         for d in kept:
             console.print(f"      {d.name}: already done with these settings; kept")
         todo = [(d, cfg) for d, cfg in runs if d not in kept]
-        if len(todo) == 1 and len(runs) == 1:
+        for d, _ in todo:
+            # What the study asks is written first, and any older summary removed: a summary.json
+            # from now on is this training's, even when Ctrl-C lands between it and the run's exit.
+            (d / "summary.json").unlink(missing_ok=True)
+            write_toml(d / STEP_FILE, asked[d])
+        if len(todo) == 1 and len(runs) == 1 and not detached:
             train(todo[0][1], todo[0][0])  # one run: in this process, with its progress bar
         elif todo:
-            _train_seeds(step, todo, execution, console)
-        for d in (d for d, _ in todo):
-            write_toml(d / STEP_FILE, asked[d])
+            _train_seeds(step, todo, execution, console, stop)
         for d, _ in runs:
             plot_run(d)
         outputs.dirs[step.name] = [d for d, _ in runs]
@@ -133,9 +144,11 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console,
     return _other_headline(step, summary)
 
 
-def _train_seeds(step: Step, todo: list[tuple[Path, Any]], execution: Execution, console: Console) -> None:
-    """Train several seeds at once as sweep trials: each a `motorlab train --config` process
-    whose config the study wrote to <step>/logs/seed<k>.toml, beside its log."""
+def _train_seeds(step: Step, todo: list[tuple[Path, Any]], execution: Execution, console: Console,
+                 stop: threading.Event | None = None) -> None:
+    """Train several seeds at once (or one seed beside other steps) as sweep trials: each a
+    `motorlab train --config` process whose config the study wrote to <step>/logs/seed<k>.toml
+    (<study>/logs/<step>.toml for a step with one seed), beside its log."""
     from motorlab.sweeps import backends
     from motorlab.sweeps.trials import trial
 
@@ -150,11 +163,16 @@ def _train_seeds(step: Step, todo: list[tuple[Path, Any]], execution: Execution,
         trials.append(trial(f"{step.name}/{run_dir.name}", step.name, cfg.seed, argv, run_dir,
                             logs / f"{run_dir.name}.log", threads))
     where = execution.backend + (f" at {execution.address}" if execution.address else "")
-    console.print(f"      {len(trials)} seeds in parallel ({where}"
-                  + (f", {parallel} at a time)" if execution.backend == "local" else ")"))
+    if len(trials) == 1:
+        console.print(f"      {step.name}: one process, log {trials[0]['log']}")
+    else:
+        console.print(f"      {len(trials)} seeds in parallel ({where}"
+                      + (f", {parallel} at a time)" if execution.backend == "local" else ")"))
 
     def on_done(t: dict[str, Any], rc: int, seconds: float) -> None:
         name = Path(t["run_dir"]).name
+        if rc == 0 and len(trials) == 1:
+            return  # one seed beside other steps: the study says when the step is done
         if rc == 0:
             s = read_json(Path(t["run_dir"]) / "summary.json")
             console.print(f"      {name}: return {s['eval_return_mean']:,.1f} ({seconds:.0f} s)")
@@ -165,7 +183,7 @@ def _train_seeds(step: Step, todo: list[tuple[Path, Any]], execution: Execution,
         backends.run_ray(trials, execution.address, execution.max_parallel, n_envs,
                          todo[0][0].parent / "ray", on_done)
     else:
-        backends.run_local(trials, parallel, on_done)
+        backends.run_local(trials, parallel, on_done, stop)
     failed = [t for t in trials if not (Path(t["run_dir"]) / "summary.json").is_file()]
     if failed:
         raise MotorlabError(f"step {step.name}: {', '.join(Path(t['run_dir']).name for t in failed)} failed: "
@@ -413,23 +431,38 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
     from motorlab.sweeps.backends import check_execution
 
     check_execution(execution.backend, execution.address, execution.max_parallel)
+    if execution.parallel_steps is not None and execution.parallel_steps < 1:
+        raise MotorlabError(f"--parallel-steps {execution.parallel_steps}: give at least 1.")
+    parallel_steps = execution.parallel_steps or recipe.parallel_steps
+    if parallel_steps > 1 and execution.backend != "local":
+        raise MotorlabError(f"parallel steps ({parallel_steps}) run as processes on this machine; with --backend "
+                            f"{execution.backend} give --parallel-steps 1 (the cluster runs each step's seeds at once).")
     study_dir = prepare_run_dir(out, recipe.name)
     write_config(study_dir, {"recipe": recipe.name, "source": recipe.source, "steps": [s.name for s in recipe.steps]})
     t0 = time.perf_counter()
     outputs = _Outputs(study_dir)
-    results: dict[str, dict[str, Any]] = {}
-    for i, step in enumerate(recipe.steps, 1):
-        console.print(f"[bold][{i}/{len(recipe.steps)}][/bold] {step.name}: {_describe(step)}")
-        t_step = time.perf_counter()
-        results[step.name] = _run_step(step, study_dir, outputs, console, execution)
-        console.print(f"      done in {time.perf_counter() - t_step:.1f} s")
+    overlaps = Overlaps()
+    if parallel_steps > 1:
+        console.print(f"      train steps that need nothing from each other run at once, at most {parallel_steps}")
+        results, overlaps = run_overlapped(
+            recipe.steps, lambda step, detached, stop: _run_step(step, study_dir, outputs, console, execution,
+                                                                 detached, stop),
+            parallel_steps, console, lambda step: _train_progress(step, study_dir), _describe)
+    else:
+        results = {}
+        for i, step in enumerate(recipe.steps, 1):
+            console.print(f"[bold][{i}/{len(recipe.steps)}][/bold] {step.name}: {_describe(step)}")
+            t_step = time.perf_counter()
+            results[step.name] = _run_step(step, study_dir, outputs, console, execution)
+            console.print(f"      done in {time.perf_counter() - t_step:.1f} s")
     study_summary: dict[str, Any] = {"recipe": recipe.name, "description": recipe.description,
                                      "steps": [s.name for s in recipe.steps],
+                                     "parallel_steps": parallel_steps,
                                      "wall_seconds": round(time.perf_counter() - t0, 2)}
-    for name, head in results.items():
-        study_summary.update({f"{name}.{k}": v for k, v in head.items()})
+    for name in (s.name for s in recipe.steps):
+        study_summary.update({f"{name}.{k}": v for k, v in results[name].items()})
     _figures(recipe, results, study_dir)
-    rows = [_cells(s, results[s.name]) for s in recipe.steps]
+    rows = [_cells(s, results[s.name], sorted(overlaps.beside.get(s.name, ()))) for s in recipe.steps]
     atomic_write_text(study_dir / "table.txt", plain_table(COLUMNS, rows))
     write_summary(study_dir, study_summary)
     console.print(rich_table(f"{recipe.name}: {recipe.description}" if recipe.description else recipe.name,
@@ -439,7 +472,20 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
     return study_summary
 
 
-def _cells(step: Step, r: dict[str, Any]) -> list[str]:
+def _train_progress(step: Step, study_dir: Path) -> tuple[int, int]:
+    """Env steps a background train step has done so far (all its seeds), and its budget."""
+    dirs = _run_dirs(step, study_dir)
+    return sum(last_timesteps(d) for d in dirs), step.train.timesteps * len(dirs)
+
+
+def _cells(step: Step, r: dict[str, Any], beside: list[str] = ()) -> list[str]:
+    cells = _step_cells(step, r)
+    if beside:  # its wall time was shared with these steps
+        cells[-1] = "; ".join(x for x in (cells[-1], f"ran beside {', '.join(beside)}") if x)
+    return cells
+
+
+def _step_cells(step: Step, r: dict[str, Any]) -> list[str]:
     def fmt(v, f="{:,.1f}"):
         return "-" if v is None else f.format(v)
 

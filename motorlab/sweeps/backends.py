@@ -14,6 +14,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -71,9 +72,11 @@ def _stop(procs: list[subprocess.Popen], grace: float = 20.0) -> None:
             p.wait()
 
 
-def run_local(trials: list[dict[str, Any]], max_parallel: int, on_done: OnDone) -> None:
+def run_local(trials: list[dict[str, Any]], max_parallel: int, on_done: OnDone,
+              stop: threading.Event | None = None) -> None:
     """At most `max_parallel` trial processes at a time, started in order. Polling (not a
-    thread pool) keeps Ctrl-C in this process, which then stops the running trials."""
+    thread pool) keeps Ctrl-C in this process, which then stops the running trials; so does
+    `stop` being set (from another thread, which cannot receive Ctrl-C itself)."""
     pending = list(trials)
     running: list[tuple[dict[str, Any], subprocess.Popen, float]] = []
     try:
@@ -88,6 +91,8 @@ def run_local(trials: list[dict[str, Any]], max_parallel: int, on_done: OnDone) 
                 if proc.returncode == 0:
                     mark_finished(t)
                 on_done(t, proc.returncode, time.perf_counter() - t0)
+            if stop is not None and stop.is_set():  # after the finished ones are counted as finished
+                raise KeyboardInterrupt
     except BaseException:
         _stop([p for _, p, _ in running])
         raise
