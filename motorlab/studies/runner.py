@@ -435,8 +435,13 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
         raise MotorlabError(f"--parallel-steps {execution.parallel_steps}: give at least 1.")
     parallel_steps = execution.parallel_steps or recipe.parallel_steps
     if parallel_steps > 1 and execution.backend != "local":
-        raise MotorlabError(f"parallel steps ({parallel_steps}) run as processes on this machine; with --backend "
-                            f"{execution.backend} give --parallel-steps 1 (the cluster runs each step's seeds at once).")
+        if execution.parallel_steps:
+            raise MotorlabError(f"--parallel-steps {parallel_steps} runs steps as processes on this machine; with "
+                                f"--backend {execution.backend} give --parallel-steps 1 (the cluster runs each "
+                                "step's seeds at once).")
+        console.print(f"      the recipe's parallel_steps = {parallel_steps} applies on this machine only; with "
+                      f"--backend {execution.backend} its steps run one after another")
+        parallel_steps = 1
     study_dir = prepare_run_dir(out, recipe.name)
     write_config(study_dir, {"recipe": recipe.name, "source": recipe.source, "steps": [s.name for s in recipe.steps]})
     t0 = time.perf_counter()
