@@ -120,10 +120,12 @@ def _fake_run(log: list, active: set, peak: list, fail: str | None = None, slow:
 @pytest.mark.parametrize("limit", [1, 2, 3])
 def test_schedule_respects_inputs_and_the_limit(tmp_path, limit):
     recipe = parse_recipe(STUDY)
-    log, active, peak = [], set(), [0]
-    results, overlaps = run_overlapped(recipe.steps, _fake_run(log, active, peak), limit,
-                                       Console(file=open(os.devnull, "w")), lambda s: (0, 1), lambda s: s.name)
+    log, active, peak, finished = [], set(), [0], []
+    results, overlaps = run_overlapped(
+        recipe.steps, _fake_run(log, active, peak), limit, Console(file=open(os.devnull, "w")), lambda s: (0, 1),
+        lambda s: s.name, lambda s: finished.append((s.name, threading.current_thread() is threading.main_thread())))
     assert set(results) == {"a", "a-eval", "b", "c"} and results["b"] == {"name": "b"}
+    assert sorted(finished) == [("a", True), ("b", True), ("c", True)]  # figures: drawn by the study's own thread
     assert peak[0] == min(limit, 3)  # three train steps need nothing: as many at once as allowed
     order = [(what, name) for what, name, _ in log]
     assert order.index(("end", "a")) < order.index(("start", "a-eval"))  # an input is finished before it is read
@@ -173,6 +175,8 @@ def test_parallel_study_equals_the_sequential_one(tmp_path):
     (a0, a1), (b0, b1) = _timed(par / "a"), _timed(par / "b")
     assert a0 < b1 and b0 < a1  # a and b trained at the same time
     assert (par / "logs" / "a.log").is_file() and (par / "logs" / "b.log").is_file()
+    for run in ("a", "b", "c/seed0", "c/seed1"):
+        assert (par / run / "plots" / "learning_curve.png").stat().st_size > 1000
     table = (par / "table.txt").read_text()
     assert "ran beside" in table and "ran beside" not in (seq / "table.txt").read_text()
     assert "(in the background)" in proc.stdout

@@ -123,8 +123,9 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
             train(todo[0][1], todo[0][0])  # one run: in this process, with its progress bar
         elif todo:
             _train_seeds(step, todo, execution, console, stop)
-        for d, _ in runs:
-            plot_run(d)
+        if not detached:  # matplotlib is not thread-safe: a background step's figures are drawn by the study's thread
+            for d, _ in runs:
+                plot_run(d)
         outputs.dirs[step.name] = [d for d, _ in runs]
         return _seeds_headline([read_json(d / "summary.json") for d, _ in runs], "eval_")
     refs = _policy_runs(step, outputs)
@@ -452,7 +453,8 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
         results, overlaps = run_overlapped(
             recipe.steps, lambda step, detached, stop: _run_step(step, study_dir, outputs, console, execution,
                                                                  detached, stop),
-            parallel_steps, console, lambda step: _train_progress(step, study_dir), _describe)
+            parallel_steps, console, lambda step: _train_progress(step, study_dir), _describe,
+            lambda step: [plot_run(d) for d in _run_dirs(step, study_dir)])
     else:
         results = {}
         for i, step in enumerate(recipe.steps, 1):

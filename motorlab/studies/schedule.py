@@ -61,8 +61,12 @@ class Overlaps:
 
 
 def run_overlapped(steps: list[Step], run: RunStep, limit: int, console: Console, progress_of: ProgressOf,
-                   describe: Callable[[Step], str]) -> tuple[dict[str, dict[str, Any]], Overlaps]:
+                   describe: Callable[[Step], str], finish: Callable[[Step], Any] = lambda step: None
+                   ) -> tuple[dict[str, dict[str, Any]], Overlaps]:
     """Run `steps` (in recipe order where they are ready), train steps in the background.
+
+    `finish(step)` runs in this thread once a background step is done: work that must not run
+    beside the foreground steps (matplotlib's figures are not thread-safe).
 
     Returns:
         Each step's headline, and which steps overlapped.
@@ -102,6 +106,7 @@ def run_overlapped(steps: list[Step], run: RunStep, limit: int, console: Console
             overlaps.end(job.step.name)
             if job.error is not None:
                 raise job.error
+            finish(job.step)
             results[job.step.name] = job.result
             console.print(f"      {job.step.name}: done in {time.perf_counter() - job.t0:.1f} s")
 
