@@ -98,27 +98,30 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=20000, help="episodes per side (50 transitions each)")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes / threads per side")
-    parser.add_argument("--repeats", type=int, default=3, help="motorlab runs; the median rate is reported")
+    parser.add_argument("--repeats", type=int, default=3, help="interleaved rounds of both sides; medians are reported")
     args = parser.parse_args()
 
-    ref_seconds, ref_n = reference_collect(args.episodes, args.workers)
-    rates, data = [], None
+    # Interleaved rounds (reference, then motorlab): a drift in the machine's speed hits both
+    # sides alike; medians over rounds, and the median of the per-round ratios.
+    ref_rates, rates, data = [], [], None
     for _ in range(args.repeats):
+        ref_seconds, ref_n = reference_collect(args.episodes, args.workers)
+        ref_rates.append(ref_n / ref_seconds)
         data = collect_transitions("Reacher-v5", args.episodes, workers=args.workers, progress=False)
         rates.append(len(data) / data.meta["seconds"])
-    rate = float(np.median(rates))
+    rate, ref_rate = float(np.median(rates)), float(np.median(ref_rates))
+    ratio = float(np.median(np.array(rates) / np.array(ref_rates)))
     check = replay_check(data)
-    ref_rate = ref_n / ref_seconds
     print(json.dumps({
         "benchmark": "dynamics_collect", "env_id": "Reacher-v5", "episodes": args.episodes,
         "workers": args.workers, "cpus": os.cpu_count(), "machine": platform.processor() or platform.machine(),
         "motorlab_transitions_per_second": rate, "motorlab_rates": rates,
-        "reference_transitions_per_second": ref_rate, "reference_seconds": ref_seconds,
-        "ratio": rate / ref_rate, "target_ratio": TARGET_RATIO, "target_rate": TARGET_RATE,
+        "reference_transitions_per_second": ref_rate, "reference_rates": ref_rates,
+        "ratio": ratio, "target_ratio": TARGET_RATIO, "target_rate": TARGET_RATE,
         # The 200k/s is 5x the 41k/s its reference made on the machine it was measured on.
         # The reference is Python-bound and motorlab is bound by MuJoCo's RK4 step, so the ratio
         # moves from machine to machine: both verdicts are printed.
-        "meets_ratio_target": rate / ref_rate >= TARGET_RATIO and check["exact_start_max_joint_diff"] == 0.0,
+        "meets_ratio_target": ratio >= TARGET_RATIO and check["exact_start_max_joint_diff"] == 0.0,
         "meets_rate_target": rate >= TARGET_RATE,
         **check,
     }, indent=2))

@@ -42,6 +42,48 @@ def test_rollout_matches_gymnasium(env_id):
         assert np.abs(rewards[e] - g_rew).max() < 5e-3
 
 
+def _fast_and_full(env, qpos, qvel, actions, monkeypatch):
+    from motorlab.dynamics import reacher_sim
+
+    fast = rollout_reacher(env, qpos, qvel, actions)
+    with monkeypatch.context() as m:
+        m.setattr(reacher_sim, "_arm_model", lambda env: None)
+        full = rollout_reacher(env, qpos, qvel, actions)
+    return fast, full
+
+
+def test_rollouts_simulate_the_arm_alone_and_match_the_full_model(tmp_path, monkeypatch):
+    """Reacher is rolled out without its target body and world geoms; the result is the full
+    model's, bit for bit, for the stock XML and a user's. A model edited at run time, or a
+    moving target, falls back to the full model."""
+    from motorlab.dynamics.reacher_sim import _arm_model
+
+    rng = np.random.default_rng(7)
+    heavy = tmp_path / "heavy.xml"  # a user's XML: a denser forearm
+    stock = gym.make("Reacher-v5").unwrapped.fullpath
+    heavy.write_text(open(stock).read().replace('name="link1" rgba', 'name="link1" density="3000" rgba'))
+    for env in (gym.make("Reacher-v5"), gym.make("Reacher-v4"), gym.make("Reacher-v5", xml_file=str(heavy))):
+        arm = _arm_model(env)
+        assert arm is not None and arm.nq == 2 and arm.ngeom == 3
+        qpos, qvel = sample_initial_states(env, 40, rng)
+        actions = rng.uniform(-1, 1, size=(40, 50, 2))
+        for a, b in zip(*_fast_and_full(env, qpos, qvel, actions, monkeypatch)):
+            np.testing.assert_array_equal(a, b)
+    heavy_tip = rollout_reacher(env, qpos, qvel, actions)[0]
+    stock_tip = rollout_reacher(gym.make("Reacher-v5"), qpos, qvel, actions)[0]
+    assert not np.array_equal(heavy_tip, stock_tip)  # the user's arm is the one simulated
+
+    for edit in (lambda m: setattr(m.opt, "timestep", 0.005), lambda m: m.body_mass.__setitem__(2, 1.0),
+                 lambda m: m.dof_damping.__setitem__(1, 0.0)):
+        edited = gym.make("Reacher-v5")
+        edit(edited.unwrapped.model)
+        assert _arm_model(edited) is None
+    # a target given a velocity moves: simulated with the full model, not held still
+    qvel[:, 2:] = 0.01
+    obs, _ = rollout_reacher(env, qpos, qvel, actions[:, :5])
+    assert (obs[:, -1, 4:6] != obs[:, 0, 4:6]).all()
+
+
 def test_initial_states_follow_the_env_reset():
     env = gym.make("Reacher-v5")
     qpos, qvel = sample_initial_states(env, 5000, np.random.default_rng(0))
