@@ -36,6 +36,12 @@ from motorlab.dynamics.train import fit_step
 from motorlab.envs import EnvConfig, make_env
 
 TARGETS = {"plan_ms_median": 5.0, "return_mean": -4.0, "final_distance_mean": 0.010, "pipeline_seconds": 180.0}
+# The time targets were set on a machine where the reference planner took 29.7 ms a step
+# (issue 4). Machines here differ by several times in speed from session to session, so
+# the time targets are also given scaled by how long the reference planner takes on this
+# one, in this same run; the unscaled verdict stays beside it.
+ISSUE_REFERENCE_PLAN_MS = 29.7
+TIME_TARGETS = ("plan_ms_median", "pipeline_seconds")
 
 
 class ReferencePlanner:
@@ -119,14 +125,19 @@ def main() -> None:
                 "valid_mse": fitted["valid_mse"],
                 "planner": {k: getattr(policy.planner, k) for k in ("horizon", "population", "iterations", "elites")}}
         reference = reference_episodes(load_model(tmp / "model"), args.reference_episodes, 10_000 + args.seed)
-    meets = (ours["plan_ms_median"] <= TARGETS["plan_ms_median"] and ours["return_mean"] >= TARGETS["return_mean"]
-             and ours["final_distance_mean"] <= TARGETS["final_distance_mean"]
-             and ours["pipeline_seconds"] <= TARGETS["pipeline_seconds"])
+    slowdown = reference["plan_ms_median"] / ISSUE_REFERENCE_PLAN_MS
+    scaled = {k: v * slowdown if k in TIME_TARGETS else v for k, v in TARGETS.items()}
+
+    def meets(targets: dict[str, float]) -> bool:
+        return all(ours[k] >= v if k == "return_mean" else ours[k] <= v for k, v in targets.items())
+
     print(json.dumps({
         "benchmark": "mpc", "env_id": "Reacher-v5", "cpus": os.cpu_count(),
         "machine": platform.processor() or platform.machine(), "motorlab": ours, "reference": reference,
         "plan_speedup": reference["plan_ms_median"] / ours["plan_ms_median"],
-        "return_gain": ours["return_mean"] - reference["return_mean"], "targets": TARGETS, "meets_targets": meets,
+        "return_gain": ours["return_mean"] - reference["return_mean"], "targets": TARGETS, "meets_targets": meets(TARGETS),
+        "machine_slowdown_vs_issue": slowdown, "targets_scaled_to_this_machine": scaled,
+        "meets_scaled_targets": meets(scaled),
     }, indent=2))
 
 
