@@ -37,8 +37,8 @@ def test_collected_reacher_transitions_are_gymnasiums(reacher_data):
             obs, reward, *_ = env.step(d.actions[r])
             tip = obs[8:10] + obs[4:6]
             np.testing.assert_allclose(d.next_states[r][:6], np.r_[obs[0:4], obs[6:8]], atol=1e-9)
-            assert np.abs(d.next_states[r][6:] - tip).max() < 5e-3  # RK4 stage vs final state, see reacher_sim
-            assert abs(d.rewards[r] - reward) < 5e-3
+            np.testing.assert_allclose(d.next_states[r][6:], tip, rtol=0, atol=1e-12)
+            assert abs(d.rewards[r] - reward) < 1e-12
             np.testing.assert_array_equal(d.goals[r], obs[4:6])
         assert d.dones[rows].tolist() == [False] * 49 + [True] and not d.terminated[rows].any()
     np.testing.assert_array_equal(d.states[1:][d.episode[1:] == d.episode[:-1]],

@@ -25,63 +25,57 @@ def gym_rollout(env, qpos0, qvel0, actions):
 
 @pytest.mark.parametrize("env_id", ["Reacher-v5", "Reacher-v4"])
 def test_rollout_matches_gymnasium(env_id):
+    """Observations and rewards equal the env's: joints bit for bit, the fingertip (RK4's last
+    stage, see reacher_sim) and rewards to rounding, at the elbow's limit too."""
     env = gym.make(env_id)
     rng = np.random.default_rng(3)
     qpos, qvel = sample_initial_states(env, 12, rng)
     actions = rng.uniform(-1, 1, size=(12, 50, 2))
+    actions[:4] = np.sign(actions[:4])  # full torque: the elbow reaches its +-3 rad limit
     obs, rewards = rollout_reacher(env, qpos, qvel, actions, threads=2)
     assert obs.shape == (12, 51, env.observation_space.shape[0]) and rewards.shape == (12, 50)
     joint = np.r_[0:8]  # cos, sin, target, joint velocities: from qpos/qvel, bit-identical
+    at_limit = 0
     for e in range(12):
         g_obs, g_rew, _ = gym_rollout(env, qpos[e], qvel[e], actions[e])
         np.testing.assert_array_equal(obs[e][:, joint], g_obs[:, joint])
-        # fingertip: exact kinematics vs RK4's last stage (see reacher_sim); mm at the elbow limit
-        tip = np.abs(obs[e][:, 8:] - g_obs[:, 8:]).max(axis=1)
-        near_limit = np.abs(np.arctan2(g_obs[:, 3], g_obs[:, 1])) > 2.9
-        assert tip[~near_limit].max(initial=0) < 2e-4 and tip.max() < 5e-3
-        assert np.abs(rewards[e] - g_rew).max() < 5e-3
+        np.testing.assert_allclose(obs[e][:, 8:], g_obs[:, 8:], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(rewards[e], g_rew, rtol=0, atol=1e-12)
+        at_limit += int((np.abs(np.arctan2(g_obs[:, 3], g_obs[:, 1])) > 2.9).sum())
+    assert at_limit > 20  # the case where the fingertip of the reached state would be mm off
 
 
-def _fast_and_full(env, qpos, qvel, actions, monkeypatch):
-    from motorlab.dynamics import reacher_sim
-
-    fast = rollout_reacher(env, qpos, qvel, actions)
-    with monkeypatch.context() as m:
-        m.setattr(reacher_sim, "_arm_model", lambda env: None)
-        full = rollout_reacher(env, qpos, qvel, actions)
-    return fast, full
-
-
-def test_rollouts_simulate_the_arm_alone_and_match_the_full_model(tmp_path, monkeypatch):
-    """Reacher is rolled out without its target body and world geoms; the result is the full
-    model's, bit for bit, for the stock XML and a user's. A model edited at run time, or a
-    moving target, falls back to the full model."""
-    from motorlab.dynamics.reacher_sim import _arm_model
+def test_rollouts_simulate_the_arm_alone_for_stock_and_user_xml(tmp_path):
+    """Reacher is rolled out without its target body and world geoms, for the stock XML and a
+    user's; a model edited at run time, or a moving target, is refused with the way out."""
+    from motorlab.dynamics.reacher_sim import arm_models
 
     rng = np.random.default_rng(7)
     heavy = tmp_path / "heavy.xml"  # a user's XML: a denser forearm
     stock = gym.make("Reacher-v5").unwrapped.fullpath
     heavy.write_text(open(stock).read().replace('name="link1" rgba', 'name="link1" density="3000" rgba'))
-    for env in (gym.make("Reacher-v5"), gym.make("Reacher-v4"), gym.make("Reacher-v5", xml_file=str(heavy))):
-        arm = _arm_model(env)
-        assert arm is not None and arm.nq == 2 and arm.ngeom == 3
-        qpos, qvel = sample_initial_states(env, 40, rng)
-        actions = rng.uniform(-1, 1, size=(40, 50, 2))
-        for a, b in zip(*_fast_and_full(env, qpos, qvel, actions, monkeypatch)):
-            np.testing.assert_array_equal(a, b)
-    heavy_tip = rollout_reacher(env, qpos, qvel, actions)[0]
-    stock_tip = rollout_reacher(gym.make("Reacher-v5"), qpos, qvel, actions)[0]
-    assert not np.array_equal(heavy_tip, stock_tip)  # the user's arm is the one simulated
+    env = gym.make("Reacher-v5", xml_file=str(heavy))
+    rollout, stage = arm_models(env)
+    assert rollout.nq == 2 and rollout.ngeom == 3 and stage.nq == 2
+    qpos, qvel = sample_initial_states(env, 6, rng)
+    actions = rng.uniform(-1, 1, size=(6, 50, 2))
+    heavy_obs, heavy_rew = rollout_reacher(env, qpos, qvel, actions)
+    for e in range(6):
+        g_obs, g_rew, _ = gym_rollout(env, qpos[e], qvel[e], actions[e])
+        np.testing.assert_array_equal(heavy_obs[e][:, :8], g_obs[:, :8])
+        np.testing.assert_allclose(heavy_rew[e], g_rew, rtol=0, atol=1e-12)
+    stock_obs = rollout_reacher(gym.make("Reacher-v5"), qpos, qvel, actions)[0]
+    assert not np.array_equal(heavy_obs, stock_obs)  # the user's arm is the one simulated
 
     for edit in (lambda m: setattr(m.opt, "timestep", 0.005), lambda m: m.body_mass.__setitem__(2, 1.0),
                  lambda m: m.dof_damping.__setitem__(1, 0.0)):
         edited = gym.make("Reacher-v5")
         edit(edited.unwrapped.model)
-        assert _arm_model(edited) is None
-    # a target given a velocity moves: simulated with the full model, not held still
-    qvel[:, 2:] = 0.01
-    obs, _ = rollout_reacher(env, qpos, qvel, actions[:, :5])
-    assert (obs[:, -1, 4:6] != obs[:, 0, 4:6]).all()
+        with pytest.raises(MotorlabError, match="--simulator gymnasium"):
+            rollout_reacher(edited, qpos, qvel, actions)
+    qvel[:, 2:] = 0.01  # the env's reset never moves the target
+    with pytest.raises(MotorlabError, match="target starts at rest"):
+        rollout_reacher(env, qpos, qvel, actions)
 
 
 def test_initial_states_follow_the_env_reset():

@@ -2,9 +2,9 @@
 
 Two collectors, one result format (transitions.py):
 - Reacher with random actions runs straight in MuJoCo (`reacher_sim.rollout_reacher`):
-  all episodes' substeps in C on every core, ~10x Gymnasium's Python stepping. Its
-  transitions are the ones Gymnasium's env gives for the same initial state and actions
-  (tests/test_dynamics_collect.py).
+  all episodes' substeps in C on every core, several times Gymnasium's Python stepping. Its
+  transitions are the ones Gymnasium's env gives for the same initial state and actions, to
+  ~1e-16 (tests/test_dynamics_collect.py).
 - Any other env or policy (a trained run folder) steps Gymnasium envs in a process
   pool, one episode per seed, so the result does not depend on the number of workers.
 """
@@ -21,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 from rich.progress import Progress
 
-from motorlab.dynamics.reacher_sim import rollout_reacher, sample_initial_states
+from motorlab.dynamics.reacher_sim import arm_models, rollout_reacher, sample_initial_states
 from motorlab.dynamics.state import StateLayout, layout_for
 from motorlab.dynamics.transitions import TRANSITIONS, Transitions
 from motorlab.envs import EnvConfig, make_env
@@ -33,8 +33,15 @@ CHUNK = 1000  # episodes per batched MuJoCo rollout: bounds memory, paces the pr
 
 
 def _is_reacher(env: gym.Env) -> bool:
+    """Reacher-v4/v5 whose model is its XML's layout: what `rollout_reacher` reproduces exactly."""
     spec = env.spec.id if env.spec else ""
-    return spec.startswith("Reacher-") and env.observation_space.shape[0] in (10, 11)
+    if not (spec.startswith("Reacher-") and env.observation_space.shape[0] in (10, 11)):
+        return False
+    try:
+        arm_models(env)
+    except MotorlabError:
+        return False
+    return True
 
 
 def _episode_arrays(obs, actions, rewards, terminated, truncated, layout: StateLayout, episode_ids):

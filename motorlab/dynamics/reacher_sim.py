@@ -1,15 +1,22 @@
 """Reacher rollouts straight in MuJoCo, batched and multithreaded (`mujoco.rollout`).
 
-Gymnasium's Reacher steps MuJoCo `frame_skip` times per action (Python-level, ~25k
-steps/s); `mujoco.rollout` runs the same substeps in C on all cores, so joint angles and
-velocities come out bit-identical to the env's. Only the arm is simulated (`_arm_model`):
-the target never moves, so its position is carried over from the initial state. The fingertip position is the planar
-two-link forward kinematics of the final joint angles. Gymnasium reads it from
-`data.xpos` after `mj_step`, which with Reacher's RK4 integrator holds the kinematics of
-RK4's last intermediate stage, not of the final state: the two agree to ~1e-5 m, but
-while the elbow presses on its +-3 rad limit they can differ by a few millimetres.
-Reproducing that stage would cost a full forward pass per transition in Python; the
-forward model is better served by the fingertip of the state it actually reached.
+Gymnasium's Reacher steps MuJoCo `frame_skip` times per action in Python; `mujoco.rollout`
+runs the same substeps in C on all cores and gives Gymnasium's observations and rewards:
+
+- Only the arm is simulated. The target is a separate body on undamped slide joints that
+  starts at rest and is never pushed, so it never moves, and the world's geoms are only
+  drawn; without them each RK4 substep runs ~20% fewer instructions (callgrind: 47k vs
+  58k), and the joint angles and velocities come out bit-identical to the env's.
+- The fingertip is the one Gymnasium reports. It reads `data.xpos` after `mj_step`, which
+  with RK4 holds the kinematics of RK4's last intermediate stage, q0 + h*v2 with
+  v2 = v0 + h/2*a1, not of the state reached (the two differ by millimetres while the
+  elbow presses on its limit). Its observation and its reward both use it. The rollout
+  records each substep's joint accelerations (two angular-acceleration sensors, evaluated
+  at the substep's start), rebuilds RK4's first stage of each env step's last substep,
+  evaluates its acceleration a1 with one more batched forward pass (a one-step rollout
+  from that stage, read through the same sensors) and takes the fingertip of the last
+  stage: equal to Gymnasium's to ~1e-16 m. This costs about one forward pass per env step
+  on top of the eight that RK4 makes over the two substeps.
 """
 
 from __future__ import annotations
@@ -21,6 +28,11 @@ import os
 import mujoco
 import mujoco.rollout
 import numpy as np
+
+from motorlab.errors import MotorlabError
+
+ARM_BODIES = ("world", "body0", "body1", "fingertip")
+_FULLPHYSICS = mujoco.mjtState.mjSTATE_FULLPHYSICS  # = [time, qpos, qvel, act, ...]
 
 
 def fingertip_xyz(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
@@ -70,16 +82,26 @@ def _without_collision(model: mujoco.MjModel) -> mujoco.MjModel:
     return fast
 
 
-ARM_BODIES = ("world", "body0", "body1", "fingertip")
-
-
 @functools.lru_cache(maxsize=4)
-def _arm_spec_model(path: str) -> mujoco.MjModel:
+def _arm_models(path: str) -> tuple[mujoco.MjModel, mujoco.MjModel, mujoco.MjModel] | None:
+    """From Reacher's XML: the arm as compiled, the arm for rollouts (with joint-acceleration
+    sensors, collision off) and the same for evaluating one RK4 stage (Euler: one forward pass
+    per step, without Euler's implicit damping, which would change nothing the sensors read)."""
     spec = mujoco.MjSpec.from_file(path)
-    spec.delete(spec.body("target"))
+    target = spec.body("target")
+    if target is None:
+        return None
+    spec.delete(target)
     for geom in list(spec.worldbody.geoms):  # floor, arena walls, base: drawn, never touched
         spec.delete(geom)
-    return spec.compile()
+    arm = spec.compile()
+    for body in ARM_BODIES[1:3]:  # world-frame angular acceleration of each link: z gives the joints' qacc
+        spec.add_sensor(type=mujoco.mjtSensor.mjSENS_FRAMEANGACC, objtype=mujoco.mjtObj.mjOBJ_BODY, objname=body)
+    rollout = _without_collision(spec.compile())
+    stage = copy.copy(rollout)
+    stage.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    stage.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP
+    return arm, rollout, stage
 
 
 def _same_arm(full: mujoco.MjModel, arm: mujoco.MjModel) -> bool:
@@ -96,56 +118,76 @@ def _same_arm(full: mujoco.MjModel, arm: mujoco.MjModel) -> bool:
     return same and all(np.array_equal(getattr(full.opt, k), getattr(arm.opt, k)) for k in opts)
 
 
-def _arm_model(env) -> mujoco.MjModel | None:
-    """Reacher's arm alone, for rollouts: the model without the target and the world's geoms.
+def arm_models(env) -> tuple[mujoco.MjModel, mujoco.MjModel]:
+    """Reacher's arm alone, with joint-acceleration sensors: the model for rollouts and the one
+    for evaluating an RK4 stage.
 
-    The target is a separate kinematic tree on two frictionless, undamped slide joints with
-    zero velocity and no force along them, so it never moves and nothing it does reaches
-    the arm; the world's geoms are drawn but can never touch. Without them each RK4
-    substep runs ~20% fewer instructions (callgrind: 47k vs 58k) and the arm's joint
-    angles and velocities come out bit-identical (tests/test_dynamics_collect.py).
-    None when the env's model is not the stock layout (a custom XML, edited options):
-    the full model is used then.
+    Raises:
+        MotorlabError: the env's model is not Reacher's layout (its XML lacks the target or the
+            arm's bodies), or differs from its XML (edited after loading).
     """
-    full = env.unwrapped.model
-    path = getattr(env.unwrapped, "fullpath", None)
-    if full.nq != 4 or full.nv != 4 or not path:
-        return None
-    try:
-        arm = _arm_spec_model(str(path))
-    except (ValueError, KeyError, TypeError):  # not the stock file's bodies
-        return None
-    return _without_collision(arm) if _same_arm(full, arm) else None
+    u = env.unwrapped
+    path = getattr(u, "fullpath", None)
+    models = _arm_models(str(path)) if path and u.model.nq == 4 else None
+    if models is None or not _same_arm(u.model, models[0]):
+        raise MotorlabError("this Reacher model is not the layout of its XML file (bodies, joints, actuators or "
+                            "options differ, e.g. edited after loading); collect it with --simulator gymnasium.")
+    return models[1], models[2]
+
+
+def _states(model: mujoco.MjModel, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
+    """Full-physics initial states (N, nstate) with the given joint positions and velocities."""
+    template = np.empty(mujoco.mj_stateSize(model, _FULLPHYSICS))
+    mujoco.mj_getState(model, mujoco.MjData(model), template, _FULLPHYSICS)
+    states = np.tile(template, (len(qpos), 1))
+    states[:, 1:1 + model.nq] = qpos
+    states[:, 1 + model.nq:1 + model.nq + model.nv] = qvel
+    return states
+
+
+def _joint_acc(sensors: np.ndarray) -> np.ndarray:
+    """Joint accelerations (..., 2) from the two links' world angular accelerations (..., 6)."""
+    return np.stack([sensors[..., 2], sensors[..., 5] - sensors[..., 2]], axis=-1)
 
 
 def rollout_reacher(env, qpos0: np.ndarray, qvel0: np.ndarray, actions: np.ndarray,
                     threads: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Observations (E, T+1, obs_dim) and rewards (E, T) of Gymnasium's Reacher-v4/v5 for
-    E episodes from the given initial qpos/qvel under actions (E, T, 2)."""
+    E episodes from the given initial qpos/qvel under actions (E, T, 2).
+
+    Raises:
+        MotorlabError: a target with a velocity (the env's reset sets it to zero), or a model
+            that is not Reacher's layout (see `arm_models`).
+    """
     u = env.unwrapped
-    # the target stays put only when it starts at rest; else simulate it too
-    arm = _arm_model(env) if not np.any(qvel0[:, 2:]) else None
-    model = arm or _without_collision(u.model)
-    k = model.nq  # simulated joints: the arm's two, or all four with the (motionless) target's
-    frame_skip = u.frame_skip
+    if np.any(qvel0[:, 2:]):
+        raise MotorlabError("Reacher's target starts at rest (the env's reset sets its velocity to 0); "
+                            "rollouts simulate the arm alone.")
+    model, stage = arm_models(env)
+    h, frame_skip = model.opt.timestep, u.frame_skip
     n, steps = actions.shape[:2]
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    template = np.empty(mujoco.mj_stateSize(model, spec))
-    mujoco.mj_getState(model, mujoco.MjData(model), template, spec)
-    # FULLPHYSICS = [time, qpos, qvel, act, ...]
-    iq, iv = 1, 1 + k
-    init = np.tile(template, (n, 1))
-    init[:, iq:iq + k] = qpos0[:, :k]
-    init[:, iv:iv + k] = qvel0[:, :k]
-    control = np.repeat(actions, frame_skip, axis=1)  # the env holds each action for frame_skip substeps
     datas = [mujoco.MjData(model) for _ in range(threads or os.cpu_count() or 1)]
-    state, _ = mujoco.rollout.rollout(model, datas, init, control)
-    last = np.arange(1, steps + 1) * frame_skip - 1  # each env step's final substep
-    qpos = np.repeat(qpos0[:, None], steps + 1, axis=1)
+    control = np.repeat(actions, frame_skip, axis=1)  # the env holds each action for frame_skip substeps
+    state, accel = mujoco.rollout.rollout(model, datas, _states(model, qpos0[:, :2], qvel0[:, :2]), control)
+    # joint angles and velocities at the start of every substep, and after the last
+    q = np.concatenate([qpos0[:, None, :2], state[..., 1:3]], axis=1)
+    v = np.concatenate([qvel0[:, None, :2], state[..., 3:5]], axis=1)
+    ends = np.arange(1, steps + 1) * frame_skip  # each env step's end; its last substep starts at ends - 1
+    qpos = np.repeat(qpos0[:, None], steps + 1, axis=1)  # the target's entries stay as they began
     qvel = np.repeat(qvel0[:, None], steps + 1, axis=1)
-    qpos[:, 1:, :k] = state[:, last, iq:iq + k]
-    qvel[:, 1:, :k] = state[:, last, iv:iv + k]
-    vec = fingertip_xyz(model, qpos) - target_xyz(u.model, qpos)
+    qpos[:, 1:, :2], qvel[:, 1:, :2] = q[:, ends], v[:, ends]
+
+    # Gymnasium's fingertip: RK4's last stage of each step's last substep, computed as MuJoCo's
+    # mj_RungeKutta does (stage 1 at X0 + h/2 F0, stage 2 at X0 + h/2 F1, stage 3 at X0 + h F2)
+    q0, v0, a0 = q[:, ends - 1], v[:, ends - 1], _joint_acc(accel[:, ends - 1])
+    q1, v1 = q0 + (0.5 * v0) * h, v0 + (0.5 * a0) * h
+    _, accel1 = mujoco.rollout.rollout(stage, [mujoco.MjData(stage) for _ in datas],
+                                       _states(stage, q1.reshape(-1, 2), v1.reshape(-1, 2)),
+                                       actions.reshape(-1, 1, actions.shape[-1]))
+    v2 = v0 + (0.5 * _joint_acc(accel1[:, 0]).reshape(n, steps, 2)) * h
+    tip = np.concatenate([fingertip_xyz(model, qpos0[:, None]), fingertip_xyz(model, q0 + v2 * h)], axis=1)
+
+    vec = tip - target_xyz(u.model, qpos)
     theta = qpos[..., :2]
     v4 = env.observation_space.shape[0] == 11  # v4 keeps the z of the vector, v5 drops it
     width = 3 if v4 else 2
