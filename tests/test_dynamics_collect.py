@@ -67,6 +67,10 @@ def test_rollouts_simulate_the_arm_alone_for_stock_and_user_xml(tmp_path):
     stock_obs = rollout_reacher(gym.make("Reacher-v5"), qpos, qvel, actions)[0]
     assert not np.array_equal(heavy_obs, stock_obs)  # the user's arm is the one simulated
 
+    renamed = tmp_path / "renamed.xml"  # a user's arm with other body names
+    renamed.write_text(open(stock).read().replace('"body1"', '"forearm"'))
+    with pytest.raises(MotorlabError, match="--simulator gymnasium"):
+        rollout_reacher(gym.make("Reacher-v5", xml_file=str(renamed)), qpos, qvel, actions)
     for edit in (lambda m: setattr(m.opt, "timestep", 0.005), lambda m: m.body_mass.__setitem__(2, 1.0),
                  lambda m: m.dof_damping.__setitem__(1, 0.0)):
         edited = gym.make("Reacher-v5")

@@ -128,10 +128,14 @@ def arm_models(env) -> tuple[mujoco.MjModel, mujoco.MjModel]:
     """
     u = env.unwrapped
     path = getattr(u, "fullpath", None)
-    models = _arm_models(str(path)) if path and u.model.nq == 4 else None
+    try:
+        models = _arm_models(str(path)) if path and u.model.nq == 4 else None
+    except (ValueError, KeyError, TypeError):  # the XML lacks the arm's bodies
+        models = None
     if models is None or not _same_arm(u.model, models[0]):
-        raise MotorlabError("this Reacher model is not the layout of its XML file (bodies, joints, actuators or "
-                            "options differ, e.g. edited after loading); collect it with --simulator gymnasium.")
+        raise MotorlabError("this Reacher model is not Reacher's arm as its XML file compiles it (bodies body0, "
+                            "body1, fingertip and target; joints, actuators or options edited after loading); "
+                            "collect it with --simulator gymnasium.")
     return models[1], models[2]
 
 
