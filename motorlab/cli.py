@@ -586,7 +586,11 @@ def dynamics_collect(
         help="State layout: auto (Reacher: cos, sin, joint velocities, fingertip x-y; else the observation), "
              "reacher, observation.")] = "auto",
     simulator: Annotated[str, typer.Option(
-        help="auto (MuJoCo rollouts in C for Reacher with random actions, else Gymnasium), mujoco, gymnasium.")] = "auto",
+        help="auto (Reacher with random actions: closed-form where the arm's closed-form dynamics reproduce "
+             "MuJoCo's, else mujoco; any other env or policy: gymnasium); closed-form (the arm's equations of "
+             "motion in NumPy, all episodes at once, equal to MuJoCo's to its solver tolerance); mujoco "
+             "(mujoco.rollout in C on every core, bit for bit Gymnasium's joints); gymnasium (the env itself, "
+             "in a process pool).")] = "auto",
     seed: Seed = 0,
     out: Out = None,
 ):

@@ -122,7 +122,7 @@ class DynamicsCollectStep(_Strict):
     policy: str = "random"
     workers: int | None = Field(None, gt=0)
     state: Literal["auto", "reacher", "observation"] = "auto"
-    simulator: Literal["auto", "mujoco", "gymnasium"] = "auto"
+    simulator: Literal["auto", "closed-form", "mujoco", "gymnasium"] = "auto"
     seed: int = Field(0, ge=0)
 
 

@@ -21,7 +21,7 @@ def pipeline(tmp_path_factory):
 def test_collect_fit_check_mpc(pipeline, tmp_path):
     data = read_summary(pipeline / "data")
     assert data["transitions"] == 300 * 50 and data["transitions_per_second"] > 0
-    assert data["simulator"] == "mujoco.rollout" and data["state_size"] == 8
+    assert data["simulator"] == "closed-form" and data["state_size"] == 8
 
     fit = read_summary(pipeline / "model")
     assert 0 < fit["valid_mse"] < 1 and fit["wall_seconds"] > 0 and fit["epochs_run"] == 3
@@ -53,6 +53,8 @@ def test_collect_fit_check_mpc(pipeline, tmp_path):
     (["dynamics", "collect", "Reacher-v9"], ["unknown env id", "Reacher-v5"]),
     (["dynamics", "collect", "Reacher-v5", "--episodes", "0"], ["--episodes must be positive"]),
     (["dynamics", "collect", "Pendulum-v1", "--state", "reacher"], ["--state observation"]),
+    (["dynamics", "collect", "Pendulum-v1", "--simulator", "closed-form"], ["Reacher", "use auto or gymnasium"]),
+    (["dynamics", "collect", "Reacher-v5", "--simulator", "bullet"], ["closed-form", "mujoco or gymnasium"]),
     (["dynamics", "fit", "missing.npz"], ["missing.npz is missing", "dynamics collect"]),
 ])
 def test_bad_collect_and_fit_input(args, fragments, tmp_path):

@@ -1,10 +1,12 @@
 """`motorlab dynamics collect`: transitions (state, action, next state, reward, done).
 
 Two collectors, one result format (transitions.py):
-- Reacher with random actions runs straight in MuJoCo (`reacher_sim.rollout_reacher`):
-  all episodes' substeps in C on every core, several times Gymnasium's Python stepping. Its
-  transitions are the ones Gymnasium's env gives for the same initial state and actions, to
-  ~1e-16 (tests/test_dynamics_collect.py).
+- Reacher with random actions runs in batches (`reacher_sim.rollout_reacher`): by default
+  the arm's closed-form equations of motion in NumPy over all episodes at once (`closed-form`,
+  tens of times Gymnasium's Python stepping), or MuJoCo's own step in C on every core
+  (`mujoco`). Their transitions are the ones Gymnasium's env gives for the same initial state
+  and actions: `mujoco` joint entries bit for bit, `closed-form` to MuJoCo's solver tolerance
+  (tests/test_dynamics_collect.py).
 - Any other env or policy (a trained run folder) steps Gymnasium envs in a process
   pool, one episode per seed, so the result does not depend on the number of workers.
 """
@@ -21,7 +23,7 @@ import gymnasium as gym
 import numpy as np
 from rich.progress import Progress
 
-from motorlab.dynamics.reacher_sim import arm_models, rollout_reacher, sample_initial_states
+from motorlab.dynamics.reacher_sim import arm_models, closed_form_arm, rollout_reacher, sample_initial_states
 from motorlab.dynamics.state import StateLayout, layout_for
 from motorlab.dynamics.transitions import TRANSITIONS, Transitions
 from motorlab.envs import EnvConfig, make_env
@@ -29,7 +31,8 @@ from motorlab.errors import MotorlabError
 from motorlab.faults import fault_line, fault_of, write_faults_log
 from motorlab.runs import prepare_run_dir, write_config, write_summary
 
-CHUNK = 1000  # episodes per batched MuJoCo rollout: bounds memory, paces the progress bar
+CHUNK = 4000  # episodes per batched rollout: bounds memory, paces the progress bar
+SIMULATORS = ("auto", "closed-form", "mujoco", "gymnasium")
 
 
 def _is_reacher(env: gym.Env) -> bool:
@@ -56,31 +59,44 @@ def _episode_arrays(obs, actions, rewards, terminated, truncated, layout: StateL
     )
 
 
-def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers: int, bar, task) -> dict:
+def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers: int, simulator: str,
+                     bar, task) -> dict:
     rng = np.random.default_rng(seed)
     steps = env.spec.max_episode_steps or 50
     low, high = env.action_space.low, env.action_space.high
-    parts, faults = [], []
+    obs_dim = env.observation_space.shape[0]
+    state_dim, goal_dim = layout.state(np.zeros(obs_dim)).shape[0], layout.goal(np.zeros(obs_dim)).shape[0]
+    # equal-length episodes: whole-array state extraction, written chunk by chunk into arrays
+    # sized for every episode (no per-episode Python, no concatenation of the parts)
+    rows = episodes * steps
+    out = dict(states=np.empty((rows, state_dim)), next_states=np.empty((rows, state_dim)),
+               goals=np.empty((rows, goal_dim)), actions=np.empty((rows, len(low))), rewards=np.empty(rows),
+               terminated=np.zeros(rows, dtype=bool), dones=np.zeros(rows, dtype=bool),
+               episode=np.empty(rows, dtype=np.int64))
+    # the closed form is one NumPy thread: a second thread on its short array operations slows it down
+    threads = 1 if simulator == "closed-form" else workers
+    filled, faults = 0, []
     for start in range(0, episodes, CHUNK):
         n = min(CHUNK, episodes - start)
         qpos, qvel = sample_initial_states(env, n, rng)
         actions = rng.uniform(low, high, size=(n, steps, len(low)))
-        obs, rewards = rollout_reacher(env, qpos, qvel, actions, threads=workers)
+        obs, rewards = rollout_reacher(env, qpos, qvel, actions, threads=threads, simulator=simulator)
         bad = ~(np.isfinite(obs).all(axis=(1, 2)) & np.isfinite(rewards).all(axis=1))
         faults += [f"seed={seed} episode={start + i}: non-finite observation or reward" for i in np.flatnonzero(bad)]
-        obs, rewards, actions, ids = obs[~bad], rewards[~bad], actions[~bad], np.arange(start, start + n)[~bad]
-        n = len(ids)
-        # equal-length episodes: whole-array state extraction, no per-episode Python
-        rows = n * steps
-        dones = np.zeros((n, steps), dtype=bool)
-        dones[:, -1] = True  # Reacher never terminates; the time limit truncates each episode's last step
-        parts.append(dict(
-            states=layout.state(obs[:, :-1]).reshape(rows, -1), next_states=layout.state(obs[:, 1:]).reshape(rows, -1),
-            goals=layout.goal(obs[:, :-1]).reshape(rows, -1), actions=actions.reshape(rows, -1),
-            rewards=rewards.reshape(rows), terminated=np.zeros(rows, dtype=bool), dones=dones.reshape(rows),
-            episode=np.repeat(ids, steps)))
-        bar.advance(task, len(bad))
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, faults
+        if bad.any():
+            obs, rewards, actions = obs[~bad], rewards[~bad], actions[~bad]
+        ids = np.arange(start, start + n)[~bad]
+        block = slice(filled, filled + len(ids) * steps)
+        out["states"][block] = layout.state(obs[:, :-1]).reshape(-1, state_dim)
+        out["next_states"][block] = layout.state(obs[:, 1:]).reshape(-1, state_dim)
+        out["goals"][block] = layout.goal(obs[:, :-1]).reshape(-1, goal_dim)
+        out["actions"][block] = actions.reshape(-1, len(low))
+        out["rewards"][block] = rewards.reshape(-1)
+        out["episode"][block] = np.repeat(ids, steps)
+        out["dones"][block.start + steps - 1:block.stop:steps] = True  # Reacher never terminates; the time
+        filled = block.stop                                             # limit truncates each last step
+        bar.advance(task, n)
+    return {k: v[:filled] for k, v in out.items()}, faults
 
 
 # ---- the Gymnasium pool: any env, random actions or a trained policy --------------
@@ -159,8 +175,9 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
         policy: "random" (uniform actions) or a run folder from `motorlab train`.
         workers: processes or threads (default: all cores).
         state: state layout, "auto" (reacher for Reacher ids, else the observation), "reacher", "observation".
-        simulator: "auto" (MuJoCo rollouts for Reacher with random actions, else Gymnasium),
-            "mujoco" or "gymnasium".
+        simulator: "auto" (for Reacher with random actions the arm's closed form where it reproduces
+            the model, else MuJoCo rollouts; Gymnasium for anything else), "closed-form", "mujoco"
+            or "gymnasium".
 
     Raises:
         MotorlabError: bad counts, unknown env or layout, a policy folder that does not fit the env.
@@ -169,8 +186,8 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
         raise MotorlabError(f"--episodes must be positive, got {episodes}.")
     if workers is not None and workers <= 0:
         raise MotorlabError(f"--workers must be positive, got {workers}.")
-    if simulator not in ("auto", "mujoco", "gymnasium"):
-        raise MotorlabError(f"--simulator {simulator!r}: choose auto, mujoco or gymnasium.")
+    if simulator not in SIMULATORS:
+        raise MotorlabError(f"--simulator {simulator!r}: choose {', '.join(SIMULATORS[:-1])} or {SIMULATORS[-1]}.")
     env_cfg = EnvConfig(id=env_id)
     env = make_env(env_cfg, shaped=False)
     layout = layout_for(env_id, env.observation_space.shape[0], state)
@@ -186,15 +203,21 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
             raise MotorlabError(f"the policy in {policy} expects observations of shape {expected.shape}, "
                                 f"{env_id} gives {env.observation_space.shape}; pick the env it was trained on.")
     fast = _is_reacher(env) and policy_dir is None
-    if simulator == "mujoco" and not fast:
-        raise MotorlabError("--simulator mujoco covers Reacher with random actions only; use auto or gymnasium.")
+    if simulator in ("closed-form", "mujoco") and not fast:
+        raise MotorlabError(f"--simulator {simulator} covers Reacher with random actions only; use auto or gymnasium.")
+    if simulator == "closed-form" and closed_form_arm(env) is None:
+        raise MotorlabError("this Reacher arm's dynamics are not the closed form's (it did not reproduce MuJoCo's "
+                            "accelerations); use --simulator mujoco.")
     fast = fast and simulator != "gymnasium"
+    used = "gymnasium"
+    if fast:
+        used = "mujoco" if simulator == "mujoco" or closed_form_arm(env) is None else "closed-form"
     workers = workers or os.cpu_count() or 1
     start = time.perf_counter()
     with Progress(disable=not progress, transient=False) as bar:
         task = bar.add_task(f"{env_id} episodes", total=episodes)
         if fast:
-            arrays, faults = _collect_reacher(env, episodes, seed, layout, workers, bar, task)
+            arrays, faults = _collect_reacher(env, episodes, seed, layout, workers, used, bar, task)
         else:
             arrays, faults = _collect_pool(env_cfg, policy_dir, episodes, seed, layout, workers, bar, task)
     if len(arrays["states"]) == 0:
@@ -205,7 +228,7 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
             "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),
             "action_low": env.action_space.low.tolist(), "action_high": env.action_space.high.tolist(),
             "policy": policy_dir or "random", "seed": seed, "episodes": episodes,
-            "simulator": "mujoco.rollout" if fast else "gymnasium", "workers": workers, "seconds": seconds,
+            "simulator": used, "workers": workers, "seconds": seconds,
             "numerical_faults": len(faults), "fault_log": faults}
     env.close()
     return Transitions(**arrays, meta=meta).check()
