@@ -156,7 +156,7 @@ def test_reacher_reward_in_torch_matches_the_env(reacher_data):
 
 @pytest.mark.parametrize("members", [1, 3])
 def test_fast_predict_equals_predict(members):
-    """The planner's folded-normalizer model computes the same next states."""
+    """The planner's folded-normalizer model computes the same next states, step by step and over a horizon."""
     rng = np.random.default_rng(0)
     model = ForwardModel(8, 2, members=members)
     model.fit_normalizers(rng.normal(1, 3, (200, 8)), rng.uniform(-1, 1, (200, 2)), rng.normal(1, 3, (200, 8))
@@ -165,6 +165,12 @@ def test_fast_predict_equals_predict(members):
     a = torch.as_tensor(rng.uniform(-1, 1, (64, 2)), dtype=torch.float32)
     with torch.no_grad():
         torch.testing.assert_close(model.fast_predict()(s, a), model.predict(s, a), rtol=1e-5, atol=1e-5)
+        plans = torch.as_tensor(rng.uniform(-1, 1, (64, 6, 2)), dtype=torch.float32)
+        path = model.fast_rollout()(s, plans)  # the planner's whole-horizon path, one step at a time
+        assert path.shape == (64, 7, 8)
+        torch.testing.assert_close(path[:, 0], s)
+        for t in range(6):
+            torch.testing.assert_close(path[:, t + 1], model.predict(path[:, t], plans[:, t]), rtol=1e-5, atol=1e-5)
 
 
 def test_damaged_model_json_is_checked_against_the_weights_before_allocating(reacher_data, tmp_path):

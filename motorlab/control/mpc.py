@@ -16,6 +16,7 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
+from motorlab.dynamics.model import stepwise_rollout
 from motorlab.errors import MotorlabError
 
 # (states (N, S), actions (N, H, A), goals (N, G)) -> returns (N,)
@@ -23,18 +24,21 @@ Scorer = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
 
 
 def model_scorer(model, reward_fn, discount: float = 1.0) -> Scorer:
-    """Return of each action sequence under the forward model and a torch reward."""
-    predict = model.fast_predict() if hasattr(model, "fast_predict") else model.predict
+    """Return of each action sequence under the forward model and a torch reward.
+
+    The model predicts the whole path first (`fast_rollout` where the model has one), then the
+    reward scores all H steps in one call on (N, H, ...) tensors: a reward is elementwise over
+    its leading dimensions, and one call instead of H saves ~10 torch calls per step ahead.
+    """
+    rollout = model.fast_rollout() if hasattr(model, "fast_rollout") else stepwise_rollout(model.predict)
 
     def score(states: torch.Tensor, actions: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
-        total = torch.zeros(states.shape[0])
-        s = states
-        for t in range(actions.shape[1]):
-            a = actions[:, t]
-            s_next = predict(s, a)
-            total = total + discount ** t * reward_fn(s, a, s_next, goals)
-            s = s_next
-        return total
+        h = actions.shape[1]
+        path = rollout(states, actions)
+        rewards = reward_fn(path[:, :-1], actions, path[:, 1:], goals[:, None].expand(-1, h, -1))
+        if discount != 1.0:
+            rewards = rewards * discount ** torch.arange(h, dtype=rewards.dtype)
+        return rewards.sum(1)
 
     return score
 

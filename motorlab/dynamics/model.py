@@ -92,6 +92,24 @@ class EnsembleMLP(nn.Module):
         return x
 
 
+def _hidden_and_out(x: torch.Tensor, layers, norms) -> torch.Tensor:
+    """The rest of a planning pass after the first layer's pre-activation x: tanh_layer_norm with
+    its 2x already folded into the weights (so layer_norm(sigmoid(.))), then the next layer."""
+    for (w, b), (lw, lb) in zip(layers, norms):
+        x = torch.addmm(b, F.layer_norm(torch.sigmoid(x), lw.shape, lw, lb, LN_EPS / 4), w)
+    return x
+
+
+def stepwise_rollout(predict):
+    """Open-loop paths (N, H+1, S) of states (N, S) under actions (N, H, A) from a one-step predict."""
+    def rollout(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        path = [states]
+        for t in range(actions.shape[1]):
+            path.append(predict(path[-1], actions[:, t]))
+        return torch.stack(path, 1)
+    return rollout
+
+
 class ForwardModel(nn.Module):
     """next_state = state + delta_norm.inverse(net([state_norm(s), action_norm(a)]))."""
 
@@ -133,44 +151,70 @@ class ForwardModel(nn.Module):
         delta = delta[0] if self.members == 1 else delta.mean(0)
         return states + self.delta_norm.inverse(delta).reshape(states.shape)
 
+    @torch.no_grad()
+    def _planning_layers(self) -> tuple[list[torch.Tensor], list[torch.Tensor], list[tuple[torch.Tensor, torch.Tensor]]]:
+        """Weights, biases and layer-norm affines with the normalizers folded into the first and last
+        layers, and tanh_layer_norm's 2x folded into the layers that feed it."""
+        net = self.net
+        w_in = torch.cat([1 / self.state_norm.std, 1 / self.action_norm.std]).float()[None, :, None]
+        shift = torch.cat([self.state_norm.mean, self.action_norm.mean]).float()
+        w0 = net.weights[0] * w_in  # (K, in, h): x_norm @ W = x @ (W / std) - (mean / std) @ W
+        scaled_shift = shift / torch.cat([self.state_norm.std, self.action_norm.std]).float()
+        b0 = net.biases[0] - (scaled_shift @ net.weights[0])[:, None]
+        std_d, mean_d = self.delta_norm.std.float(), self.delta_norm.mean.float()
+        w_last = net.weights[-1] * std_d  # delta = z * std + mean, folded into the output layer
+        b_last = net.biases[-1] * std_d + mean_d
+        ws = [2 * w0, *(2 * w for w in net.weights[1:-1]), w_last]
+        bs = [2 * b0, *(2 * b for b in net.biases[1:-1]), b_last]
+        return ws, bs, [(w, b) for w, b in zip(net.ln_weights, net.ln_biases)]
+
     def fast_predict(self):
         """predict() for planning: the normalizers folded into the first and last layers, the input
         concatenation split into two matmuls, no autograd. ~Half the torch calls per step, which is
         what a small-batch planner pays for (per-call overhead, not FLOPs, dominates on a CPU)."""
-        with torch.no_grad():
-            net, n_s = self.net, self.state_size
-            w_in = torch.cat([1 / self.state_norm.std, 1 / self.action_norm.std]).float()[None, :, None]
-            shift = torch.cat([self.state_norm.mean, self.action_norm.mean]).float()
-            w0 = net.weights[0] * w_in  # (K, in, h): x_norm @ W = x @ (W / std) - (mean / std) @ W
-            scaled_shift = shift / torch.cat([self.state_norm.std, self.action_norm.std]).float()
-            b0 = net.biases[0] - (scaled_shift @ net.weights[0])[:, None]
-            std_d, mean_d = self.delta_norm.std.float(), self.delta_norm.mean.float()
-            w_last = net.weights[-1] * std_d  # delta = z * std + mean, folded into the output layer
-            b_last = net.biases[-1] * std_d + mean_d
-            # the hidden layers feed tanh_layer_norm: fold its 2x into their weights
-            ws = [2 * w0, *(2 * w for w in net.weights[1:-1]), w_last]
-            bs = [2 * b0, *(2 * b for b in net.biases[1:-1]), b_last]
-            lns = [(w, b) for w, b in zip(net.ln_weights, net.ln_biases)]
-            if self.members == 1:
-                ws0s, ws0a = ws[0][0, :n_s].clone(), ws[0][0, n_s:].clone()
-                rest = [(w[0].clone(), b[0, 0].clone()) for w, b in zip(ws[1:], bs[1:])]
-                b00 = bs[0][0, 0].clone()
-                lns1 = [(w[0, 0].clone(), b[0, 0].clone()) for w, b in lns]
+        ws, bs, lns = self._planning_layers()
+        if self.members == 1:
+            first_s, first_a, first_b, rest, norms = self._single_member(ws, bs, lns)
 
-                def step(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-                    x = torch.addmm(b00, states, ws0s).addmm_(actions, ws0a)
-                    for (w, b), (lw, lb) in zip(rest, lns1):
-                        x = torch.addmm(b, F.layer_norm(torch.sigmoid(x), lw.shape, lw, lb, LN_EPS / 4), w)
-                    return states + x
-            else:
-                def step(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-                    x = torch.cat([states, actions], -1).expand(self.members, -1, -1)
-                    for i, (w, b) in enumerate(zip(ws, bs)):
-                        x = torch.baddbmm(b, x, w)
-                        if i < len(lns):
-                            x = F.layer_norm(torch.sigmoid(x), x.shape[-1:], eps=LN_EPS / 4) * lns[i][0] + lns[i][1]
-                    return states + x.mean(0)
+            @torch.no_grad()
+            def step(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+                return states + _hidden_and_out(torch.addmm(first_b, states, first_s).addmm_(actions, first_a),
+                                                rest, norms)
+        else:
+            @torch.no_grad()
+            def step(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+                x = torch.cat([states, actions], -1).expand(self.members, -1, -1)
+                for i, (w, b) in enumerate(zip(ws, bs)):
+                    x = torch.baddbmm(b, x, w)
+                    if i < len(lns):
+                        x = F.layer_norm(torch.sigmoid(x), x.shape[-1:], eps=LN_EPS / 4) * lns[i][0] + lns[i][1]
+                return states + x.mean(0)
         return step
+
+    def fast_rollout(self):
+        """Open-loop paths for planning: states (N, S) under action sequences (N, H, A) -> (N, H+1, S),
+        fast_predict applied H times. With one member, the first layer's action part of all H steps
+        is one matmul up front, so each step is one matmul per layer."""
+        if self.members != 1:
+            return stepwise_rollout(self.fast_predict())
+        first_s, first_a, first_b, rest, norms = self._single_member(*self._planning_layers())
+
+        @torch.no_grad()
+        def rollout(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+            action_part = torch.matmul(actions, first_a).add_(first_b)  # (N, H, hidden)
+            path = [states]
+            for t in range(actions.shape[1]):
+                path.append(path[-1] + _hidden_and_out(torch.addmm(action_part[:, t], path[-1], first_s), rest, norms))
+            return torch.stack(path, 1)
+        return rollout
+
+    @torch.no_grad()
+    def _single_member(self, ws, bs, lns):
+        """Member 0's planning layers as 2-d tensors: the first layer split into its state and action rows."""
+        n_s = self.state_size
+        rest = [(w[0].clone(), b[0, 0].clone()) for w, b in zip(ws[1:], bs[1:])]
+        norms = [(w[0, 0].clone(), b[0, 0].clone()) for w, b in lns]
+        return ws[0][0, :n_s].clone(), ws[0][0, n_s:].clone(), bs[0][0, 0].clone(), rest, norms
 
     # ---- files -------------------------------------------------------------------
 
