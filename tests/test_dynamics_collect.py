@@ -102,6 +102,9 @@ def test_closed_form_equals_mujoco_forward_dynamics():
     tilted = copy.copy(model)
     tilted.opt.gravity[:] = (0.0, -9.81, 0.0)  # now gravity pulls the links round their hinges
     assert PlanarArm.from_model(tilted) is None
+    both_limited = copy.copy(model)
+    both_limited.jnt_limited[0] = 1  # two soft limits at once: a coupled problem the closed form leaves to MuJoCo
+    assert PlanarArm.from_model(both_limited) is None and PlanarArm.from_model(model) == arm
 
 
 def test_rollouts_simulate_the_arm_alone_for_stock_and_user_xml(tmp_path):

@@ -205,13 +205,14 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
     fast = _is_reacher(env) and policy_dir is None
     if simulator in ("closed-form", "mujoco") and not fast:
         raise MotorlabError(f"--simulator {simulator} covers Reacher with random actions only; use auto or gymnasium.")
-    if simulator == "closed-form" and closed_form_arm(env) is None:
-        raise MotorlabError("this Reacher arm's dynamics are not the closed form's (it did not reproduce MuJoCo's "
-                            "accelerations); use --simulator mujoco.")
     fast = fast and simulator != "gymnasium"
     used = "gymnasium"
     if fast:
-        used = "mujoco" if simulator == "mujoco" or closed_form_arm(env) is None else "closed-form"
+        closed = closed_form_arm(env) is not None
+        if simulator == "closed-form" and not closed:
+            raise MotorlabError("this Reacher arm's dynamics are not the closed form's (it did not reproduce "
+                                "MuJoCo's accelerations); use --simulator mujoco.")
+        used = "closed-form" if closed and simulator != "mujoco" else "mujoco"
     workers = workers or os.cpu_count() or 1
     start = time.perf_counter()
     with Progress(disable=not progress, transient=False) as bar:

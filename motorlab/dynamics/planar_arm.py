@@ -4,9 +4,10 @@ Why not MuJoCo itself: for a 2-DOF model almost all of a MuJoCo step is the gene
 pipeline's per-call bookkeeping (~1.4 µs per forward pass, eight per Reacher action), so
 `mujoco.rollout` tops out near 90k transitions/s per core. The arm's equations of motion
 fit in a few lines and run as NumPy array operations over thousands of episodes at once,
-~10x faster per core. Every operation follows the order MuJoCo's C code uses (RK4's stage
+~20x faster per core. Every operation follows the order MuJoCo's C code uses (RK4's stage
 sums, the LDL solve, the soft joint-limit constraint), so the states agree with MuJoCo's to
-rounding. `PlanarArm.from_model` takes its constants from the compiled MjModel and checks
+rounding wherever MuJoCo's constraint solver converges (it stops at its tolerance; see
+reacher_sim for what that leaves). `PlanarArm.from_model` takes its constants from the compiled MjModel and checks
 the closed form against `mj_forward` at random states, limits included; any model it does
 not reproduce gets `None`, and the caller simulates it with `mujoco.rollout` instead.
 
@@ -221,14 +222,15 @@ class PlanarArm:
 
 
 def _is_planar_pair(model: mujoco.MjModel) -> bool:
-    """Two hinges in a chain about the same axis, two plain motors on them, RK4, nothing else acting."""
+    """Two hinges in a chain, two plain motors on them, RK4, at most one joint limit (one soft
+    constraint, whose solution is closed-form), nothing else acting."""
     if model.nq != 2 or model.nv != 2 or model.nu != 2 or model.na != 0 or model.neq or model.ntendon:
         return False
     hinge = mujoco.mjtJoint.mjJNT_HINGE
     if not (np.all(model.jnt_type == hinge) and model.dof_parentid[1] == 0 and model.dof_parentid[0] == -1):
         return False
     if model.opt.integrator != mujoco.mjtIntegrator.mjINT_RK4 or np.any(model.jnt_stiffness) \
-            or np.any(model.dof_frictionloss):
+            or np.any(model.dof_frictionloss) or np.count_nonzero(model.jnt_limited) > 1:
         return False
     motors = (np.all(model.actuator_trntype == mujoco.mjtTrn.mjTRN_JOINT)
               and list(model.actuator_trnid[:, 0]) == [0, 1]
