@@ -254,6 +254,7 @@ def test_sar_hand_is_the_reference_study_with_the_fast_preset():
             assert (f.train.env, f.train.timesteps) == (r.train.env, r.train.timesteps)
             assert f.train.hyperparams["learning_starts"] == r.train.hyperparams["learning_starts"]
             assert (f.train.n_envs, r.train.n_envs) == (4, 1)
+            assert f.train.torch_threads == r.train.torch_threads == 1  # two trainings at once share 2 cores
         else:
             assert f.settings == r.settings
 
