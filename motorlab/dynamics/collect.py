@@ -73,14 +73,12 @@ def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers
                goals=np.empty((rows, goal_dim)), actions=np.empty((rows, len(low))), rewards=np.empty(rows),
                terminated=np.zeros(rows, dtype=bool), dones=np.zeros(rows, dtype=bool),
                episode=np.empty(rows, dtype=np.int64))
-    # the closed form is one NumPy thread: a second thread on its short array operations slows it down
-    threads = 1 if simulator == "closed-form" else workers
     filled, faults = 0, []
     for start in range(0, episodes, CHUNK):
         n = min(CHUNK, episodes - start)
         qpos, qvel = sample_initial_states(env, n, rng)
         actions = rng.uniform(low, high, size=(n, steps, len(low)))
-        obs, rewards = rollout_reacher(env, qpos, qvel, actions, threads=threads, simulator=simulator)
+        obs, rewards = rollout_reacher(env, qpos, qvel, actions, threads=workers, simulator=simulator)
         bad = ~(np.isfinite(obs).all(axis=(1, 2)) & np.isfinite(rewards).all(axis=1))
         faults += [f"seed={seed} episode={start + i}: non-finite observation or reward" for i in np.flatnonzero(bad)]
         if bad.any():
