@@ -27,12 +27,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from motorlab.control.mpc_step import build_policy, run_episodes
-from motorlab.dynamics.collect import collect_step
+from motorlab.control.mpc_episodes import build_policy, run_episodes
+from motorlab.control.steps import MpcSettings
 from motorlab.dynamics.model import load_model
 from motorlab.dynamics.rewards import reacher_distance
 from motorlab.dynamics.state import REACHER
-from motorlab.dynamics.train import fit_step
+from motorlab.dynamics.steps import DYNAMICS_COLLECT, DYNAMICS_FIT
 from motorlab.envs import EnvConfig, make_env
 
 TARGETS = {"plan_ms_median": 5.0, "return_mean": -4.0, "final_distance_mean": 0.010, "pipeline_seconds": 180.0}
@@ -111,18 +111,21 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         start = time.perf_counter()
-        collected = collect_step("Reacher-v5", args.collect_episodes, seed=args.seed, out=tmp / "data", progress=False)
-        fitted = fit_step(tmp / "data", seed=args.seed, out=tmp / "model", progress=False)
+        collected = DYNAMICS_COLLECT.run(DYNAMICS_COLLECT.make(env="Reacher-v5", episodes=args.collect_episodes,
+                                                               seed=args.seed), tmp / "data", progress=False)
+        fitted = DYNAMICS_FIT.run(DYNAMICS_FIT.make(transitions=str(tmp / "data"), seed=args.seed), tmp / "model",
+                                  progress=False)
         env = make_env(EnvConfig(id="Reacher-v5"), shaped=False)
-        policy = build_policy(env, "Reacher-v5", tmp / "model", seed=args.seed)
+        plan = MpcSettings(env="Reacher-v5", model=str(tmp / "model")).plan()  # motorlab mpc's defaults
+        policy = build_policy(env, "Reacher-v5", tmp / "model", seed=args.seed, **plan)
         returns, distances, _, per_env_ms, _ = run_episodes("Reacher-v5", policy, args.episodes, 10_000 + args.seed, 1,
                                                          progress=False)
         pipeline = time.perf_counter() - start
         ours = {"return_mean": float(returns.mean()), "return_std": float(returns.std()),
                 "final_distance_mean": float(distances[:, -1].mean()), "plan_ms_median": float(np.median(per_env_ms)),
                 "episodes": args.episodes, "pipeline_seconds": pipeline,
-                "collect_seconds": collected["collect_seconds"], "fit_seconds": fitted["wall_seconds"],
-                "valid_mse": fitted["valid_mse"],
+                "collect_seconds": collected.collect_seconds, "fit_seconds": fitted.wall_seconds,
+                "valid_mse": fitted.valid_mse,
                 "planner": {k: getattr(policy.planner, k) for k in ("horizon", "population", "iterations", "elites")}}
         reference = reference_episodes(load_model(tmp / "model"), args.reference_episodes, 10_000 + args.seed)
     slowdown = reference["plan_ms_median"] / ISSUE_REFERENCE_PLAN_MS

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import importlib
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -23,8 +23,16 @@ import numpy as np
 from motorlab.control.lqr import LQRPolicy
 from motorlab.control.pid import make_pid
 from motorlab.errors import MotorlabError
-from motorlab.evaluate import Policy
 from motorlab.runs import atomic_write_bytes, read_json, require_run_dir, write_json
+
+
+class Policy(Protocol):
+    """What every policy does: start a batch of episodes, map observations to actions."""
+
+    def reset(self, n: int) -> None: ...
+
+    def act(self, obs: np.ndarray) -> np.ndarray: ...
+
 
 POLICY_JSON = "policy.json"
 POLICY_WEIGHTS = "policy.safetensors"

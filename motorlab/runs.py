@@ -32,13 +32,13 @@ def default_out(step: str) -> Path:
     return Path("runs") / f"{step}-{time.strftime('%Y%m%d-%H%M%S')}"
 
 
-def _umask() -> int:
+def current_umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
 
 
-_FILE_MODE = 0o666 & ~_umask()  # what open() gives; mkstemp's 0600 would hide plots and videos from others
+_FILE_MODE = 0o666 & ~current_umask()  # what open() gives; mkstemp's 0600 would hide plots and videos from others
 
 
 @contextlib.contextmanager
@@ -100,7 +100,7 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     atomic_write_text(Path(path), json.dumps(_plain(data), indent=2, sort_keys=False) + "\n")
 
 
-def _read_text_file(path: Path, parse, fmt: str, fix: str) -> dict[str, Any]:
+def read_text_file(path: Path, parse, fmt: str, fix: str) -> dict[str, Any]:
     """Parse a file a step wrote; a missing or corrupt file gives one clear error."""
     path = Path(path)
     if not path.is_file():
@@ -112,7 +112,7 @@ def _read_text_file(path: Path, parse, fmt: str, fix: str) -> dict[str, Any]:
 
 
 def read_json(path: Path) -> dict[str, Any]:
-    return _read_text_file(path, json.loads, "JSON", "run the step that writes it first.")
+    return read_text_file(path, json.loads, "JSON", "run the step that writes it first.")
 
 
 def _config_toml(config: dict[str, Any]) -> str:
@@ -157,7 +157,7 @@ def write_toml(path: Path, config: dict[str, Any]) -> None:
 def read_config(run_dir: Path) -> dict[str, Any]:
     import tomllib
 
-    return _read_text_file(Path(run_dir) / CONFIG, tomllib.loads, "TOML",
+    return read_text_file(Path(run_dir) / CONFIG, tomllib.loads, "TOML",
                            f"{run_dir} is not a motorlab run folder.")
 
 

@@ -42,6 +42,12 @@ def assert_one_line_error(proc: subprocess.CompletedProcess, *fragments: str) ->
     return lines[0]
 
 
+def run_kind(kind, out: Path, progress: bool = False, **fields) -> dict:
+    """Run a step kind in this process, as the Python API does: its summary.json keys and run_dir."""
+    summary = kind.run(kind.make(**fields), out, progress=progress)
+    return {**summary.keys(), "run_dir": str(summary.run_dir)}
+
+
 def read_summary(run_dir: Path) -> dict:
     return json.loads((Path(run_dir) / "summary.json").read_text())
 

@@ -10,7 +10,6 @@ import pytest
 
 from helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli
 
-
 # ---- train -------------------------------------------------------------------------
 
 TRAIN_ERRORS = [

@@ -3,19 +3,36 @@ P-th percentile of the preview returns; the result depends on seeds, not on work
 
 from __future__ import annotations
 
+import importlib
 import json
 
 import numpy as np
 import pytest
 import torch
 
-from helpers import (COLLECT_EPISODES, COLLECT_PERCENTILE, COLLECT_PREVIEW, COLLECT_SEED, HAND_ID, HAND_MUSCLES,
-                     assert_one_line_error, read_summary, run_cli)
+from helpers import (
+    COLLECT_EPISODES,
+    COLLECT_PERCENTILE,
+    COLLECT_PREVIEW,
+    COLLECT_SEED,
+    HAND_ID,
+    HAND_MUSCLES,
+    assert_one_line_error,
+    read_summary,
+    run_cli,
+    run_kind,
+)
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.policies import load_run_policy
-from motorlab.synergy import collect as collect_mod
-from motorlab.synergy.collect import Episode, collect
+from motorlab.synergy.collect import Episode
+from motorlab.synergy.steps import COLLECT
+
+collect_mod = importlib.import_module("motorlab.synergy.collect")  # the module (motorlab.synergy.collect is the function)
+
+
+def collect(run_dir, out, progress=False, **fields):
+    return run_kind(COLLECT, out, progress, run=str(run_dir), **fields)
 
 
 def load(path) -> dict[str, np.ndarray]:

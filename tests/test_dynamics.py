@@ -35,7 +35,7 @@ def test_collected_reacher_transitions_are_gymnasiums(reacher_data):
         qpos = np.r_[np.arctan2(s0[2:4], s0[0:2]), d.goals[rows[0]]]
         qvel = np.r_[s0[4:6], 0.0, 0.0]
         env.unwrapped.set_state(qpos, qvel)
-        for i, r in enumerate(rows):
+        for _i, r in enumerate(rows):
             obs, reward, *_ = env.step(d.actions[r])
             tip = obs[8:10] + obs[4:6]
             np.testing.assert_allclose(d.next_states[r][:6], np.r_[obs[0:4], obs[6:8]], atol=1e-9)

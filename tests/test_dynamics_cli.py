@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+
 from helpers import assert_ok, assert_one_line_error, assert_png, read_summary, run_cli
 
 

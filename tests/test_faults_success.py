@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from helpers import assert_one_line_error, episode_rows, read_metrics_rows, read_summary, run_cli
-from motorlab.envs import EnvConfig, make_env
+from helpers import assert_one_line_error, episode_rows, read_metrics_rows, read_summary, run_cli, run_kind
 from motorlab.cli import app
-from motorlab.dynamics.collect import collect_step
-from motorlab.evaluate import EpisodeSuccess, Evaluator, evaluate, success_mode
+from motorlab.dynamics.steps import DYNAMICS_COLLECT
+from motorlab.envs import EnvConfig, make_env
+from motorlab.evaluation import EpisodeSuccess, Evaluator, evaluate, success_mode
 from motorlab.policies import ZeroPolicy
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.tracking import Tracker
@@ -92,7 +92,7 @@ for _id, _cls in ((FAULTY_ID, FaultyEnv), (SOLVED_ONCE_ID, SolvedOnceEnv)):
 def test_guard_ends_a_nan_episode_with_zero_reward():
     env = make_env(EnvConfig(id=FAULTY_ID))
     env.reset(seed=0, options={"faulty": True})
-    for t in range(1, FAULT_STEP):
+    for _t in range(1, FAULT_STEP):
         obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
         assert reward == 1.0 and not terminated and "numerical_fault" not in info
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
@@ -107,7 +107,7 @@ def test_guard_ends_an_episode_with_a_nan_reward():
     env = make_env(EnvConfig(id=FAULTY_ID))
     env.reset(seed=0, options={"faulty": True, "what": "reward"})
     rewards = []
-    for t in range(1, FAULT_STEP + 1):
+    for _t in range(1, FAULT_STEP + 1):
         obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
         rewards.append(reward)
     assert terminated and "non-finite reward" in info["numerical_fault"]
@@ -118,7 +118,7 @@ def test_guard_ends_an_episode_with_a_nan_reward():
 def test_guard_leaves_healthy_episodes_alone():
     env = make_env(EnvConfig(id=FAULTY_ID))
     env.reset(seed=0, options={"faulty": False})
-    for t in range(1, EPISODE_STEPS + 1):
+    for _t in range(1, EPISODE_STEPS + 1):
         obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
         assert reward == 1.0 and not terminated and "numerical_fault" not in info
     assert truncated
@@ -182,7 +182,7 @@ def test_dynamics_collect_drops_the_faulted_step(tmp_path):
 
     episodes = 10
     faulty = np.array(expected_faults(range(episodes)))
-    summary = collect_step(FAULTY_ID, episodes, workers=1, out=tmp_path / "data", progress=False)
+    summary = run_kind(DYNAMICS_COLLECT, tmp_path / "data", env=FAULTY_ID, episodes=episodes, workers=1)
     data = load_transitions(tmp_path / "data")
     lengths = np.bincount(data.episode, minlength=episodes)
     np.testing.assert_array_equal(lengths, np.where(faulty, FAULT_STEP - 1, EPISODE_STEPS))
@@ -201,10 +201,10 @@ def faulty_run(tmp_path_factory):
 
 
 def test_synergy_collect_never_keeps_a_faulted_episode(faulty_run, tmp_path):
-    from motorlab.synergy.collect import collect
+    from motorlab.synergy.steps import COLLECT
 
     run, _ = faulty_run
-    summary = collect(run, episodes=4, percentile=0.0, preview=6, workers=1, out=tmp_path / "c", progress=False)
+    summary = run_kind(COLLECT, tmp_path / "c", run=str(run), episodes=4, percentile=0.0, preview=6, workers=1)
     with np.load(tmp_path / "c" / "activations.npz", allow_pickle=False) as f:
         seeds, episode, acts = f["seeds"], f["episode"], f["activations"]
     preview_faulty = expected_faults(range(6))

@@ -24,7 +24,9 @@ import tomli_w
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from helpers import run_kind
 from motorlab.cli import main
+from motorlab.kinds import KINDS as REGISTRY
 
 FUZZ = settings(max_examples=60, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow,
@@ -108,12 +110,11 @@ def accepted_or_error(box: Sandbox, *args) -> str:
 
 # ---- recipe files -----------------------------------------------------------------------
 
-KINDS = ["train", "evaluate", "compare", "synergies-collect", "synergies-vaf", "synergies-fit", "zeroshot",
-         "dynamics-collect", "dynamics-fit", "dynamics-check", "mpc", "trian", 3]
+KINDS = [*REGISTRY, "trian", 3]  # every kind a recipe can name, and two it cannot
 FIELD_NAMES = ["env", "algo", "timesteps", "seed", "seeds", "delay", "history", "policy", "episodes", "lr",
                "preset", "hyperparams", "runs", "model", "transitions", "epochs", "horizon", "population",
                "activations", "n", "vaf", "method", "sar", "phi", "envs", "run", "percentile", "reward",
-               "until_solved", "name", "kind", "timestep", "bogus"]
+               "until_solved", "name", "kind", "timestep", "bogus", "threshold", "groups", "title", "camera"]
 SCALARS = st.one_of(
     st.sampled_from(["InvertedPendulum-v5", REACHER, "NoSuch-v0", "ppo", "sac", "lqr", "@a", "@b", "@s1", "",
                      "linear:1e-3", "pid", "fast", "pca-ica", "nmf", "quadratic", "1e-3", "-1"]),
@@ -290,12 +291,11 @@ def mutated_npz(path: Path, base: dict[str, np.ndarray], data) -> None:
 @pytest.fixture(scope="module")
 def reacher_files(tmp_path_factory):
     """A small real transitions.npz and a model fit on it (one epoch)."""
-    from motorlab.dynamics.collect import collect_step
-    from motorlab.dynamics.train import fit_step
+    from motorlab.dynamics.steps import DYNAMICS_COLLECT, DYNAMICS_FIT
 
     root = tmp_path_factory.mktemp("reacher")
-    collect_step(REACHER, 4, workers=1, out=root / "data", progress=False)
-    fit_step(root / "data", epochs=1, hidden=(8,), batch_size=50, out=root / "model", progress=False)
+    run_kind(DYNAMICS_COLLECT, root / "data", env=REACHER, episodes=4, workers=1)
+    run_kind(DYNAMICS_FIT, root / "model", transitions=str(root / "data"), epochs=1, hidden=[8], batch_size=50)
     with np.load(root / "data" / "transitions.npz", allow_pickle=False) as f:
         transitions = {k: f[k] for k in f.files}
     return root, transitions

@@ -7,7 +7,7 @@ import pytest
 
 from motorlab.control.lqr import LQRPolicy, LQRSettings, companion_form, fit_linear_model, learn_lqr, lqr_gain
 from motorlab.envs import EnvConfig
-from motorlab.evaluate import evaluate
+from motorlab.evaluation import evaluate
 
 
 def spectral_radius(M: np.ndarray) -> float:

@@ -11,7 +11,7 @@ import motorlab.envs
 from helpers import HAND_ID, HAND_MUSCLES, assert_one_line_error, run_cli
 from motorlab.envs import EnvConfig, check_env_id, make_env
 from motorlab.errors import MotorlabError
-from motorlab.evaluate import step_success
+from motorlab.evaluation import step_success
 from motorlab.synergy.collect import muscle_activations
 
 

@@ -18,7 +18,7 @@ from rich.console import Console
 from helpers import assert_ok, assert_one_line_error, read_summary, run_cli
 from motorlab.recipes import parse_recipe
 from motorlab.runs import last_timesteps
-from motorlab.studies.schedule import run_overlapped, step_inputs
+from motorlab.studies.schedule import run_overlapped
 
 TINY = 'algo = "ppo"\nhyperparams = { n_steps = 128, batch_size = 64 }\n'
 STUDY = f"""
@@ -89,7 +89,7 @@ name = "curves"
 kind = "compare"
 groups = { "SAR" = ["@sar-rl"], "E2E" = ["@e2e"] }
 """)
-    assert {s.name: step_inputs(s) for s in recipe.steps} == {
+    assert {s.name: s.inputs() for s in recipe.steps} == {
         "play": [], "collect": ["play"], "fit": ["collect"], "sar-rl": ["fit"], "e2e": [],
         "zeroshot": ["sar-rl", "e2e"], "curves": ["sar-rl", "e2e"]}
 
@@ -102,10 +102,10 @@ def _fake_run(log: list, active: set, peak: list, fail: str | None = None, slow:
     def run(step, detached, stop):
         with lock:
             log.append(("start", step.name, detached))
-            if step.kind == "train":
+            if step.kind.trains:
                 active.add(step.name)
                 peak[0] = max(peak[0], len(active))
-        deadline = time.monotonic() + (10 if step.name == slow else 0.3 if step.kind == "train" else 0.05)
+        deadline = time.monotonic() + (10 if step.name == slow else 0.3 if step.kind.trains else 0.05)
         while time.monotonic() < deadline and not stop.is_set():
             time.sleep(0.01)
         with lock:
@@ -244,7 +244,7 @@ def test_sar_studies_train_their_two_chains_at_once(name):
     from motorlab.recipes import load_recipe
 
     recipe = load_recipe(name)
-    inputs = {s.name: step_inputs(s) for s in recipe.steps}
+    inputs = {s.name: s.inputs() for s in recipe.steps}
     assert recipe.parallel_steps == 2
     assert inputs["rl-e2e"] == [] and inputs["play"] == []  # two chains: nothing joins them before the end
     chain, step = [], "sar-rl"

@@ -8,7 +8,7 @@ import pytest
 from motorlab.control.pid import PIDController, make_pid, parse_gains
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.evaluate import evaluate
+from motorlab.evaluation import evaluate
 from motorlab.policies import load_policy
 
 

@@ -7,9 +7,9 @@ import shutil
 import matplotlib.image
 import numpy as np
 
-from helpers import ENV_ID, assert_ok, assert_png, run_cli
+from helpers import ENV_ID, assert_ok, assert_png, run_cli, run_kind
 from motorlab.envs import EnvConfig
-from motorlab.evaluate import evaluate_step
+from motorlab.evaluation.steps import EVALUATE
 from motorlab.report.plots import comparison_bars, obs_labels, observation_trace
 from motorlab.report.run import plot_run
 
@@ -44,7 +44,7 @@ def test_plot_run_is_reproducible(fast_run, tmp_path):
 
 def test_plot_run_on_evaluation_run_has_no_learning_curve(tmp_path):
     run = tmp_path / "eval-pid"
-    evaluate_step("pid", EnvConfig(id=ENV_ID), episodes=1, seed=0, out=run)
+    run_kind(EVALUATE, run, policy="pid", env=EnvConfig(id=ENV_ID), episodes=1, seed=0)
     written = plot_run(run)
     assert [p.name for p in written] == ["observation_trace.png"]
     assert not (run / "plots" / "learning_curve.png").exists()
@@ -55,7 +55,7 @@ def test_plot_run_with_history_and_delay(tmp_path):
     # PID gains on the newest frame of a 2-frame history; the trace shows that frame.
     spec = "pid:kp=[0,0,0,0,1,20,0,0],ki=0,kd=[0,0,0,0,1,3,0,0]"
     run = tmp_path / "eval-history"
-    summary = evaluate_step(spec, EnvConfig(id=ENV_ID, history=2, delay=0.2), episodes=1, seed=0, out=run)
+    summary = run_kind(EVALUATE, run, policy=spec, env=EnvConfig(id=ENV_ID, history=2, delay=0.2), episodes=1, seed=0)
     assert summary["history"] == 2
     (trace,) = plot_run(run)
     assert_png(trace)

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import pytest
-from helpers import assert_ok, assert_one_line_error, read_summary, run_cli
 
+from helpers import assert_ok, assert_one_line_error, read_summary, run_cli
 from motorlab.recipes import load_recipe
 
 TINY = """
@@ -77,7 +77,7 @@ def test_rerun_keeps_finished_steps(study):
 @pytest.mark.parametrize("name", ["reacher", "reacher-quick"])
 def test_bundled_reacher_recipes_parse(name):
     recipe = load_recipe(name)
-    assert [s.kind for s in recipe.steps] == ["dynamics-collect", "dynamics-fit", "dynamics-check", "mpc"]
+    assert [s.kind.name for s in recipe.steps] == ["dynamics-collect", "dynamics-fit", "dynamics-check", "mpc"]
 
 
 @pytest.mark.parametrize("change, fragments", [

@@ -28,38 +28,38 @@ def test_pendulum_recipe_parses():
     assert recipe.name == "pendulum"
     assert len(recipe.steps) >= 7
     # Every [[steps]] table became one validated step, in order, of the kind it names.
-    assert [(s.name, s.kind) for s in recipe.steps] == [(r["name"], r["kind"]) for r in raw["steps"]]
-    kinds = {s.kind for s in recipe.steps}
+    assert [(s.name, s.kind.name) for s in recipe.steps] == [(r["name"], r["kind"]) for r in raw["steps"]]
+    kinds = {s.kind.name for s in recipe.steps}
     assert kinds == {"train", "evaluate"}
     by_name = {s.name: s for s in recipe.steps}
     for r, step in zip(raw["steps"], recipe.steps):
         # [defaults] reach every step unless the step sets the field itself.
-        env = step.train.env if step.train else step.evaluate.env
+        env = step.settings.env
         assert env.id == r.get("env", raw["defaults"]["env"])
         assert env.delay == r.get("delay")
         assert env.history == r.get("history", 1)
-        assert (step.train or step.evaluate).seed == r.get("seed", raw["defaults"]["seed"])
-        if step.kind == "train":
-            assert step.train.timesteps == r["timesteps"]
-            assert step.train.until_solved == r.get("until_solved", False)
-            assert step.train.preset == r.get("preset")
+        assert step.settings.seed == r.get("seed", raw["defaults"]["seed"])
+        if step.kind.name == "train":
+            assert step.settings.timesteps == r["timesteps"]
+            assert step.settings.until_solved == r.get("until_solved", False)
+            assert step.settings.preset == r.get("preset")
             if r.get("preset") == "fast":
-                assert step.train.algo == "lqr"
+                assert step.settings.algo == "lqr"
             elif r.get("preset") == "sb3-ppo":
-                assert step.train.algo == "ppo"
+                assert step.settings.algo == "ppo"
         else:
-            assert step.evaluate.episodes == r.get("episodes", raw["defaults"]["episodes"])
+            assert step.settings.episodes == r.get("episodes", raw["defaults"]["episodes"])
             if r["policy"].startswith("@"):
                 # A reference names an earlier train step; evaluation starts from its env.
-                ref = by_name[step.policy_ref]
-                assert ref.kind == "train"
+                (ref,) = [by_name[name] for name in step.inputs()]
+                assert ref.kind.name == "train"
                 assert recipe.steps.index(ref) < recipe.steps.index(step)
-                assert step.evaluate.env.history == ref.train.env.history
+                assert step.settings.env.history == ref.settings.env.history
             else:
-                assert step.evaluate.policy == r["policy"]
+                assert step.settings.policy == r["policy"]
     # The study compares PID, PPO and the fast preset, with and without delay.
-    assert any(s.kind == "evaluate" and s.evaluate.policy == "pid" for s in recipe.steps)
-    trained = [s.train for s in recipe.steps if s.kind == "train"]
+    assert any(s.kind.name == "evaluate" and s.settings.policy == "pid" for s in recipe.steps)
+    trained = [s.settings for s in recipe.steps if s.kind.name == "train"]
     assert {"ppo", "lqr"} <= {t.algo for t in trained}
     assert any(t.env.delay for t in trained) and any(t.env.history > 1 for t in trained)
 
@@ -94,11 +94,11 @@ def test_defaults_and_references_resolve():
         delay = 0.2
         """), "r.toml")
     train, ev = recipe.steps
-    assert train.train.seed == 4 and train.train.env.reward == "alive" and train.train.env.history == 2
-    assert train.train.preset == "fast" and train.train.algo == "lqr"  # the preset was applied
-    assert ev.evaluate.seed == 4 and ev.evaluate.episodes == 2
+    assert train.settings.seed == 4 and train.settings.env.reward == "alive" and train.settings.env.history == 2
+    assert train.settings.preset == "fast" and train.settings.algo == "lqr"  # the preset was applied
+    assert ev.settings.seed == 4 and ev.settings.episodes == 2
     # The evaluation uses the trained policy's env (history 2), without its reward shaping, plus the delay.
-    assert ev.evaluate.env.history == 2 and ev.evaluate.env.reward is None and ev.evaluate.env.delay == 0.2
+    assert ev.settings.env.history == 2 and ev.settings.env.reward is None and ev.settings.env.delay == 0.2
 
 
 RECIPE_ERRORS = {

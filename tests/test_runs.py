@@ -9,8 +9,19 @@ import numpy as np
 import pytest
 
 from motorlab.errors import MotorlabError
-from motorlab.runs import (MetricsWriter, atomic_write_text, is_complete, prepare_run_dir, read_config, read_json,
-                           read_metrics, require_run_dir, write_config, write_json, write_summary)
+from motorlab.runs import (
+    MetricsWriter,
+    atomic_write_text,
+    is_complete,
+    prepare_run_dir,
+    read_config,
+    read_json,
+    read_metrics,
+    require_run_dir,
+    write_config,
+    write_json,
+    write_summary,
+)
 
 
 def test_write_json_is_plain_json(tmp_path):
@@ -112,10 +123,10 @@ def test_read_metrics_missing(tmp_path):
 
 def test_atomic_writes_get_normal_file_permissions(tmp_path):
     """Plots, videos and summaries are as readable as any file the user writes (not mkstemp's 0600)."""
-    from motorlab.runs import _umask, atomic_write_text
+    from motorlab.runs import atomic_write_text, current_umask
 
     atomic_write_text(tmp_path / "a.txt", "x")
     with open(tmp_path / "b.txt", "w") as f:  # what plain open() gives under this umask
         f.write("y")
     mode = (tmp_path / "a.txt").stat().st_mode & 0o777
-    assert mode == (tmp_path / "b.txt").stat().st_mode & 0o777 == 0o666 & ~_umask()
+    assert mode == (tmp_path / "b.txt").stat().st_mode & 0o777 == 0o666 & ~current_umask()

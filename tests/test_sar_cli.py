@@ -9,8 +9,16 @@ import warnings
 import numpy as np
 import pytest
 
-from helpers import (HAND_ID, HAND_MUSCLES, PUBLISHED_SAR, assert_ok, assert_one_line_error, assert_png,
-                     read_summary, run_cli)
+from helpers import (
+    HAND_ID,
+    HAND_MUSCLES,
+    PUBLISHED_SAR,
+    assert_ok,
+    assert_one_line_error,
+    assert_png,
+    read_summary,
+    run_cli,
+)
 from motorlab.synergy import load_sar
 
 

@@ -213,7 +213,7 @@ def test_bundled_sar_recipes_parse(name):
     raw = tomllib.loads(bundled()[name].read_text())
     recipe = load_recipe(name)
     assert recipe.name == name
-    assert [(s.name, s.kind) for s in recipe.steps] == [(r["name"], r["kind"]) for r in raw["steps"]]
+    assert [(s.name, s.kind.name) for s in recipe.steps] == [(r["name"], r["kind"]) for r in raw["steps"]]
     kinds = [s.kind for s in recipe.steps]
     assert kinds[:4] == ["train", "collect", "vaf", "fit"] and kinds[-1] == "compare"
     assert ("zeroshot" in kinds) == name.startswith("sar-hand")

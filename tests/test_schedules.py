@@ -10,7 +10,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from motorlab.errors import MotorlabError
 from motorlab.rl.config import resolve
-from motorlab.rl.schedules import parse_schedule, schedule_value
+from motorlab.rl.schedules import parse_schedule
 
 
 @pytest.mark.parametrize(
@@ -27,9 +27,9 @@ from motorlab.rl.schedules import parse_schedule, schedule_value
 )
 def test_schedule_values(spec, start, end):
     schedule = parse_schedule(spec)
-    assert schedule_value(schedule, 0.0) == pytest.approx(start)
-    assert schedule_value(schedule, 0.5) == pytest.approx((start + end) / 2)
-    assert schedule_value(schedule, 1.0) == pytest.approx(end)
+    assert schedule(1.0) == pytest.approx(start)
+    assert schedule(0.5) == pytest.approx((start + end) / 2)
+    assert schedule(0.0) == pytest.approx(end)
     # SB3 calls it with progress_remaining: 1 at the start, 0 at the end.
     assert float(schedule(1.0)) == pytest.approx(start)
     assert float(schedule(0.0)) == pytest.approx(end)

@@ -11,7 +11,7 @@ import pytest
 
 from helpers import ENV_ID, TINY_PPO, assert_ok, read_summary, run_cli
 from motorlab.envs import EnvConfig
-from motorlab.evaluate import evaluate
+from motorlab.evaluation import evaluate
 from motorlab.policies import load_policy, load_run_policy
 from motorlab.rl.config import resolve
 from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker

@@ -13,11 +13,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import typer
 
 from helpers import ENV_ID, TINY_PPO, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli
+from motorlab.cli import app
 from motorlab.errors import MotorlabError
+from motorlab.stats import aggregate, trial_scores
 from motorlab.sweeps.grid import label, parse_grid, settings
-from motorlab.sweeps.stats import aggregate, trial_scores
+
+CLI = typer.main.get_command(app)
 
 TINY = " ".join(["train", ENV_ID, *TINY_PPO])  # ~3 s a trial
 GRID = ["--grid", "lr=3e-4,1e-3"]
@@ -187,10 +191,10 @@ def test_grid_settings_are_every_combination():
 def test_switch_options_take_true_or_false(tmp_path):
     from motorlab.sweeps.trials import command_trials
 
-    trials = command_trials(f"train {ENV_ID}", settings(parse_grid(["normalize=true,false"])), [0], tmp_path, {})
+    trials = command_trials(CLI, f"train {ENV_ID}", settings(parse_grid(["normalize=true,false"])), [0], tmp_path, {})
     assert "--normalize" in trials[0]["argv"] and "--no-normalize" in trials[1]["argv"]
     with pytest.raises(MotorlabError, match="is a switch"):
-        command_trials(f"train {ENV_ID}", settings(parse_grid(["normalize=maybe"])), [0], tmp_path, {})
+        command_trials(CLI, f"train {ENV_ID}", settings(parse_grid(["normalize=maybe"])), [0], tmp_path, {})
 
 
 def test_stats_iqm_improvement_and_direction():

@@ -15,7 +15,7 @@ from motorlab.envs import EnvConfig, LowPassDelay, make_env
 from motorlab.envs.isolated import ProcessEnv
 from motorlab.envs.upkie import balance_reward
 from motorlab.errors import MotorlabError
-from motorlab.evaluate import evaluate
+from motorlab.evaluation import evaluate
 from motorlab.policies import load_policy
 
 UPKIE = "Upkie-PyBullet-Pendulum"

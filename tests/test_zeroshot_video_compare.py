@@ -11,16 +11,26 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from helpers import (ENV_ID, assert_cli_error, assert_ok, assert_one_line_error, assert_png, episode_rows,
-                     read_metrics_rows, read_summary, run_cli)
+from helpers import (
+    ENV_ID,
+    assert_cli_error,
+    assert_ok,
+    assert_one_line_error,
+    assert_png,
+    episode_rows,
+    read_metrics_rows,
+    read_summary,
+    run_cli,
+    run_kind,
+)
 from motorlab.envs import EnvConfig
 from motorlab.errors import MotorlabError
-from motorlab.evaluate import evaluate
+from motorlab.evaluation import evaluate
+from motorlab.evaluation.steps import ZEROSHOT
 from motorlab.policies import load_run_policy
 from motorlab.report.compare import mean_and_band
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.train import train
-from motorlab.zeroshot import zeroshot
 
 UNSEEN = ["myoHandReorientID-v0", "myoHandReorientOOD-v0"]
 
@@ -65,7 +75,7 @@ def test_zeroshot_unknown_env(hand_play_run, tmp_path):
 
 def test_zeroshot_needs_episodes(hand_play_run, tmp_path):
     with pytest.raises(MotorlabError, match="--episodes"):
-        zeroshot([hand_play_run], UNSEEN[:1], episodes=0, out=tmp_path / "out")
+        run_kind(ZEROSHOT, tmp_path / "out", runs=[str(hand_play_run)], envs=UNSEEN[:1], episodes=0)
     assert not (tmp_path / "out").exists()
 
 

@@ -18,6 +18,7 @@ import torch
 
 from motorlab.dynamics.model import stepwise_rollout
 from motorlab.errors import MotorlabError
+from motorlab.extras import require
 
 # (states (N, S), actions (N, H, A), goals (N, G)) -> returns (N,)
 Scorer = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
@@ -113,6 +114,7 @@ class EvoTorchCEM:
                  population: int = 200, iterations: int = 5, elites: int = 20, init_std: float = 0.5,
                  seed: int = 0, **_):
         check_plan_settings(horizon, population, iterations, elites)
+        require("evotorch", "evotorch", "--optimizer evotorch needs EvoTorch")  # fail here, not at the first plan
         self.score = score
         self.low, self.high = np.asarray(low, dtype=np.float32), np.asarray(high, dtype=np.float32)
         self.horizon, self.population, self.iterations, self.elites = horizon, population, iterations, elites

@@ -25,11 +25,10 @@ from rich.progress import Progress
 
 from motorlab.dynamics.reacher_sim import arm_models, closed_form_arm, rollout_reacher, sample_initial_states
 from motorlab.dynamics.state import StateLayout, layout_for
-from motorlab.dynamics.transitions import TRANSITIONS, Transitions
+from motorlab.dynamics.transitions import Transitions
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.faults import fault_line, fault_of, write_faults_log
-from motorlab.runs import prepare_run_dir, write_config, write_summary
+from motorlab.faults import fault_line, fault_of
 
 CHUNK = 4000  # episodes per batched rollout: bounds memory, paces the progress bar
 SIMULATORS = ("auto", "closed-form", "mujoco", "gymnasium")
@@ -231,25 +230,3 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
             "numerical_faults": len(faults), "fault_log": faults}
     env.close()
     return Transitions(**arrays, meta=meta).check()
-
-
-def collect_step(env_id: str, episodes: int, policy: str = "random", workers: int | None = None, seed: int = 0,
-                 state: str = "auto", simulator: str = "auto", out: Path | None = None,
-                 progress: bool = True) -> dict[str, Any]:
-    """`motorlab dynamics collect`: transitions.npz in a run folder; returns the summary."""
-    data = collect_transitions(env_id, episodes, policy, workers, seed, state, simulator, progress)
-    run = prepare_run_dir(out, "dynamics-collect")
-    data.save(run / TRANSITIONS)
-    write_faults_log(run, data.meta["fault_log"])
-    write_config(run, {"env": env_id, "episodes": episodes, "policy": policy, "workers": workers, "seed": seed,
-                       "state": state, "simulator": simulator})
-    seconds = data.meta["seconds"]
-    summary = {"env_id": env_id, "transitions": len(data), "episodes": episodes,
-               "transitions_per_second": len(data) / seconds, "collect_seconds": seconds,
-               "simulator": data.meta["simulator"], "state_layout": data.meta["state_layout"],
-               "state_size": int(data.states.shape[1]), "action_size": int(data.actions.shape[1]),
-               "return_mean": float(np.bincount(data.episode, weights=data.rewards)[np.unique(data.episode)].mean()),
-               "numerical_faults": data.meta["numerical_faults"]}
-    write_summary(run, summary)
-    summary["run_dir"] = str(run)
-    return summary

@@ -19,9 +19,9 @@ import torch
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from motorlab.dynamics.model import ForwardModel
-from motorlab.dynamics.transitions import Transitions, load_transitions
+from motorlab.dynamics.transitions import Transitions
 from motorlab.errors import MotorlabError
-from motorlab.runs import MetricsWriter, prepare_run_dir, write_config, write_summary
+from motorlab.runs import MetricsWriter
 
 
 def split_episodes(episode: np.ndarray, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -149,30 +149,3 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
               "train_rows": int(len(x_train)), "valid_rows": int(len(x_valid)), "train_seconds": seconds,
               "history": history}
     return model, result
-
-
-def fit_step(transitions: Path, epochs: int = 50, hidden: tuple[int, ...] = (64, 64), ensemble: int = 1,
-             lr: float = 2e-3, batch_size: int = 2000, valid_fraction: float = 0.1, patience: int | None = None,
-             seed: int = 0, out: Path | None = None, progress: bool = True) -> dict[str, Any]:
-    """`motorlab dynamics fit`: model.safetensors + model.json, metrics, loss plot; returns the summary."""
-    from motorlab.report.dynamics_plots import loss_curve
-
-    start = time.perf_counter()
-    data = load_transitions(transitions)
-    settings = {"transitions": str(transitions), "epochs": epochs, "hidden": list(hidden), "ensemble": ensemble,
-                "lr": lr, "batch_size": batch_size, "valid_fraction": valid_fraction, "patience": patience,
-                "seed": seed}
-    check_settings(epochs, hidden, ensemble, lr, batch_size, valid_fraction, patience)
-    run = prepare_run_dir(out, "dynamics-fit")
-    model, result = fit_model(data, epochs, hidden, ensemble, lr, batch_size, valid_fraction, patience, seed,
-                              run_dir=run, progress=progress)
-    history = result.pop("history")
-    loss_curve(history, run / "plots" / "loss.png", f"{data.env_id}: forward model ({model.members}x{list(hidden)})")
-    wall = time.perf_counter() - start
-    summary = {"env_id": data.env_id, "state_layout": data.meta.get("state_layout"), **result,
-               "wall_seconds": wall, "transitions": len(data), "members": model.members, "hidden": list(hidden)}
-    model.save(run, metrics={k: v for k, v in summary.items() if k not in ("env_id", "state_layout")})
-    write_config(run, settings)
-    write_summary(run, summary)
-    summary["run_dir"] = str(run)
-    return summary

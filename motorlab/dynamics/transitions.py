@@ -88,11 +88,11 @@ def check_meta(meta: dict, state_size: int, source: str, fix: str) -> None:
         raise bad("env_id", "an env id such as 'Reacher-v5'")
     if not isinstance(meta.get("state_layout"), str):
         raise bad("state_layout", "a layout name (reacher, observation)")
-    for field, size in (("state_labels", state_size), ("goal_labels", None)):
-        labels = meta.get(field)
+    for key, size in (("state_labels", state_size), ("goal_labels", None)):
+        labels = meta.get(key)
         if labels is not None and (not isinstance(labels, list) or not all(isinstance(x, str) for x in labels)
                                    or (size is not None and len(labels) != size)):
-            raise bad(field, f"a list of {size} names" if size is not None else "a list of names")
+            raise bad(key, f"a list of {size} names" if size is not None else "a list of names")
     obs_dim = meta.get("obs_dim")
     if obs_dim is not None and (not isinstance(obs_dim, int) or isinstance(obs_dim, bool) or obs_dim < 1):
         raise bad("obs_dim", "a positive integer")

@@ -11,19 +11,20 @@ from __future__ import annotations
 
 import logging
 import warnings
-from typing import Any, Literal
+from pathlib import Path
+from typing import Any, ClassVar, Literal
 
 import gymnasium as gym
-from pathlib import Path
-
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from motorlab.envs.rewards import resolve_reward
 from motorlab.envs.upkie import is_upkie, make_upkie, register_upkie
 from motorlab.envs.wrappers import DelayOn, LowPassDelay, NumericalGuard, RewardShaping, delay_alpha, env_dt_of
 from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.extras import missing
+from motorlab.settings import Settings
 
-__all__ = ["EnvConfig", "make_env", "check_env_id", "max_return", "env_dt", "LowPassDelay", "RewardShaping",
+__all__ = ["EnvConfig", "EnvSettings", "ENV_KEYS", "make_env", "check_env_id", "max_return", "env_dt", "LowPassDelay", "RewardShaping",
            "delay_alpha", "register_myosuite"]
 
 def _route_mujoco_warnings() -> None:
@@ -47,35 +48,73 @@ class EnvConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    id: str = "InvertedPendulum-v5"
-    delay: float | None = Field(None, description="low-pass time constant in seconds (None: no delay)")
-    # Actuation and perception delay, as in the robust-policy workflow (DESIGN.md).
-    delay_on: DelayOn = "both"
-    history: int = Field(1, ge=1, description="observation frames stacked (1: no history)")
-    reward: str | None = Field(None, description="built-in reward name or module:function")
-    sar: str | None = Field(None, description="sar.npz: act in synergy space (SynergyActionWrapper)")
-    phi: float = Field(1.0, gt=0, le=1, description="synergy weight: 1 = synergies only, <1 = blend with raw actions")
+    id: str = Field("InvertedPendulum-v5", description="Gymnasium env id, e.g. InvertedPendulum-v5")
+    delay: float | None = Field(None, description="Low-pass delay time constant TAU in seconds (alpha = dt/TAU "
+                                "must be in (0, 1)); e.g. 0.2")
+    # Actuation and perception delay, as in the robust-policy workflow (docs/design.md).
+    delay_on: DelayOn = Field("both", description="What the delay filters: both (actuation and perception), "
+                              "action or observation")
+    history: int = Field(1, ge=1, description="Stack the last K observations (K=1: none)")
+    reward: str | None = Field(None, description="Reward shaping: task, alive, quadratic, action-penalty, or "
+                               "module:function (fn(next_obs, action, reward, terminated, info) -> float)")
+    sar: str | None = Field(None, description="Act in synergy space: a sar.npz from `motorlab synergies fit` or "
+                            "`import-sklearn`")
+    phi: float = Field(1.0, gt=0, le=1, description="With a SAR: 1 = synergies only; <1 = action is [synergies, "
+                       "raw muscles] blended phi*decode(syn) + (1-phi)*raw (the reference used 0.66)")
     kwargs: dict[str, Any] = Field(default_factory=dict,
                                    description="keyword arguments for the env (gymnasium.make), e.g. Upkie's time_limit")
     # How an episode's success is read from the env's per-step flag (info["solved"]): "any" step
     # (manipulation: the object reached its goal once), or the "final" step (walking: upright and
     # at the commanded speed when the episode ended). "auto" picks final for MyoSuite's walking
     # tasks, whose flag is a state, not an event: under "any", even a policy that falls forward
-    # is counted as walking once (see motorlab.evaluate.success_mode).
-    success: Literal["auto", "any", "final"] = "auto"
+    # is counted as walking once (see motorlab.evaluation.success_mode).
+    success: Literal["auto", "any", "final"] = Field(
+        "auto", description="When an episode counts as a success, from the env's per-step flag (MyoSuite: "
+        "info['solved']): any (solved at any step), final (solved at its last step), or auto (final for "
+        "MyoSuite's walking tasks, any otherwise)")
 
     @field_validator("sar")
     @classmethod
     def _absolute(cls, v):
         # run folders record where the SAR is, wherever the run is evaluated from
-        return str(Path(v).resolve()) if v else v
+        return str(Path(v).resolve()) if v and not v.startswith("@") else v  # "@step": a recipe's, resolved when it runs
+
+
+# Recipe and CLI names of the env settings every env-taking step shares (EnvConfig's fields).
+ENV_KEYS = {"env": "id", "delay": "delay", "delay_on": "delay_on", "history": "history", "reward": "reward",
+            "sar": "sar", "phi": "phi", "env_kwargs": "kwargs", "success": "success"}
+
+
+class EnvSettings(Settings):
+    """Settings of a step that builds an env: recipes and the CLI give the env's settings flat
+    (env, delay, history, ...); they are folded into one `EnvConfig`."""
+
+    aliases: ClassVar[frozenset[str]] = frozenset(ENV_KEYS)
+    env: EnvConfig = Field(default_factory=EnvConfig)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _fold_env(cls, data: Any) -> Any:
+        return fold_env(data) if isinstance(data, dict) else data
+
+
+def fold_env(fields: dict[str, Any]) -> dict[str, Any]:
+    """Flat env settings (env = "id", delay, history, ...) folded into one "env" dict."""
+    data = dict(fields)
+    env = data.get("env")
+    env = {"id": env} if isinstance(env, str) else dict(env or {})
+    for key, field in ENV_KEYS.items():
+        if key != "env" and key in data:
+            env[field] = data.pop(key)
+    data["env"] = env
+    return data
 
 
 def register_myosuite() -> bool:
     """Import MyoSuite, which registers its env ids (myoHandReorient8-v0, myoLegWalk-v0, ...).
 
     Returns:
-        False when MyoSuite is not installed.
+        False when MyoSuite is not installed (the `myosuite` extra).
     """
     try:
         with warnings.catch_warnings():
@@ -99,10 +138,7 @@ def check_env_id(env_id: str) -> None:
         if env_id in gym.registry:
             return
         if env_id.startswith("myo") and not installed:
-            raise MotorlabError(
-                f"{env_id} is a MyoSuite env, and MyoSuite is not installed: "
-                "`pip install myosuite==3.0.0` (make demo / make test install it)."
-            )
+            raise missing(f"{env_id} needs MyoSuite", "myosuite")
         raise MotorlabError(
             f"unknown env id {env_id!r}{did_you_mean(env_id, gym.registry.keys())}; "
             "`python -c \"import gymnasium; gymnasium.pprint_registry()\"` lists the ids."
@@ -143,6 +179,18 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
         env = gym.wrappers.FrameStackObservation(env, cfg.history, padding_type="reset")
         env = gym.wrappers.FlattenObservation(env)
     return env
+
+
+def describe_env(env: EnvConfig) -> str:
+    """The env and its wrappers in a few words: "InvertedPendulum-v5, delay 0.2 s on both, history 10"."""
+    tags = [env.id]
+    if env.delay:
+        tags.append(f"delay {env.delay:g} s on {env.delay_on}")  # action, observation or both
+    if env.history > 1:
+        tags.append(f"history {env.history}")
+    if env.sar:
+        tags.append(f"synergies {Path(env.sar).name}, phi {env.phi:g}")
+    return ", ".join(tags)
 
 
 def env_dt(env: gym.Env) -> float | None:

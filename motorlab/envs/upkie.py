@@ -33,9 +33,9 @@ import gymnasium as gym
 import numpy as np
 
 from motorlab.errors import MotorlabError
+from motorlab.extras import require
 
 PREFIXES = ("Upkie-", "Cookie-")
-INSTALL = "`pip install upkie==13.1.0 pybullet==3.2.7` (make demo / make test install them)"
 
 DEFAULTS: dict[str, Any] = {"gui": False, "regulate_frequency": False, "frequency": 200.0, "time_limit": 10.0}
 
@@ -53,23 +53,18 @@ def register_upkie() -> None:
     """Register the Upkie ids with Gymnasium.
 
     Raises:
-        MotorlabError: upkie or pybullet not installed.
+        MotorlabError: upkie or pybullet not installed (the `upkie` extra).
     """
     if "Upkie-PyBullet-Pendulum" in gym.registry:
         return
-    try:
-        import upkie.envs
-    except ImportError:
-        raise MotorlabError(f"Upkie envs need the upkie package, which is not installed: {INSTALL}.") from None
-    try:
-        with _quiet_c_output():  # PyBullet prints its build time to stderr on import
-            import pybullet  # noqa: F401  (upkie imports it lazily; fail here, clearly)
-    except ImportError:
-        raise MotorlabError(f"Upkie's PyBullet backend needs pybullet, which is not installed: {INSTALL}.") from None
+    upkie_envs = require("upkie.envs", "upkie", "Upkie envs need the upkie package")
+    with _quiet_c_output():  # PyBullet prints its build time to stderr on import
+        # upkie imports pybullet lazily; fail here, clearly
+        require("pybullet", "upkie", "Upkie's PyBullet backend needs pybullet")
     # Upkie logs a warning at every fall; in training that is thousands of lines. Falls
     # are counted in info["fell"] and the evaluation summary instead.
     logging.getLogger("upkie").setLevel(logging.ERROR)
-    upkie.envs.register()
+    upkie_envs.register()
 
 
 @contextlib.contextmanager

@@ -14,7 +14,7 @@ import numpy as np
 from scipy import stats
 
 from motorlab.errors import MotorlabError
-from motorlab.report.plots import STYLE, _save, plt, steps_axis
+from motorlab.report.plots import STYLE, plt, save_figure, steps_axis
 from motorlab.runs import read_json, read_metrics, require_run_dir
 
 GRID_POINTS = 100
@@ -83,7 +83,7 @@ def compare_curves(groups: dict[str, list[Path]], path: Path, title: str = "Lear
             steps_axis(ax.xaxis)
             ax.legend(fontsize=8)
         fig.suptitle(f"{title} — mean and 95% confidence band over seeds", fontsize=11)
-        _save(fig, path)
+        save_figure(fig, path)
     return result
 
 
@@ -94,7 +94,7 @@ def group_statistics(groups: dict[str, list[Path | str]]) -> dict[str, Any]:
     Returns:
         Flat keys "<group>.final_return_iqm", "..._iqm_ci_low", "<A>.final_return_p_better_than[<B>]", ...
     """
-    from motorlab.sweeps.stats import aggregate, trial_scores
+    from motorlab.stats import aggregate, trial_scores
 
     scores = {g: [trial_scores(read_json(Path(d) / "summary.json")) for d in ds] for g, ds in groups.items()}
     flat, _ = aggregate(scores)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motorlab.report.plots import STYLE, _save, plt
+from motorlab.report.plots import STYLE, plt, save_figure
 
 
 def loss_curve(history: list[dict], path: Path, title: str = "") -> Path:
@@ -24,7 +24,7 @@ def loss_curve(history: list[dict], path: Path, title: str = "") -> Path:
         ax.set_ylabel("MSE of the normalized state delta")
         ax.set_title(title)
         ax.legend()
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 
 def error_vs_horizon(horizons: np.ndarray, errors: dict[str, np.ndarray], path: Path, title: str = "",
@@ -41,7 +41,7 @@ def error_vs_horizon(horizons: np.ndarray, errors: dict[str, np.ndarray], path: 
         ax.set_ylabel(ylabel)
         ax.set_title(title)
         ax.legend()
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 
 def xy_traces(true_xy: np.ndarray, model_xy: np.ndarray, goals: np.ndarray | None, path: Path, title: str = "",
@@ -61,7 +61,7 @@ def xy_traces(true_xy: np.ndarray, model_xy: np.ndarray, goals: np.ndarray | Non
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_title(title)
         ax.legend(loc="best")
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 
 def distance_over_time(distances: np.ndarray, path: Path, title: str = "", dt: float | None = None) -> Path:
@@ -77,4 +77,4 @@ def distance_over_time(distances: np.ndarray, path: Path, title: str = "", dt: f
         ax.set_yscale("log")
         ax.set_title(title)
         ax.legend()
-        return _save(fig, path)
+        return save_figure(fig, path)

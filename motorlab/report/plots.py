@@ -48,7 +48,7 @@ def obs_labels(env_id: str, n: int) -> list[str]:
     return [f"obs[{i}]" for i in range(n)]
 
 
-def _save(fig, path: Path) -> Path:
+def save_figure(fig, path: Path) -> Path:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", bbox_inches="tight")
     plt.close(fig)
@@ -83,7 +83,7 @@ def learning_curve(run_dir: Path, path: Path, title: str = "", solve_return: flo
         ax.set_ylabel("episode return")
         ax.set_title(title or f"Learning curve: {Path(run_dir).name}")
         ax.legend(loc="best", fontsize=8)
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 
 def observation_trace(observations: np.ndarray, actions: np.ndarray, dt: float, labels: list[str],
@@ -106,7 +106,7 @@ def observation_trace(observations: np.ndarray, actions: np.ndarray, dt: float, 
         axes[n].set_xlabel("time (s)")
         fig.suptitle(title or "Observation trace", fontsize=11)
         fig.align_ylabels(axes)
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 
 MAX_TRACE_LINES = 8
@@ -130,7 +130,7 @@ def _trace_heatmaps(observations: np.ndarray, actions: np.ndarray, t: np.ndarray
             fig.colorbar(image, ax=ax, label="standardized value")
         axes[-1, 0].set_xlabel("time (s)")
         fig.suptitle(title or "Observation trace", fontsize=11)
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 
 def comparison_bars(names: list[str], values: list[float | None], ylabel: str, path: Path, title: str,
@@ -156,7 +156,7 @@ def comparison_bars(names: list[str], values: list[float | None], ylabel: str, p
         ax.set_xticks(xs, names, rotation=25, ha="right", fontsize=8)
         ax.set_ylabel(ylabel)
         ax.set_title(title)
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 
 def grouped_bars(groups: list[str], series: dict[str, list[float | None]], ylabel: str, path: Path, title: str,
@@ -179,7 +179,7 @@ def grouped_bars(groups: list[str], series: dict[str, list[float | None]], ylabe
             ax.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
         ax.set_title(title)
         ax.legend(fontsize=8)
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 
 def vaf_plot(vaf: np.ndarray, threshold: float | None, n_needed: int | None, path: Path, title: str) -> Path:
@@ -199,4 +199,4 @@ def vaf_plot(vaf: np.ndarray, threshold: float | None, n_needed: int | None, pat
         ax.set_ylim(min(0.0, float(vaf.min())), 1.02)
         ax.set_title(title)
         ax.legend(loc="lower right", fontsize=8)
-        return _save(fig, path)
+        return save_figure(fig, path)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from motorlab.envs import EnvConfig
-from motorlab.evaluate import evaluate, trained_env_settings
+from motorlab.evaluation import evaluate, trained_env_settings
 from motorlab.policies import load_policy
 from motorlab.report.plots import learning_curve, obs_labels, observation_trace
 from motorlab.runs import METRICS, read_config, read_json, require_run_dir

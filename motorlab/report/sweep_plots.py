@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from matplotlib.ticker import PercentFormatter
 
-from motorlab.report.plots import STYLE, _save, plt, steps_axis
+from motorlab.report.plots import STYLE, plt, save_figure, steps_axis
 
 LABELS = {"final_return": "final return", "success_rate": "success rate", "steps_to_success": "steps to success"}
 
@@ -43,7 +43,7 @@ def interval_estimates(metrics: dict[str, dict[str, Any]], path: Path, title: st
                 ax.set_xlim(-0.02, 1.02)
                 ax.xaxis.set_major_formatter(PercentFormatter(1.0))
         fig.suptitle(f"{title}: IQM (dot) with 95% bootstrap CI (bar); ticks are single seeds", fontsize=10)
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 
 def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) -> Path:
@@ -60,7 +60,7 @@ def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) 
         ax.set_xlim(-0.02, 1.02)
         ax.set_xlabel("probability that A is better than B (fewer steps for steps to success)")
         ax.set_title(f"{title}: probability of improvement", fontsize=10)
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 
 def performance_profiles(profiles: dict[str, dict[str, Any]], path: Path, title: str) -> Path:
@@ -78,6 +78,6 @@ def performance_profiles(profiles: dict[str, dict[str, Any]], path: Path, title:
             ax.set_ylim(-0.02, 1.02)
             ax.legend(fontsize=8)
         fig.suptitle(f"{title}: performance profiles", fontsize=10)
-        return _save(fig, path)
+        return save_figure(fig, path)
 
 

@@ -8,6 +8,7 @@ Other simulators render their own rgb_array frames (Upkie: PyBullet's CPU render
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,7 @@ import numpy as np
 
 from motorlab.envs import EnvConfig, env_dt, make_env
 from motorlab.errors import MotorlabError
-from motorlab.evaluate import trained_env_settings
+from motorlab.evaluation import trained_env_settings
 from motorlab.policies import load_policy
 from motorlab.runs import atomic_path, read_config, require_run_dir, write_json
 
@@ -94,34 +95,30 @@ def make_video_env(env_cfg: EnvConfig):
 
 def render_video(run_dir: Path, episodes: int = 5, seed: int = 0, camera: str | None = None,
                  width: int = 640, height: int = 480, out: Path | None = None) -> dict[str, Any]:
-    """Render `episodes` deterministic episodes of the run's policy to `videos/episode_<k>.mp4`.
+    """Render `episodes` deterministic episodes of the run's policy to `<out>/episode_<k>.mp4`
+    (default out: RUN_DIR/videos), with an index videos.json beside them.
 
     Returns:
-        A summary with the files, frame counts, fps and episode returns.
+        The files, frame counts, fps, episode returns, camera and size.
     """
-
     if episodes <= 0:
         raise MotorlabError(f"--episodes must be positive, got {episodes}.")
     run_dir = require_run_dir(Path(run_dir))
     config = read_config(run_dir)
     env_cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
-    env = make_video_env(env_cfg)
-    policy = load_policy(config.get("policy", str(run_dir)), env, env_cfg.id, seed)
-    cam, every, fps = video_settings(env, width, height, camera)
     folder = Path(out) if out else run_dir / "videos"
     files, returns, frames_per = [], [], []
-    for k in range(episodes):
-        frames, ret = record_episode(env, policy, cam, seed + k, every)
-        path = folder / f"episode_{k}.mp4"
-        write_mp4(path, frames, fps)
-        files.append(str(path))
-        returns.append(ret)
-        frames_per.append(len(frames))
-    cam.close()
-    env.close()
+    with filming(make_video_env(env_cfg), width, height, camera) as (env, cam, every, fps):
+        policy = load_policy(config.get("policy", str(run_dir)), env, env_cfg.id, seed)
+        for k in range(episodes):
+            frames, ret = record_episode(env, policy, cam, seed + k, every)
+            path = folder / f"episode_{k}.mp4"
+            write_mp4(path, frames, fps)
+            files.append(str(path))
+            returns.append(ret)
+            frames_per.append(len(frames))
     summary = {"videos": files, "frames": frames_per, "fps": fps, "returns": returns, "camera": cam.camera,
                "width": width, "height": height}
-    # the run's own summary.json stays as it is; the videos get their own index
     write_json(folder / "videos.json", summary)
     return summary
 
@@ -140,6 +137,20 @@ def record_episode(env, policy, cam, seed: int, every: int = 1) -> tuple[list[np
         t += 1
     frames.append(cam.grab())
     return frames, ret
+
+
+@contextlib.contextmanager
+def filming(env, width: int, height: int, camera):
+    """(env, camera, every, fps) for recording `env`; the renderer and the env are closed when the
+    block ends, whatever an episode raised."""
+    try:
+        cam, every, fps = video_settings(env, width, height, camera)
+        try:
+            yield env, cam, every, fps
+        finally:
+            cam.close()
+    finally:
+        env.close()
 
 
 def video_settings(env, width: int, height: int, camera):

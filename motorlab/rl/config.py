@@ -8,15 +8,14 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from motorlab.control.lqr import LQRSettings
-from motorlab.envs import EnvConfig
+from motorlab.envs import EnvSettings
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.rl.schedules import parse_schedule
 
 Algo = Literal["ppo", "sac", "td3", "lqr"]
-ALGOS = ("ppo", "sac", "td3", "lqr")
 
 PRESETS: dict[str, dict[str, Any]] = {
     # motorlab's most sample-efficient configuration for balance/regulation tasks:
@@ -40,29 +39,31 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-class TrainConfig(BaseModel):
+class TrainConfig(EnvSettings):
     """Everything `motorlab train` needs; written to the run folder's config.toml."""
 
-    model_config = ConfigDict(extra="forbid")
-
-    env: EnvConfig = Field(default_factory=EnvConfig)
-    algo: Algo = "ppo"
-    preset: str | None = None
-    timesteps: int = Field(100_000, gt=0, description="env-step budget")
-    seed: int = Field(0, ge=0)
-    lr: str | None = Field(None, description="learning-rate schedule, e.g. 3e-4 or linear:1e-3,0")
+    algo: Algo = Field("ppo", description="ppo | sac | td3 (Stable-Baselines3) | lqr (model-based: linear model + "
+                       "LQR)")
+    preset: str | None = Field(None, description="named settings under the given ones (see PRESETS)")
+    timesteps: int = Field(100_000, gt=0, description="Env-step budget")
+    seed: int = Field(0, ge=0, description="Random seed (training, env resets, evaluation)")
+    lr: str | None = Field(None, description="Learning-rate schedule: 3e-4 (constant) or linear:START,END (over "
+                           "the budget)")
     clip_range: str | None = Field(None, description="PPO clip-range schedule, e.g. linear:0.3,0.1")
-    until_solved: bool = False
-    solve_episodes: int = Field(10, gt=0, description="deterministic episodes that must all reach the max return")
-    solve_return: float | None = Field(None, description="return that counts as solved (default: the env's maximum)")
-    eval_every: int | None = Field(None, gt=0, description="env steps between evaluations (default: each PPO rollout / 1000 / each LQR refit)")
-    n_envs: int = Field(1, gt=0)
-    normalize: bool = Field(False, description="normalize observations with running statistics (VecNormalize)")
-    device: str = "auto"
+    until_solved: bool = Field(False, description="Stop once solve_episodes deterministic episodes all reach the "
+                               "maximum return; summary.json gets steps_to_success")
+    solve_episodes: int = Field(10, gt=0, description="Episodes that must all succeed")
+    solve_return: float | None = Field(None, description="Return that counts as solved (default: the env's "
+                                       "maximum, 1000 for InvertedPendulum)")
+    eval_every: int | None = Field(None, gt=0, description="Env steps between evaluations (default: every PPO "
+                                   "rollout, 1000 for SAC/TD3, each LQR refit)")
+    n_envs: int = Field(1, gt=0, description="Parallel envs (subprocesses when > 1)")
+    normalize: bool = Field(False, description="Normalize observations with running statistics (VecNormalize)")
+    device: str = Field("auto", description="auto (CUDA when present) | cpu | cuda")
     # Small MLPs train fastest on one CPU thread; more threads contend with the envs.
     torch_threads: int = Field(1, ge=1, description="CPU threads for PyTorch")
-    progress: bool = True
-    checkpoint_every: int | None = Field(None, ge=0, description="env steps between checkpoints for --resume "
+    progress: bool = Field(True, description="Show a progress bar")
+    checkpoint_every: int | None = Field(None, ge=0, description="Env steps between checkpoints for --resume "
                                          "(default: a tenth of the budget; 0: none)")
     hyperparams: dict[str, Any] = Field(default_factory=dict, description="extra keyword arguments for the SB3 algorithm")
     lqr: LQRSettings = Field(default_factory=LQRSettings)

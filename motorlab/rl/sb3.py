@@ -11,9 +11,9 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 from motorlab.envs import make_env
-from motorlab.evaluate import EpisodeSuccess, success_mode
-from motorlab.faults import fault_of
 from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.evaluation import EpisodeSuccess, success_mode
+from motorlab.faults import fault_of
 from motorlab.policies import SB3Policy, save_sb3_policy
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.schedules import parse_schedule
@@ -175,17 +175,29 @@ def _save_model(model: BaseAlgorithm, run_dir: Path) -> None:
 
 
 def _init_annotations(cls: type) -> dict:
-    """Resolved annotations of `cls.__init__` and its bases (SB3 annotates with strings).
-    Names SB3 imports only for type checking do not resolve and are left to SB3."""
+    """Resolved annotations of `cls.__init__` and its bases (SB3 annotates with strings), each
+    resolved on its own with typing.get_type_hints: names SB3 imports only for type checking do
+    not resolve and are left to SB3."""
     import sys
+    import typing
 
     hints: dict = {}
     for base in reversed(cls.__mro__):
         init = base.__dict__.get("__init__")
         namespace = vars(sys.modules[base.__module__])
         for name, ann in getattr(init, "__annotations__", {}).items():
+            holder = _annotated(name, ann)
             try:
-                hints[name] = eval(ann, namespace) if isinstance(ann, str) else ann  # library code, not user input
-            except Exception:
+                hints[name] = typing.get_type_hints(holder, globalns=namespace)[name]
+            except Exception:  # a name SB3 imports under TYPE_CHECKING only
                 hints.pop(name, None)
     return hints
+
+
+def _annotated(name: str, ann) -> object:
+    """An object carrying one annotation, for typing.get_type_hints to resolve."""
+
+    def holder() -> None: ...
+
+    holder.__annotations__ = {name: ann}
+    return holder

@@ -49,8 +49,3 @@ def parse_schedule(spec: str | float, what: str = "learning-rate") -> Schedule:
         raise MotorlabError(f"{what} schedule {spec!r} needs two values, start and end: linear:3e-4,1e-5.")
     start, end = (_number(p.strip(), what, spec) for p in parts)
     return LinearSchedule(start, end, 1.0)
-
-
-def schedule_value(schedule: Schedule, progress_done: float) -> float:
-    """Value after `progress_done` (0..1) of the budget."""
-    return float(schedule(1.0 - progress_done))

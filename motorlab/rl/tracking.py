@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 from torch.utils.tensorboard import SummaryWriter
 
-from motorlab.evaluate import Evaluator, Policy
+from motorlab.evaluation import Evaluator
 from motorlab.faults import FAULT_KEY, FAULTS_LOG
+from motorlab.policies import Policy
 from motorlab.rl.config import TrainConfig
 from motorlab.runs import METRICS, MetricsWriter
 

@@ -22,7 +22,7 @@ from rich.progress import Progress
 from motorlab.control.lqr import learn_lqr
 from motorlab.envs import make_env, max_return
 from motorlab.errors import MotorlabError
-from motorlab.evaluate import success_mode
+from motorlab.evaluation import success_mode
 from motorlab.policies import load_policy_files, save_controller
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker

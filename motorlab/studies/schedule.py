@@ -21,18 +21,10 @@ from typing import Any, Callable
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from motorlab.recipes import Step, _refs
+from motorlab.recipes import Step
 
 RunStep = Callable[[Step, bool, threading.Event], dict[str, Any]]  # (step, in the background, stop) -> headline
-ProgressOf = Callable[[Step], tuple[int, int]]  # (env steps done, budget) of a train step
-
-
-def step_inputs(step: Step) -> list[str]:
-    """Names of the earlier steps this step reads."""
-    names = [step.sar_ref[1:]] if step.sar_ref else []
-    if step.settings is not None:
-        names += [r for value in step.settings.model_dump().values() for r in _refs(value)]
-    return names
+ProgressOf = Callable[[Step], tuple[int, int]]  # (done, total) of a training step
 
 
 @dataclass
@@ -115,13 +107,13 @@ def run_overlapped(steps: list[Step], run: RunStep, limit: int, console: Console
             reap()
             if not (pending or background):
                 break
-            ready = [s for s in pending if all(n in results for n in step_inputs(s))]
-            train = next((s for s in ready if s.kind == "train"), None)
+            ready = [s for s in pending if all(n in results for n in s.inputs())]
+            train = next((s for s in ready if s.kind.trains), None)
             if train is not None and len(background) < limit:
                 pending.remove(train)
                 start_background(train)
                 continue
-            other = next((s for s in ready if s.kind != "train"), None)
+            other = next((s for s in ready if not s.kind.trains), None)
             if other is not None:
                 pending.remove(other)
                 header(other)

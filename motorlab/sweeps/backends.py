@@ -169,7 +169,8 @@ def run_ray(trials: list[dict[str, Any]], address: str | None, max_parallel: int
 
         from motorlab.sweeps.ray_progress import Reporter
     except ImportError:
-        raise MotorlabError("the ray backend needs Ray Tune: pip install 'ray[tune]==2.60.0'.") from None
+        raise MotorlabError("the ray backend needs Ray Tune, which is not installed: pip install 'motorlab[ray]' "
+                            "(or: pip install 'ray[tune]==2.60.0')") from None
 
     try:
         if address:

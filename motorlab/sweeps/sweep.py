@@ -17,23 +17,27 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from motorlab.errors import MotorlabError
+from motorlab.recipes import bundled, find_recipe
+from motorlab.report import sweep_plots
+from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import atomic_write_text, read_json, run_path, write_config, write_json, write_summary
+from motorlab.stats import aggregate, trial_scores
 from motorlab.sweeps import backends
 from motorlab.sweeps.grid import parse_grid, settings
-from motorlab.sweeps.stats import aggregate, trial_scores
 from motorlab.sweeps.trials import command_trials, is_finished, recipe_trials
+
+if TYPE_CHECKING:
+    from typer.core import TyperGroup  # the motorlab command, handed down by the CLI
 
 def _recipe_path(target: str) -> Path | None:
     """The recipe file TARGET names, or None when TARGET is a command line."""
-    from motorlab.recipes import bundled, find_recipe
-
     if len(target.split()) == 1 and (target.endswith(".toml") or target in bundled()):
         return find_recipe(target)
     return None
@@ -53,7 +57,7 @@ def _seeds(seeds: int | list[int]) -> list[int]:
 
 
 def plan(target: str, seeds: int | list[int], grid: list[str] | None, sweep_dir: Path,
-         threads: dict[str, str] | None = None) -> list[dict[str, Any]]:
+         threads: dict[str, str] | None = None, commands: TyperGroup | None = None) -> list[dict[str, Any]]:
     """The sweep's trials, every command line checked before any runs.
 
     Raises:
@@ -65,12 +69,14 @@ def plan(target: str, seeds: int | list[int], grid: list[str] | None, sweep_dir:
     recipe = _recipe_path(target)
     if recipe is not None:
         return recipe_trials(recipe, combos, seed_list, sweep_dir, threads or {})
-    return command_trials(target, combos, seed_list, sweep_dir, threads or {})
+    if commands is None:
+        raise ValueError("a command-line target needs the motorlab command group to check it against")
+    return command_trials(commands, target, combos, seed_list, sweep_dir, threads or {})
 
 
 def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = None, backend: str = "local",
               address: str | None = None, max_parallel: int | None = None, out: Path | None = None,
-              console: Console | None = None) -> dict[str, Any]:
+              console: Console | None = None, commands: TyperGroup | None = None) -> dict[str, Any]:
     """Run every seed of every setting of `target` (a motorlab command line or a recipe) and
     aggregate final return, success rate and steps-to-success across seeds with rliable.
 
@@ -87,7 +93,7 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
     # Several trials per machine: one math thread each, or they fight over the cores.
     threads = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if parallel != 1 else {}
     sweep_dir = run_path(out, "sweep")
-    trials = plan(target, seeds, grid, sweep_dir, threads)
+    trials = plan(target, seeds, grid, sweep_dir, threads, commands)
     labels = list(dict.fromkeys(t["setting"] for t in trials))
     write_config(sweep_dir, {"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [],
                              "settings": labels, "backend": backend, "address": address, "max_parallel": max_parallel})
@@ -134,9 +140,6 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
 
 def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[str, Any]], sweep_dir: Path,
                    wall: float, console: Console) -> dict[str, Any]:
-    from motorlab.report import sweep_plots
-    from motorlab.report.html import build_report
-
     labels = list(dict.fromkeys(t["setting"] for t in trials))
     scores = {s: [trial_scores(read_json(Path(t["run_dir"]) / "summary.json")) for t in done if t["setting"] == s]
               for s in labels}

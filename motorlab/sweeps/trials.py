@@ -11,28 +11,37 @@ sweep run again into the same folder skips those trials and runs the rest.
 
 from __future__ import annotations
 
+import hashlib
 import shlex
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+import tomli_w
 
 from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.runs import finished_with, is_complete, toml_holds, write_toml
+from motorlab.kinds import DEFAULT_KIND, KINDS, for_command, kind
+from motorlab.recipes import fields_of, parse_recipe
+from motorlab.runs import atomic_write_text, finished_with, is_complete, toml_holds, write_toml
 from motorlab.sweeps.grid import label
+
+if TYPE_CHECKING:
+    from typer.core import TyperGroup  # the motorlab command, handed down by the CLI
 
 TRIAL_FILE = "sweep_trial.toml"
 STARTED_FILE = "sweep_trial_started.toml"  # the command line a trial's folder was started with
-# Commands that train or evaluate and take --seed and --out: the ones a sweep can repeat.
-SWEEPABLE = ("train", "evaluate", "mpc", "dynamics collect", "dynamics fit", "dynamics check", "synergies collect",
-             "synergies fit", "zeroshot", "video")
+# Commands of step kinds that take a seed (and --out): the ones a sweep can repeat.
+SWEEPABLE = tuple(k.command for k in KINDS.values() if k.command and "seed" in k.settings.model_fields)
 
 
 def trial(name: str, setting: str, seed: int, argv: list[str], run_dir: Path, log: Path,
-          env: dict[str, str] | None = None, fingerprint: str = "") -> dict[str, Any]:
-    """`fingerprint`: a hash of inputs the command line only names (a recipe file's text)."""
+          env: dict[str, str] | None = None, fingerprint: str = "",
+          resume_argv: list[str] | None = None) -> dict[str, Any]:
+    """`fingerprint`: a hash of inputs the command line only names (a recipe file's text);
+    `resume_argv`: the command line that continues the run where an interrupted start left it."""
     return {"name": name, "setting": setting, "seed": seed, "argv": [str(a) for a in argv],
             "run_dir": str(Path(run_dir).resolve()), "log": str(Path(log).resolve()), "env": env or {},
-            "fingerprint": fingerprint}
+            "fingerprint": fingerprint, "resume_argv": [str(a) for a in resume_argv] if resume_argv else None}
 
 
 def _marker(t: dict[str, Any]) -> dict[str, Any]:
@@ -53,25 +62,18 @@ def mark_started(t: dict[str, Any]) -> None:
 
 
 def launch_argv(t: dict[str, Any]) -> list[str]:
-    """The command line that runs `t`: its own, or `train --resume RUN_DIR` when an interrupted
-    start of this very command line left a training checkpoint (then only the rest of the budget
-    is trained; the result is the same run folder)."""
-    from motorlab.rl.checkpoint import FOLDER, LATEST
-
+    """The command line that runs `t`: its own, or its resume command line (e.g. `train --resume
+    RUN_DIR`) when an interrupted start of this very command line left a checkpoint (then only the
+    rest of the budget is trained; the result is the same run folder)."""
     run_dir = Path(t["run_dir"])
-    if (t["argv"][:1] == ["train"] and not is_complete(run_dir) and (run_dir / FOLDER / LATEST).is_file()
+    if (t.get("resume_argv") and not is_complete(run_dir)
             and toml_holds(run_dir / STARTED_FILE, _marker(t))):  # else: another command line started it
-        return ["train", "--resume", str(run_dir), "--no-progress"]
+        return t["resume_argv"]
     return t["argv"]
 
 
-def _command(words: list[str]):
+def _command(group: TyperGroup, words: list[str]):
     """The click command for `words` ("train ...", "dynamics fit ..."), and how many words name it."""
-    import typer
-
-    from motorlab.cli import app
-
-    group = typer.main.get_command(app)
     names = [" ".join(words[:2]), words[0]] if len(words) > 1 else [words[0]] if words else []
     for name in names:
         if name in SWEEPABLE:
@@ -112,16 +114,18 @@ def _check_parses(cmd, argv: list[str], where: str) -> None:
         raise MotorlabError(f"{where}: {message}") from None
 
 
-def command_trials(command: str, settings: list[dict[str, str]], seeds: list[int], sweep_dir: Path,
-                   threads: dict[str, str]) -> list[dict[str, Any]]:
-    """Trials of a motorlab command line: each adds its setting's options, --seed and --out."""
+def command_trials(cli: TyperGroup, command: str, settings: list[dict[str, str]], seeds: list[int],
+                   sweep_dir: Path, threads: dict[str, str]) -> list[dict[str, Any]]:
+    """Trials of a motorlab command line (checked against `cli`, the motorlab command): each adds
+    its setting's options, --seed and --out."""
     try:
         words = shlex.split(command)
     except ValueError as e:
         raise MotorlabError(f"cannot read the command {command!r}: {e}.") from None
     if words[:1] == ["motorlab"]:
         words = words[1:]
-    cmd, n = _command(words)
+    cmd, n = _command(cli, words)
+    step_kind = for_command(" ".join(words[:n]))
     args = words[n:]
     for fixed in ("--seed", "--out"):
         if any(a == fixed or a.startswith(fixed + "=") for a in args):
@@ -138,7 +142,8 @@ def command_trials(command: str, settings: list[dict[str, str]], seeds: list[int
         for s in seeds:
             run_dir = sweep_dir / name / f"seed{s}"
             out.append(trial(f"{name}/seed{s}", name, s, [*head, *args, *extra, "--seed", str(s), "--out", run_dir],
-                             run_dir, sweep_dir / "logs" / f"{name}-seed{s}.log", threads))
+                             run_dir, sweep_dir / "logs" / f"{name}-seed{s}.log", threads,
+                             resume_argv=step_kind.resume_argv(run_dir) if step_kind else None))
     return out
 
 
@@ -158,8 +163,6 @@ def recipe_variant(data: dict[str, Any], setting: dict[str, str], seed: int, sou
     Raises:
         MotorlabError: a step name or field the recipe does not have.
     """
-    from motorlab.recipes import FIELDS
-
     data = {**data, "steps": [dict(s) for s in data.get("steps", [])]}
     data.pop("seeds", None)  # one seed per trial: the sweep's
     defaults = {k: v for k, v in data.get("defaults", {}).items() if k != "seeds"}
@@ -173,32 +176,32 @@ def recipe_variant(data: dict[str, Any], setting: dict[str, str], seed: int, sou
         if dot and not targets:
             raise MotorlabError(f"--grid {key}: {source} has no step {step_name!r}{did_you_mean(step_name, names)}; "
                                 f"steps: {', '.join(names)}.")
-        hit = [i for i in targets if field in FIELDS.get(steps[i].get("kind", "train"), ())]
+        hit = [i for i in targets if field in _fields(steps[i])]
         if not hit:
             where = f"step {step_name!r}" if dot else "any step"
             raise MotorlabError(f"--grid {key}: {where} of {source} has no field {field!r}"
-                                f"{did_you_mean(field, set().union(*FIELDS.values()))}.")
+                                f"{did_you_mean(field, set().union(*map(fields_of, KINDS.values())))}.")
         for i in hit:
             steps[i][field] = value
     for s in steps:
-        kind = s.get("kind", "train")
         s.pop("seeds", None)
-        if "seed" in FIELDS.get(kind, ()):
+        if "seed" in _fields(s):
             s["seed"] = seed
     return data
+
+
+def _fields(step: dict[str, Any]) -> set[str]:
+    """The fields of a recipe step's kind (none for a kind the recipe check will refuse)."""
+    try:
+        return fields_of(kind(str(step.get("kind", DEFAULT_KIND))))
+    except MotorlabError:
+        return set()
 
 
 def recipe_trials(path: Path, settings: list[dict[str, str]], seeds: list[int], sweep_dir: Path,
                   threads: dict[str, str]) -> list[dict[str, Any]]:
     """Trials of a whole study: each runs `motorlab run` on a variant of the recipe written
     to <sweep>/recipes/, with the setting applied and all seeds set to the trial's."""
-    import hashlib
-
-    import tomli_w
-
-    from motorlab.recipes import parse_recipe
-    from motorlab.runs import atomic_write_text
-
     try:
         data = tomllib.loads(path.read_text())
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:

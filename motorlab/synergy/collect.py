@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import multiprocessing as mp
 import os
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,9 +22,9 @@ from rich.progress import Progress
 
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.evaluate import EpisodeSuccess, success_mode, trained_env_settings
-from motorlab.faults import fault_line, fault_of, write_faults_log
-from motorlab.runs import atomic_write_npz, prepare_run_dir, require_run_dir, write_config, write_summary
+from motorlab.evaluation import EpisodeSuccess, success_mode, trained_env_settings
+from motorlab.faults import fault_line, fault_of
+from motorlab.runs import atomic_write_npz, require_run_dir
 
 ACTIVATIONS = "activations.npz"
 
@@ -102,10 +103,27 @@ def _episodes(seeds: list[int], workers: int, init_args: tuple):
         yield from pool.imap(_run_episode, seeds)
 
 
-def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int = 20, seed: int = 0,
+@dataclass
+class Collection:
+    """The kept episodes of a collection and how they were chosen."""
+
+    env_id: str
+    source_run: Path
+    kept: list[Episode]
+    preview_returns: np.ndarray
+    threshold: float
+    tried: int
+    fault_log: list[str]  # faulted episodes neither set the threshold nor are kept: their activations diverged
+
+    def activations(self) -> np.ndarray:
+        """Every kept step's muscle activations, (samples, n_muscles)."""
+        return np.concatenate([e.activations for e in self.kept])
+
+
+def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int = 50, seed: int = 0,
             deterministic: bool = False, workers: int | None = None, max_episodes: int | None = None,
-            out: Path | None = None, progress: bool = True) -> dict[str, Any]:
-    """Collect muscle activations of `episodes` episodes at or above the preview's percentile.
+            progress: bool = True) -> Collection:
+    """Muscle activations of `episodes` episodes at or above the preview's percentile.
 
     Args:
         run_dir: a finished training run (its policy and env are used).
@@ -116,18 +134,9 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
         workers: processes (default: all cores).
         max_episodes: give up after this many episodes past the preview (default 20 N).
 
-    Returns:
-        The summary; `activations.npz` in the output folder holds `activations` (S, n_muscles),
-        `episode` (S,) index into the kept episodes, `returns` (N,), `threshold`,
-        `preview_returns` (M,), `seeds` (N,) and `metadata` (JSON string).
-
     Raises:
-        MotorlabError: bad counts, an env without muscles, or no episode reaching the threshold.
+        MotorlabError: an env without muscles, or no episode reaching the threshold.
     """
-    if episodes <= 0 or preview <= 0:
-        raise MotorlabError(f"--episodes and --preview must be positive, got {episodes} and {preview}.")
-    if not 0.0 <= percentile <= 100.0:
-        raise MotorlabError(f"--percentile must be between 0 and 100, got {percentile}.")
     run_dir = require_run_dir(Path(run_dir))
     cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
     probe = make_env(cfg)
@@ -138,7 +147,7 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
     init_args = (str(run_dir), cfg.model_dump(), deterministic)
 
     kept: list[Episode] = []
-    fault_log: list[str] = []  # faulted episodes neither set the threshold nor are kept: their activations diverged
+    fault_log: list[str] = []
     with Progress(disable=not progress, transient=False) as bar:
         task = bar.add_task("preview episodes", total=preview)
         preview_returns = []
@@ -151,7 +160,6 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
         if not preview_returns:
             raise MotorlabError(f"all {preview} preview episodes ended on a numerical fault "
                                 f"(first: {fault_log[0]}); check the env and the policy's run.")
-        preview_returns = np.array(preview_returns)
         threshold = float(np.percentile(preview_returns, percentile))
         task = bar.add_task(f"episodes with return >= {threshold:.2f}", total=episodes)
         seeds = [seed + preview + i for i in range(max_episodes)]
@@ -168,23 +176,47 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
     if not kept:
         raise MotorlabError(f"no episode in {tried} reached the threshold {threshold:.3g}; "
                             "lower --percentile or train the policy longer.")
-    run = prepare_run_dir(out, "collect")
-    acts = np.concatenate([e.activations for e in kept])
-    meta = {"source_run": str(run_dir.resolve()), "env_id": cfg.id, "percentile": percentile, "preview": preview,
-            "deterministic": deterministic, "seed": seed, "episodes_requested": episodes, "episodes_tried": tried}
-    atomic_write_npz(run / ACTIVATIONS, activations=acts,
-              episode=np.concatenate([np.full(e.length, i) for i, e in enumerate(kept)]),
-              returns=np.array([e.ret for e in kept]), seeds=np.array([e.seed for e in kept]),
-              solved=np.array([e.solved for e in kept]), threshold=np.array(threshold),
-              preview_returns=preview_returns, metadata=np.array(json.dumps(meta)))
-    write_config(run, {"run_dir": str(run_dir), "episodes": episodes, "percentile": percentile, "preview": preview,
-                       "seed": seed, "deterministic": deterministic})
-    summary = {"env_id": cfg.id, "samples": int(len(acts)), "n_muscles": int(acts.shape[1]),
-               "episodes_kept": len(kept), "episodes_requested": episodes, "episodes_tried": tried,
-               "threshold": threshold, "preview_return_mean": float(preview_returns.mean()),
-               "kept_return_mean": float(np.mean([e.ret for e in kept])),
-               "kept_success_rate": float(np.mean([e.solved for e in kept])), "numerical_faults": len(fault_log)}
-    write_faults_log(run, fault_log)
-    write_summary(run, summary)
-    summary["run_dir"] = str(run)
-    return summary
+    return Collection(cfg.id, run_dir, kept, np.array(preview_returns), threshold, tried, fault_log)
+
+
+def save_activations(path: Path, c: Collection, meta: dict[str, Any]) -> None:
+    """activations.npz: `activations` (S, n_muscles), `episode` (S,) index into the kept episodes,
+    `returns` (N,), `seeds` (N,), `solved` (N,), `threshold`, `preview_returns` (M,) and
+    `metadata` (JSON string). Plain arrays: loading it needs no pickle."""
+    atomic_write_npz(path, activations=c.activations(),
+                     episode=np.concatenate([np.full(e.length, i) for i, e in enumerate(c.kept)]),
+                     returns=np.array([e.ret for e in c.kept]), seeds=np.array([e.seed for e in c.kept]),
+                     solved=np.array([e.solved for e in c.kept]), threshold=np.array(c.threshold),
+                     preview_returns=c.preview_returns, metadata=np.array(json.dumps(meta)))
+
+
+def load_activations(path: Path) -> tuple[np.ndarray, dict]:
+    """Activations (n_samples, n_muscles) and metadata from activations.npz (no pickle).
+
+    Raises:
+        MotorlabError: missing, not an npz, no `activations` array, wrong shape, NaN/Inf.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "activations.npz"
+    if not path.is_file():
+        raise MotorlabError(f"{path} does not exist; write it with `motorlab synergies collect RUN_DIR`.")
+    try:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):  # a plain .npy array
+            raise MotorlabError(f"{path} is a single array, not an .npz archive; write it with "
+                                "`motorlab synergies collect` (activations.npz).")
+        with loaded as data:
+            if "activations" not in data.files:
+                raise MotorlabError(f"{path} has no 'activations' array; it holds {', '.join(data.files) or 'nothing'}.")
+            acts = np.asarray(data["activations"], dtype=np.float64)
+            meta = json.loads(str(data["metadata"])) if "metadata" in data.files else {}
+    except MotorlabError:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, json.JSONDecodeError) as e:
+        raise MotorlabError(f"{path} is not a readable .npz file ({e}); collect it again.") from None
+    if acts.ndim != 2 or acts.shape[0] < 2 or acts.shape[1] < 1:
+        raise MotorlabError(f"{path}: activations must be (samples, muscles) with at least 2 samples; got {acts.shape}.")
+    if not np.all(np.isfinite(acts)):
+        raise MotorlabError(f"{path}: activations contain NaN or Inf; collect them again.")
+    return acts, meta

@@ -11,7 +11,7 @@ with values in [0, 1], are reduced to N synergies (Berg et al. 2023, MyoSuite):
 
 An agent acts with z in [-1, 1]^N. Every inverse in these chains is affine, so
 decoding to muscle space is ONE affine map ``decode(z) = z @ weight + bias``,
-composed once from the plain fitted arrays (`_affine_from_arrays`) and applied
+composed once from the plain fitted arrays (`affine_from_arrays`) and applied
 as a single batched matrix product.
 
 `sar.npz` holds only plain arrays plus a JSON metadata string, so loading it
@@ -56,7 +56,7 @@ NMF_MAX_ITER = 2000
 NMF_INIT = "nndsvda"
 
 
-class _FormatError(ValueError):
+class SarFormatError(ValueError):
     """Plain arrays / metadata that do not describe a valid SAR (callers add context)."""
 
 
@@ -193,44 +193,44 @@ def _check_arrays(method: str, arrays: dict[str, np.ndarray]) -> tuple[int, int]
         (n_synergies, n_muscles).
 
     Raises:
-        _FormatError: naming the first problem found.
+        SarFormatError: naming the first problem found.
     """
     if method not in REQUIRED_ARRAYS:
-        raise _FormatError(f"unknown SAR method {method!r} (expected one of {', '.join(METHODS)})")
+        raise SarFormatError(f"unknown SAR method {method!r} (expected one of {', '.join(METHODS)})")
     missing = [k for k in REQUIRED_ARRAYS[method] if k not in arrays]
     if missing:
-        raise _FormatError(f"missing array(s) {', '.join(missing)} for method {method!r}")
+        raise SarFormatError(f"missing array(s) {', '.join(missing)} for method {method!r}")
     for k in REQUIRED_ARRAYS[method]:
         a = arrays[k]
         if a.dtype.kind not in "fiu":
-            raise _FormatError(f"array {k} has dtype {a.dtype}, expected floating point")
+            raise SarFormatError(f"array {k} has dtype {a.dtype}, expected floating point")
         if not np.all(np.isfinite(a)):
-            raise _FormatError(f"array {k} holds non-finite values (NaN or Inf)")
+            raise SarFormatError(f"array {k} holds non-finite values (NaN or Inf)")
 
     def shape(k: str, expected: tuple[int, ...]) -> None:
         if arrays[k].shape != expected:
-            raise _FormatError(f"array {k} has shape {arrays[k].shape}, expected {expected}")
+            raise SarFormatError(f"array {k} has shape {arrays[k].shape}, expected {expected}")
 
     if arrays["scaler_min"].ndim != 1:
-        raise _FormatError(f"array scaler_min has shape {arrays['scaler_min'].shape}, expected 1-D")
+        raise SarFormatError(f"array scaler_min has shape {arrays['scaler_min'].shape}, expected 1-D")
     n = arrays["scaler_min"].shape[0]
     shape("scaler_scale", (n,))
     if np.any(arrays["scaler_scale"] == 0):
-        raise _FormatError("array scaler_scale holds zeros (a min-max scale is never zero)")
+        raise SarFormatError("array scaler_scale holds zeros (a min-max scale is never zero)")
     if method == "nmf":
         comps = arrays["nmf_components"]
         if comps.ndim != 2 or comps.shape[0] != n:
-            raise _FormatError(f"array nmf_components has shape {comps.shape}, expected ({n}, n_muscles)")
+            raise SarFormatError(f"array nmf_components has shape {comps.shape}, expected ({n}, n_muscles)")
         return n, comps.shape[1]
     comps = arrays["pca_components"]
     if comps.ndim != 2:
-        raise _FormatError(f"array pca_components has shape {comps.shape}, expected (n_components, n_muscles)")
+        raise SarFormatError(f"array pca_components has shape {comps.shape}, expected (n_components, n_muscles)")
     p, m = comps.shape
     shape("pca_mean", (m,))
     shape("pca_explained_variance", (p,))
     if method == "pca":
         if p != n:
-            raise _FormatError(f"array pca_components has {p} rows but the scaler has {n} features")
+            raise SarFormatError(f"array pca_components has {p} rows but the scaler has {n} features")
         return n, m
     # FastICA maps the p PCA scores to n sources; sklearn's mixing_ is (p, n).
     shape("ica_mixing", (p, n))
@@ -239,7 +239,7 @@ def _check_arrays(method: str, arrays: dict[str, np.ndarray]) -> tuple[int, int]
     return n, m
 
 
-def _affine_from_arrays(method: str, arrays: dict[str, np.ndarray],
+def affine_from_arrays(method: str, arrays: dict[str, np.ndarray],
                         metadata: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """Compose the decode map ``z @ W + b`` from the plain fitted arrays.
 
@@ -256,7 +256,7 @@ def _affine_from_arrays(method: str, arrays: dict[str, np.ndarray],
         (weight (N, M), bias (M,)), float64.
 
     Raises:
-        _FormatError: missing, non-finite or inconsistent arrays.
+        SarFormatError: missing, non-finite or inconsistent arrays.
     """
     arrays = {k: np.asarray(v) for k, v in arrays.items()}
     _check_arrays(method, arrays)
@@ -312,7 +312,7 @@ def _validate_method(method: str, allowed: tuple[str, ...]) -> str:
     return method
 
 
-def _require_sklearn():
+def require_sklearn():
     try:
         import sklearn
     except ImportError:
@@ -322,7 +322,7 @@ def _require_sklearn():
     return sklearn
 
 
-def _versions() -> dict[str, str | None]:
+def library_versions() -> dict[str, str | None]:
     import motorlab
 
     try:
@@ -334,7 +334,7 @@ def _versions() -> dict[str, str | None]:
     return {"numpy": np.__version__, "sklearn": skl, "motorlab": motorlab.__version__}
 
 
-def _now() -> str:
+def utc_now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="seconds")
 
 
@@ -409,7 +409,7 @@ def vaf_curve(activations: Any, method: str = "pca", max_n: int | None = None, s
     if isinstance(max_n, bool) or not isinstance(max_n, (int, np.integer)) or not 1 <= max_n <= m:
         raise MotorlabError(f"max_n must be an integer in [1, {m}] (the number of muscles); got {max_n!r}.")
     if method == "nmf":
-        _require_sklearn()
+        require_sklearn()
         _check_nmf_input(x)
         return np.array([_fit_nmf(x, n, seed)[2] for n in range(1, int(max_n) + 1)])
     return _pca_vaf(x)[: int(max_n)]
@@ -481,7 +481,7 @@ def fit_sar(
     n_samples, m = x.shape
     if (n_synergies is None) == (vaf is None):
         raise MotorlabError("give exactly one of --n-synergies or --vaf (a VAF threshold such as 0.95).")
-    _require_sklearn()
+    require_sklearn()
     from sklearn.preprocessing import MinMaxScaler
 
     limit = min(m, n_samples)
@@ -526,8 +526,8 @@ def fit_sar(
         "source_env": source_env,
         "seed": int(seed),
         "scaler_feature_range": [-1.0, 1.0],
-        "created": _now(),
-        "versions": _versions(),
+        "created": utc_now(),
+        "versions": library_versions(),
     }
     scaler = MinMaxScaler(feature_range=(-1, 1))
     arrays: dict[str, np.ndarray] = {}
@@ -577,7 +577,7 @@ def fit_sar(
         scaler.fit(scores)
     arrays.update(scaler_min=scaler.min_, scaler_scale=scaler.scale_)
     arrays = {k: np.asarray(v, dtype=np.float64) for k, v in arrays.items()}
-    weight, bias = _affine_from_arrays(method, arrays, meta)
+    weight, bias = affine_from_arrays(method, arrays, meta)
     return SAR(method=method, arrays=arrays, weight=weight, bias=bias, metadata=meta)
 
 
@@ -687,8 +687,8 @@ def load_sar(path: Path | str) -> SAR:
     weight, bias = data.pop("decode_weight"), data.pop("decode_bias")
     try:
         n, m = _check_arrays(method, data)
-        expected_w, expected_b = _affine_from_arrays(method, data, meta)
-    except _FormatError as e:
+        expected_w, expected_b = affine_from_arrays(method, data, meta)
+    except SarFormatError as e:
         raise bad(str(e)) from None
     for name, arr, shape in (("decode_weight", weight, (n, m)), ("decode_bias", bias, (m,))):
         if arr.shape != shape:

@@ -16,8 +16,16 @@ from typing import Any
 import numpy as np
 
 from motorlab.errors import MotorlabError
-from motorlab.synergy.sar import (FORMAT_VERSION, SAR, _affine_from_arrays, _FormatError, _now, _require_sklearn,
-                                  _versions, save_sar)
+from motorlab.synergy.sar import (
+    FORMAT_VERSION,
+    SAR,
+    SarFormatError,
+    affine_from_arrays,
+    library_versions,
+    require_sklearn,
+    save_sar,
+    utc_now,
+)
 
 PICKLES = {"pca": "pca.pkl", "ica": "ica.pkl", "normalizer": "normalizer.pkl"}
 CHECK_ATOL = 1e-6
@@ -108,7 +116,7 @@ def import_sklearn(folder: Path | str, trust: bool, out: Path | str, n_check: in
     if out.is_dir():
         out = out / "sar.npz"
 
-    sklearn = _require_sklearn()
+    sklearn = require_sklearn()
     from sklearn.decomposition import PCA, FastICA
     from sklearn.preprocessing import MinMaxScaler
 
@@ -149,12 +157,12 @@ def import_sklearn(folder: Path | str, trust: bool, out: Path | str, n_check: in
         "import_source": str(folder.resolve()),
         "pickled_sklearn_versions": sorted(versions) if versions else [sklearn.__version__],
         "sklearn_versions_differ": bool(versions),
-        "created": _now(),
-        "versions": _versions(),
+        "created": utc_now(),
+        "versions": library_versions(),
     }
     try:
-        weight, bias = _affine_from_arrays("sklearn-import", arrays, meta)
-    except _FormatError as e:
+        weight, bias = affine_from_arrays("sklearn-import", arrays, meta)
+    except SarFormatError as e:
         raise MotorlabError(f"the pickles in {folder} do not chain together: {e}.") from None
     meta["n_synergies"], meta["n_muscles"] = int(weight.shape[0]), int(weight.shape[1])
     sar = SAR(method="sklearn-import", arrays=arrays, weight=weight, bias=bias, metadata=meta)

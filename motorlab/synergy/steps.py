@@ -1,92 +1,213 @@
-"""The synergy steps behind `motorlab synergies vaf|fit|import-sklearn`: read
-activations.npz safely, compute, write a run folder."""
+"""The synergy step kinds: `collect` muscle activations from a policy's good episodes, measure
+the `vaf` of N synergies, `fit` a Synergistic Action Representation (sar.npz)."""
 
 from __future__ import annotations
 
-import json
-import zipfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
+from pydantic import Field
+from rich.console import Console
 
 from motorlab.errors import MotorlabError
-from motorlab.runs import prepare_run_dir, write_config, write_summary
+from motorlab.report.plots import vaf_plot
+from motorlab.settings import Settings, Summary
+from motorlab.stepkind import Artifact, Ref, Row, StepKind
+from motorlab.synergy.collect import ACTIVATIONS, collect, load_activations, save_activations
+from motorlab.synergy.sar import fit_sar, save_sar, smallest_n, vaf_curve
 
 SAR_FILE = "sar.npz"
 
-
-def load_activations(path: Path) -> tuple[np.ndarray, dict]:
-    """Activations (n_samples, n_muscles) and metadata from activations.npz (no pickle).
-
-    Raises:
-        MotorlabError: missing, not an npz, no `activations` array, wrong shape, NaN/Inf.
-    """
-    path = Path(path)
-    if path.is_dir():
-        path = path / "activations.npz"
-    if not path.is_file():
-        raise MotorlabError(f"{path} does not exist; write it with `motorlab synergies collect RUN_DIR`.")
-    try:
-        loaded = np.load(path, allow_pickle=False)
-        if not isinstance(loaded, np.lib.npyio.NpzFile):  # a plain .npy array
-            raise MotorlabError(f"{path} is a single array, not an .npz archive; write it with "
-                                "`motorlab synergies collect` (activations.npz).")
-        with loaded as data:
-            if "activations" not in data.files:
-                raise MotorlabError(f"{path} has no 'activations' array; it holds {', '.join(data.files) or 'nothing'}.")
-            acts = np.asarray(data["activations"], dtype=np.float64)
-            meta = json.loads(str(data["metadata"])) if "metadata" in data.files else {}
-    except MotorlabError:
-        raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, json.JSONDecodeError) as e:
-        raise MotorlabError(f"{path} is not a readable .npz file ({e}); collect it again.") from None
-    if acts.ndim != 2 or acts.shape[0] < 2 or acts.shape[1] < 1:
-        raise MotorlabError(f"{path}: activations must be (samples, muscles) with at least 2 samples; got {acts.shape}.")
-    if not np.all(np.isfinite(acts)):
-        raise MotorlabError(f"{path}: activations contain NaN or Inf; collect them again.")
-    return acts, meta
+# ---- collect ----------------------------------------------------------------------------------
 
 
-def vaf_step(activations: Path, threshold: float = 0.8, method: str = "pca", max_n: int | None = None,
-             out: Path | None = None) -> dict[str, Any]:
-    """VAF for N = 1..n_muscles; writes vaf.png and summary.json (`vaf`, `n_for_threshold`)."""
-    from motorlab.report.plots import vaf_plot
-    from motorlab.synergy.sar import smallest_n, vaf_curve
-
-    if not 0.0 < threshold <= 1.0:
-        raise MotorlabError(f"--threshold must be a fraction in (0, 1], e.g. 0.8; got {threshold}.")
-    acts, meta = load_activations(activations)
-    curve = vaf_curve(acts, method=method, max_n=max_n)
-    try:
-        n_needed: int | None = smallest_n(curve, threshold)
-    except MotorlabError:
-        n_needed = None  # reported as null; the curve is still worth having
-    run = prepare_run_dir(out, "vaf")
-    write_config(run, {"activations": str(Path(activations).resolve()), "threshold": threshold, "method": method,
-                       "max_n": max_n})
-    vaf_plot(curve, threshold, n_needed, run / "vaf.png", f"VAF of {meta.get('env_id', 'recorded')} activations ({method})")
-    summary = {"method": method, "n_muscles": int(acts.shape[1]), "samples": int(acts.shape[0]),
-               "threshold": threshold, "n_for_threshold": n_needed, "vaf": [float(v) for v in curve]}
-    write_summary(run, summary)
-    summary["run_dir"] = str(run)
-    return summary
+class CollectSettings(Settings):
+    run: str = Field(description="A training run folder (the play policy)")
+    episodes: int = Field(100, gt=0, description="Episodes to keep (those at or above the threshold)")
+    percentile: float = Field(80.0, ge=0, le=100, description="Return threshold: this percentile of the preview "
+                              "returns")
+    preview: int = Field(50, gt=0, description="Preview episodes that set the threshold")
+    deterministic: bool = Field(False, description="Act with the policy's mean instead of sampling from it")
+    workers: int | None = Field(None, gt=0, description="Processes (default: all cores)")
+    max_episodes: int | None = Field(None, gt=0, description="Give up after this many episodes past the preview "
+                                     "(default: 20 x episodes)")
+    seed: int = Field(0, ge=0, description="Random seed (episode seeds and sampled actions)")
 
 
-def fit_step(activations: Path, n_synergies: int | None = None, vaf: float | None = None, method: str = "pca-ica",
-             seed: int = 0, out: Path | None = None) -> dict[str, Any]:
-    """Fit a SAR and write `sar.npz` + summary.json in the run folder."""
-    from motorlab.synergy.sar import fit_sar, save_sar
+class CollectSummary(Summary):
+    env_id: str
+    samples: int
+    n_muscles: int
+    episodes_kept: int
+    episodes_requested: int
+    episodes_tried: int
+    threshold: float
+    preview_return_mean: float
+    kept_return_mean: float
+    kept_success_rate: float
+    numerical_faults: int
 
-    acts, meta = load_activations(activations)
-    sar = fit_sar(acts, n_synergies=n_synergies, vaf=vaf, method=method, seed=seed, source_env=meta.get("env_id"))
-    run = prepare_run_dir(out, "fit")
-    write_config(run, {"activations": str(Path(activations).resolve()), "n_synergies": n_synergies, "vaf": vaf,
-                       "method": method, "seed": seed})
-    save_sar(sar, run / SAR_FILE)
-    summary = {"sar": str(run / SAR_FILE), "method": method, "n_synergies": sar.n_synergies,
-               "n_muscles": sar.n_muscles, "vaf": sar.metadata.get("vaf"), "source_env": meta.get("env_id"),
-               "samples": int(acts.shape[0])}
-    write_summary(run, summary)
-    summary["run_dir"] = str(run)
-    return summary
+
+class CollectKind(StepKind[CollectSettings, CollectSummary]):
+    """Record muscle activations (MuJoCo data.act) of a policy's good episodes to activations.npz.
+
+    Preview episodes set a return threshold at the P-th percentile; then episodes run until N
+    of them reach it. Episodes run in a process pool, each from its own seed, so the result does
+    not depend on the number of workers."""
+
+    name = "collect"
+    command = "synergies collect"
+    settings = CollectSettings
+    summary = CollectSummary
+    refs = (Ref("run", ("policy",)),)
+    provides = Artifact("activations", ACTIVATIONS)
+
+    def run(self, settings: CollectSettings, out: Path | None = None, console: Console | None = None,
+            progress: bool = True) -> CollectSummary:
+        s = settings
+        c = collect(Path(s.run), s.episodes, s.percentile, s.preview, s.seed, s.deterministic, s.workers,
+                    s.max_episodes, progress)
+        run_dir = self.start(out)
+        acts = c.activations()
+        meta = {"source_run": str(c.source_run.resolve()), "env_id": c.env_id, "percentile": s.percentile,
+                "preview": s.preview, "deterministic": s.deterministic, "seed": s.seed,
+                "episodes_requested": s.episodes, "episodes_tried": c.tried}
+        save_activations(run_dir / ACTIVATIONS, c, meta)
+        summary = CollectSummary(
+            env_id=c.env_id, samples=len(acts), n_muscles=acts.shape[1], episodes_kept=len(c.kept),
+            episodes_requested=s.episodes, episodes_tried=c.tried, threshold=c.threshold,
+            preview_return_mean=float(c.preview_returns.mean()),
+            kept_return_mean=float(np.mean([e.ret for e in c.kept])),
+            kept_success_rate=float(np.mean([e.solved for e in c.kept])), numerical_faults=len(c.fault_log))
+        return self.finish(run_dir, settings, summary, c.fault_log)
+
+    def describe(self, settings: CollectSettings, copies: int = 1) -> str:
+        return f"collect {settings.episodes} episodes from {settings.run} (≥ {settings.percentile:g}th pct.)"
+
+    def headline(self, s: CollectSummary) -> dict[str, Any]:
+        return {"samples": s.samples, "n_muscles": s.n_muscles, "episodes_kept": s.episodes_kept,
+                "threshold": s.threshold, "kept_success_rate": s.kept_success_rate}
+
+    def row(self, settings: CollectSettings, h: dict[str, Any]) -> Row:
+        return Row(note=f"kept {h['episodes_kept']} episodes, {h['samples']:,} samples x {h['n_muscles']} muscles")
+
+
+COLLECT = CollectKind()
+
+
+# ---- vaf --------------------------------------------------------------------------------------
+
+
+class VafSettings(Settings):
+    activations: str = Field(description="activations.npz (or its folder)")
+    threshold: float = Field(0.8, gt=0, le=1, description="Report the smallest N whose VAF reaches this")
+    method: Literal["pca", "pca-ica", "nmf"] = Field("pca", description="pca (also pca-ica: same VAF) or nmf "
+                                                     "(classic, uncentered)")
+    max_n: int | None = Field(None, gt=0, description="Largest N (saves time with nmf)")
+
+
+class VafSummary(Summary):
+    method: str
+    n_muscles: int
+    samples: int
+    threshold: float
+    n_for_threshold: int | None
+    vaf: list[float]
+
+
+class VafKind(StepKind[VafSettings, VafSummary]):
+    """Variance accounted for by N = 1..n_muscles synergies: vaf.png and the smallest N reaching the threshold."""
+
+    name = "vaf"
+    command = "synergies vaf"
+    settings = VafSettings
+    summary = VafSummary
+    refs = (Ref("activations", ("activations",)),)
+
+    def run(self, settings: VafSettings, out: Path | None = None, console: Console | None = None,
+            progress: bool = True) -> VafSummary:
+        acts, meta = load_activations(Path(settings.activations))
+        curve = vaf_curve(acts, method=settings.method, max_n=settings.max_n)
+        try:
+            n_needed: int | None = smallest_n(curve, settings.threshold)
+        except MotorlabError:
+            n_needed = None  # reported as null; the curve is still worth having
+        run_dir = self.start(out)
+        vaf_plot(curve, settings.threshold, n_needed, run_dir / "vaf.png",
+                 f"VAF of {meta.get('env_id', 'recorded')} activations ({settings.method})")
+        summary = VafSummary(method=settings.method, n_muscles=acts.shape[1], samples=acts.shape[0],
+                             threshold=settings.threshold, n_for_threshold=n_needed, vaf=[float(v) for v in curve])
+        return self.finish(run_dir, settings, summary)
+
+    def describe(self, settings: VafSettings, copies: int = 1) -> str:
+        return f"VAF of {settings.activations} ({settings.method})"
+
+    def headline(self, s: VafSummary) -> dict[str, Any]:
+        return {"n_for_threshold": s.n_for_threshold, "threshold": s.threshold, "n_muscles": s.n_muscles}
+
+    def row(self, settings: VafSettings, h: dict[str, Any]) -> Row:
+        n = h["n_for_threshold"]
+        return Row(note=f"N = {n} reaches VAF {h['threshold']:.0%}" if n else
+                   f"no N reaches VAF {h['threshold']:.0%}")
+
+
+VAF = VafKind()
+
+
+# ---- fit --------------------------------------------------------------------------------------
+
+
+class FitSettings(Settings):
+    activations: str = Field(description="activations.npz (or its folder)")
+    n_synergies: int | None = Field(None, gt=0, description="Number of synergies N")
+    vaf: float | None = Field(None, gt=0, le=1, description="Or: the smallest N whose VAF reaches this, e.g. 0.8")
+    method: Literal["pca-ica", "pca", "nmf"] = Field("pca-ica", description="pca-ica (PCA -> FastICA -> scale to "
+                                                     "[-1,1], the reference), pca, or nmf")
+    seed: int = Field(0, ge=0, description="Random seed (FastICA, NMF)")
+
+
+class FitSummary(Summary):
+    sar: str
+    method: str
+    n_synergies: int
+    n_muscles: int
+    vaf: float | None
+    source_env: str | None
+    samples: int
+
+
+class FitKind(StepKind[FitSettings, FitSummary]):
+    """Fit a Synergistic Action Representation; writes sar.npz (plain arrays + JSON metadata, no pickle)."""
+
+    name = "fit"
+    command = "synergies fit"
+    settings = FitSettings
+    summary = FitSummary
+    refs = (Ref("activations", ("activations",)),)
+    provides = Artifact("sar", SAR_FILE)
+
+    def run(self, settings: FitSettings, out: Path | None = None, console: Console | None = None,
+            progress: bool = True) -> FitSummary:
+        acts, meta = load_activations(Path(settings.activations))
+        sar = fit_sar(acts, n_synergies=settings.n_synergies, vaf=settings.vaf, method=settings.method,
+                      seed=settings.seed, source_env=meta.get("env_id"))
+        run_dir = self.start(out)
+        save_sar(sar, run_dir / SAR_FILE)
+        summary = FitSummary(sar=str(run_dir / SAR_FILE), method=settings.method, n_synergies=sar.n_synergies,
+                             n_muscles=sar.n_muscles, vaf=sar.metadata.get("vaf"), source_env=meta.get("env_id"),
+                             samples=acts.shape[0])
+        return self.finish(run_dir, settings, summary)
+
+    def describe(self, settings: FitSettings, copies: int = 1) -> str:
+        return (f"fit {settings.method} to {settings.activations}"
+                + (f", N = {settings.n_synergies}" if settings.n_synergies else f", VAF ≥ {settings.vaf}"))
+
+    def headline(self, s: FitSummary) -> dict[str, Any]:
+        return {"n_synergies": s.n_synergies, "n_muscles": s.n_muscles, "vaf": s.vaf}
+
+    def row(self, settings: FitSettings, h: dict[str, Any]) -> Row:
+        return Row(note=f"{h['n_synergies']} synergies, VAF {h['vaf']:.1%}")
+
+
+FIT = FitKind()

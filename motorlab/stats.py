@@ -73,6 +73,15 @@ def _interval(values: dict[str, np.ndarray], func) -> tuple[dict, dict]:
                                           random_state=np.random.RandomState(0))
 
 
+def iqm_with_ci(values: list[float]) -> tuple[float, float, float]:
+    """IQM of one setting's per-seed values and its 95% stratified-bootstrap CI (low, high)."""
+    from rliable import metrics as rm
+
+    point, ci = _interval({"seeds": np.array([[v] for v in values])},
+                          lambda x: np.array([rm.aggregate_iqm(x), rm.aggregate_mean(x)]))
+    return float(point["seeds"][0]), float(ci["seeds"][0, 0]), float(ci["seeds"][1, 0])
+
+
 def aggregate(scores: dict[str, list[dict[str, Score]]]) -> tuple[dict[str, Any], dict[str, Any]]:
     """IQM, mean and CI of each metric per setting; probability of improvement for each pair
     of settings; performance profiles of returns and success rates.

@@ -1,4 +1,4 @@
-"""`motorlab mpc`: control an env with CEM on a learned forward model; returns, distances, timing.
+"""MPC episodes: an env controlled by CEM on a learned forward model; returns, distances, timing.
 
 Episodes run in groups of `parallel` Gymnasium envs whose plans are made in one batched
 planner call per control step (Brax-style batching: the model sees all envs' candidates at
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -22,17 +22,14 @@ from motorlab.dynamics.rewards import reward_for
 from motorlab.dynamics.state import layout_for, xy_columns
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.faults import fault_line, fault_of, write_faults_log
-from motorlab.runs import MetricsWriter, atomic_write_npz, prepare_run_dir, write_config, write_summary
-
-# Tuned on Reacher-v5 (benchmarks/mpc.py): ~4 ms per control step on one core, return ~-3.6.
-# The horizon matters most (10 steps: ~-4.6); population x iterations buys precision at ~0.6 us per row.
-DEFAULTS = {"horizon": 15, "population": 100, "iterations": 5, "elites": 10}
+from motorlab.faults import fault_line, fault_of
+from motorlab.report.video import filming, record_episode, write_mp4
 
 
 def build_policy(env, env_id: str, model_path: Path, optimizer: str = "cem", seed: int = 0, threads: int | None = 1,
                  **settings) -> MPCPolicy:
-    """An MPC policy for `env` on the model in `model_path` (checked against the env and its layout)."""
+    """An MPC policy for `env` on the model in `model_path` (checked against the env and its layout);
+    `settings` are the planner's (horizon, population, iterations, elites)."""
     model = load_model(model_path, env_id=env_id)
     layout = layout_for(env_id, env.observation_space.shape[0], model.meta.get("state_layout", "observation"))
     if model.state_size != layout.size or model.action_size != env.action_space.shape[0]:
@@ -41,8 +38,7 @@ def build_policy(env, env_id: str, model_path: Path, optimizer: str = "cem", see
     if threads:
         torch.set_num_threads(threads)  # small batches: more threads cost more than they give
     score = model_scorer(model, reward_for(env_id, layout.name))
-    planner = make_planner(optimizer, score, env.action_space.low, env.action_space.high, seed=seed,
-                           **{**DEFAULTS, **{k: v for k, v in settings.items() if v is not None}})
+    planner = make_planner(optimizer, score, env.action_space.low, env.action_space.high, seed=seed, **settings)
     return MPCPolicy(planner, layout)
 
 
@@ -103,61 +99,9 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
     return MPCEpisodes(np.array(returns), padded, np.array(call_ms), np.array(per_env_ms), fault_log)
 
 
-def mpc_step(env_id: str, model_path: Path, episodes: int = 50, horizon: int | None = None,
-             population: int | None = None, iterations: int | None = None, elites: int | None = None,
-             optimizer: str = "cem", parallel: int = 1, seed: int = 0, video: bool = False,
-             out: Path | None = None, progress: bool = True) -> dict[str, Any]:
-    """`motorlab mpc`: summary.json (return_mean, return_std, final_distance_mean, plan_ms_median), episodes.npz,
-    metrics.csv (one row per episode), plots/distance.png and, with `video`, videos/episode_0.mp4."""
-    from motorlab.report.dynamics_plots import distance_over_time
-
-    if episodes <= 0 or parallel <= 0:
-        raise MotorlabError(f"--episodes and --parallel must be positive, got {episodes} and {parallel}.")
-    settings = {"horizon": horizon, "population": population, "iterations": iterations, "elites": elites}
-    resolved = {**DEFAULTS, **{k: v for k, v in settings.items() if v is not None}}
-    env = make_env(EnvConfig(id=env_id), shaped=False)
-    policy = build_policy(env, env_id, model_path, optimizer, seed, **resolved)
-    dt = float(getattr(env.unwrapped, "dt", 0.0)) or None
-    env.close()
-    parallel = min(parallel, episodes)
-    run = prepare_run_dir(out, "mpc")
-    start = time.perf_counter()
-    returns, distances, call_ms, per_env_ms, fault_log = run_episodes(env_id, policy, episodes, seed, parallel,
-                                                                       progress)
-    wall = time.perf_counter() - start
-    final = distances[:, -1]
-    metrics = MetricsWriter(run / "metrics.csv", ["episode", "return", "final_distance"])
-    for i, (r, d) in enumerate(zip(returns, final)):
-        metrics.write({"episode": i, "return": r, "final_distance": d})
-    metrics.close()
-    atomic_write_npz(run / "episodes.npz", returns=returns, distances=distances, plan_ms=call_ms)
-    if np.isfinite(distances).all():
-        distance_over_time(distances, run / "plots" / "distance.png",
-                           f"{env_id}: MPC ({optimizer}, horizon {resolved['horizon']}, "
-                           f"{resolved['population']} x {resolved['iterations']})", dt=dt)
-    summary = {"env_id": env_id, "episodes": episodes, "return_mean": float(returns.mean()),
-               "return_std": float(returns.std()), "return_min": float(returns.min()),
-               "final_distance_mean": float(final.mean()),
-               "final_distance_median": float(np.median(final)), "plan_ms_median": float(np.median(per_env_ms)),
-               "plan_call_ms_median": float(np.median(call_ms)), "parallel": parallel, "optimizer": optimizer,
-               **resolved, "wall_seconds": wall, "numerical_faults": len(fault_log)}
-    write_faults_log(run, fault_log)
-    if video:
-        summary["video"] = str(_video(env_id, policy, run / "videos" / "episode_0.mp4", seed))
-    write_config(run, {"env": env_id, "model": str(model_path), "episodes": episodes, "optimizer": optimizer,
-                       "parallel": parallel, "seed": seed, **resolved})
-    write_summary(run, summary)
-    summary["run_dir"] = str(run)
-    return summary
-
-
-def _video(env_id: str, policy: MPCPolicy, path: Path, seed: int) -> Path:
-    from motorlab.report.video import record_episode, video_settings, write_mp4
-
-    env = make_env(EnvConfig(id=env_id), shaped=False)
-    cam, every, fps = video_settings(env, 480, 480, None)
-    frames, _ = record_episode(env, policy, cam, seed, every)
-    write_mp4(path, frames, fps)
-    cam.close()
-    env.close()
+def record_video(env_id: str, policy: MPCPolicy, path: Path, seed: int) -> Path:
+    """One episode of `policy` rendered to an MP4 at `path`."""
+    with filming(make_env(EnvConfig(id=env_id), shaped=False), 480, 480, None) as (env, cam, every, fps):
+        frames, _ = record_episode(env, policy, cam, seed, every)
+        write_mp4(path, frames, fps)
     return path

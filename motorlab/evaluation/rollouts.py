@@ -8,21 +8,15 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Protocol
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 from motorlab.envs import EnvConfig, env_dt, make_env, max_return
-from motorlab.faults import fault_line, fault_of, write_faults_log
-
-
-class Policy(Protocol):
-    """What every policy does: start a batch of episodes, map observations to actions."""
-
-    def reset(self, n: int) -> None: ...
-
-    def act(self, obs: np.ndarray) -> np.ndarray: ...
+from motorlab.faults import fault_line, fault_of
+from motorlab.policies import Policy
+from motorlab.runs import read_config
 
 
 @dataclass
@@ -227,71 +221,7 @@ def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, recor
                     actions=[a for p in parts for a in p.actions], dt=parts[0].dt)
 
 
-def trained_env_settings(run_dir) -> dict:
+def trained_env_settings(run_dir: Path) -> dict:
     """The env settings a run folder records, without reward shaping: evaluation,
     plots, videos, collection and zero-shot all report the task's own return."""
-    from motorlab.runs import read_config
-
     return {k: v for k, v in read_config(run_dir).get("env", {}).items() if k != "reward"}
-
-
-def resolve_env(policy_spec: str, overrides: dict) -> EnvConfig:
-    """The env to evaluate on: the run folder's training env (if the policy is a run
-    folder), with the given overrides (id, delay, delay_on, history, kwargs) on top.
-
-    Raises:
-        MotorlabError: no env id known (built-in controller without --env).
-    """
-    from pathlib import Path
-
-    from motorlab.errors import MotorlabError
-    from motorlab.policies import BUILTIN_POLICIES, unknown_policy_message
-    from motorlab.runs import require_run_dir
-
-    base: dict = {}
-    if Path(policy_spec).exists():
-        base = trained_env_settings(require_run_dir(Path(policy_spec)))
-    elif policy_spec.split(":", 1)[0] not in BUILTIN_POLICIES:
-        raise MotorlabError(unknown_policy_message(policy_spec))
-    merged = merge_env(base, overrides)
-    if "id" not in merged:
-        raise MotorlabError(f"no env for {policy_spec!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")
-    return EnvConfig.model_validate(merged)
-
-
-def merge_env(base: dict, overrides: dict) -> dict:
-    """Env settings `overrides` on top of `base`; env keyword arguments merge key by key."""
-    merged = {**base, **{k: v for k, v in overrides.items() if v is not None}}
-    if isinstance(base.get("kwargs"), dict) and isinstance(overrides.get("kwargs"), dict):
-        merged["kwargs"] = {**base["kwargs"], **overrides["kwargs"]}
-    return merged
-
-
-def evaluate_step(policy_spec: str, env_cfg: EnvConfig, episodes: int, seed: int, out) -> dict:
-    """`motorlab evaluate`: evaluate a policy and write a run folder (config.toml, summary.json).
-
-    Returns:
-        The summary: return mean/std/min/max, success rate, episode lengths.
-    """
-    from motorlab.policies import load_policy
-    from motorlab.runs import prepare_run_dir, write_config, write_summary
-
-    if episodes <= 0:
-        from motorlab.errors import MotorlabError
-
-        raise MotorlabError(f"--episodes must be positive, got {episodes}.")
-    probe = make_env(env_cfg, shaped=False)
-    try:
-        policy = load_policy(policy_spec, probe, env_cfg.id, seed)
-        target = max_return(env_cfg.id)
-    finally:
-        probe.close()
-    result = evaluate(policy, env_cfg, episodes, seed)
-    run_dir = prepare_run_dir(out, "evaluate")
-    write_config(run_dir, {"policy": policy_spec, "episodes": episodes, "seed": seed, "env": env_cfg.model_dump()})
-    summary = {"policy": policy_spec, "env_id": env_cfg.id, "delay": env_cfg.delay, "history": env_cfg.history,
-               "seed": seed, "max_return": target, "success_mode": success_mode(env_cfg), **result.summary()}
-    write_faults_log(run_dir, result.fault_log)
-    write_summary(run_dir, summary)
-    summary["run_dir"] = str(run_dir)
-    return summary

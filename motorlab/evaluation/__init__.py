@@ -1,0 +1,18 @@
+"""Evaluation: batched rollouts of any policy (returns, success, falls, numerical faults) and
+zero-shot transfer to envs a policy never trained on.
+
+    from motorlab.evaluation import evaluate, Evaluator, Rollouts
+"""
+
+from motorlab.evaluation.rollouts import (
+                                          EpisodeSuccess,
+                                          Evaluator,
+                                          Rollouts,
+                                          evaluate,
+                                          step_success,
+                                          success_mode,
+                                          trained_env_settings,
+)
+
+__all__ = ["EpisodeSuccess", "Evaluator", "Rollouts", "evaluate", "step_success", "success_mode",
+           "trained_env_settings"]

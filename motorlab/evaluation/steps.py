@@ -1,0 +1,232 @@
+"""The `evaluate` and `zeroshot` step kinds: policies scored on their own env, and on envs
+they never trained on."""
+
+from __future__ import annotations
+
+import statistics
+from pathlib import Path
+from typing import Any, ClassVar
+
+from pydantic import Field
+from rich.console import Console
+from rich.table import Table
+
+from motorlab.envs import ENV_KEYS, EnvSettings, describe_env, fold_env, make_env, max_return
+from motorlab.errors import MotorlabError
+from motorlab.evaluation.rollouts import evaluate, success_mode, trained_env_settings
+from motorlab.evaluation.zeroshot import transfer
+from motorlab.policies import BUILTIN_POLICIES, load_policy, unknown_policy_message
+from motorlab.report.plots import grouped_bars
+from motorlab.report.run import plot_run
+from motorlab.runs import require_run_dir
+from motorlab.settings import Settings, Summary
+from motorlab.stepkind import Artifact, Ref, Row, Scores, StepKind, falls_note, iqm_note, scored_cells, seeds_headline
+
+# ---- evaluate ---------------------------------------------------------------------------------
+
+
+class EvaluateSettings(EnvSettings):
+    """Evaluate a policy deterministically on an env (by default the one it trained on)."""
+
+    aliases: ClassVar[frozenset[str]] = frozenset(ENV_KEYS) - {"reward"}  # returns are the task's own
+    policy: str = Field(description="A run folder, or a built-in controller: pid, pid:kp=[..],ki=[..],kd=[..], "
+                        "zero, random")
+    episodes: int = Field(10, gt=0, description="Evaluation episodes")
+    seed: int = Field(0, ge=0, description="Random seed (env resets: episode i starts from seed + i)")
+
+
+class EvaluateSummary(Summary):
+    policy: str
+    env_id: str
+    delay: float | None
+    history: int
+    seed: int
+    max_return: float | None
+    success_mode: str
+    episodes: int
+    return_mean: float | None
+    return_std: float | None
+    return_min: float | None
+    return_max: float | None
+    success_rate: float | None
+    episode_length_mean: float | None
+    episode_lengths: list[int]
+    falls: int
+    numerical_faults: int
+
+
+def settings_for(policy: str, env: dict[str, Any], episodes: int | None = None,
+                 seed: int | None = None) -> EvaluateSettings:
+    """Evaluation settings for `policy` on the env its run folder trained on (if it is a run
+    folder), with the given env settings (id, delay, history, kwargs, ...) on top.
+
+    Raises:
+        MotorlabError: no env id known (a built-in controller without --env).
+        pydantic.ValidationError: a bad env setting.
+    """
+    base: dict[str, Any] = {}
+    if Path(policy).exists():
+        base = trained_env_settings(require_run_dir(Path(policy)))
+    elif policy.split(":", 1)[0] not in BUILTIN_POLICIES:
+        raise MotorlabError(unknown_policy_message(policy))
+    merged = merge_env(base, env)
+    if "id" not in merged:
+        raise MotorlabError(f"no env for {policy!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")
+    given = {"episodes": episodes, "seed": seed}
+    return EvaluateSettings.model_validate({"policy": policy, "env": merged,
+                                            **{k: v for k, v in given.items() if v is not None}})
+
+
+def merge_env(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """Env settings `overrides` on top of `base`; env keyword arguments merge key by key."""
+    merged = {**base, **{k: v for k, v in overrides.items() if v is not None}}
+    if isinstance(base.get("kwargs"), dict) and isinstance(overrides.get("kwargs"), dict):
+        merged["kwargs"] = {**base["kwargs"], **overrides["kwargs"]}
+    return merged
+
+
+class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
+    """Evaluate a policy; returns are the task's own (training-time reward shaping is not applied)."""
+
+    name = "evaluate"
+    command = "evaluate"
+    settings = EvaluateSettings
+    summary = EvaluateSummary
+    refs = (Ref("policy", ("policy",)), Ref("sar", ("sar",)))
+    provides = Artifact("evaluation")
+    scored = True
+    per_seed = True
+
+    def prepare(self, fields: dict[str, Any], referenced: dict[str, Settings]) -> dict[str, Any]:
+        trained = getattr(referenced.get("policy"), "env", None)
+        if trained is None:
+            return fields
+        # by default, evaluate on the env the policy was trained on, without its reward shaping
+        trained_env = trained.model_dump(exclude={"reward"})
+        sar = trained_env.pop("sar", None)
+        data = fold_env(fields)
+        data["env"] = merge_env(trained_env, data["env"])
+        if sar and "sar" not in data["env"]:  # in the synergy space it trained in; "@fit": once that step ran
+            data["sar"] = sar
+        return data
+
+    def check(self, settings: EvaluateSettings) -> None:
+        make_env(settings.env).close()
+
+    def run(self, settings: EvaluateSettings, out: Path | None = None, console: Console | None = None,
+            progress: bool = True) -> EvaluateSummary:
+        env_cfg = settings.env
+        probe = make_env(env_cfg, shaped=False)
+        try:
+            policy = load_policy(settings.policy, probe, env_cfg.id, settings.seed)
+            target = max_return(env_cfg.id)
+        finally:
+            probe.close()
+        result = evaluate(policy, env_cfg, settings.episodes, settings.seed)
+        run_dir = self.start(out)
+        summary = EvaluateSummary(policy=settings.policy, env_id=env_cfg.id, delay=env_cfg.delay,
+                                  history=env_cfg.history, seed=settings.seed, max_return=target,
+                                  success_mode=success_mode(env_cfg), **result.summary())
+        return self.finish(run_dir, settings, summary, result.fault_log)
+
+    def describe(self, settings: EvaluateSettings, copies: int = 1) -> str:
+        return f"evaluate {settings.policy} · {describe_env(settings.env)}"
+
+    def scores(self, s: EvaluateSummary) -> Scores:
+        return Scores(s.return_mean, s.return_std, s.return_min, s.success_rate, s.episodes,
+                      s.episode_length_mean, s.falls)
+
+    def headline(self, s: EvaluateSummary) -> dict[str, Any]:
+        head = {"return_mean": s.return_mean, "return_std": s.return_std, "return_min": s.return_min,
+                "success_rate": s.success_rate, "episode_length_mean": s.episode_length_mean, "falls": s.falls,
+                "episodes": s.episodes}
+        return {k: v for k, v in head.items() if v is not None}
+
+    def aggregate(self, summaries: list[EvaluateSummary]) -> dict[str, Any]:
+        if len(summaries) == 1:
+            return self.headline(summaries[0])
+        return {**seeds_headline([self.scores(s) for s in summaries]), "falls": sum(s.falls for s in summaries),
+                "episode_length_mean": statistics.fmean(s.episode_length_mean for s in summaries)}
+
+    def row(self, settings: EvaluateSettings, h: dict[str, Any]) -> Row:
+        return Row(*scored_cells(h), note="; ".join(x for x in (iqm_note(h), falls_note(h)) if x))
+
+    def figures(self, run_dir: Path) -> None:
+        plot_run(run_dir)
+
+
+EVALUATE = EvaluateKind()
+
+
+# ---- zeroshot ---------------------------------------------------------------------------------
+
+RESULT_KEYS = ("success_rate", "return_mean", "return_std", "numerical_faults")
+
+
+class ZeroshotSettings(Settings):
+    runs: list[str] = Field(min_length=1, description="Training run folders to compare")
+    envs: list[str] = Field(min_length=1, description="Env ids the policies never trained on")
+    episodes: int = Field(500, gt=0, description="Episodes per run and env")
+    seed: int = Field(0, ge=0, description="Random seed (env resets)")
+
+
+class ZeroshotSummary(Summary):
+    """Also "<run>.<env>.success_rate", "<run>.<env>.return_mean", ... for every run and env."""
+
+    runs: list[str]
+    envs: list[str]
+    episodes: int
+    seed: int
+    numerical_faults: int
+
+
+class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
+    """Zero-shot success of trained policies on unseen envs: table, summary.json, grouped bar chart."""
+
+    name = "zeroshot"
+    command = "zeroshot"
+    settings = ZeroshotSettings
+    summary = ZeroshotSummary
+    refs = (Ref("runs", ("policy",)),)
+
+    def run(self, settings: ZeroshotSettings, out: Path | None = None, console: Console | None = None,
+            progress: bool = True) -> ZeroshotSummary:
+        t = transfer([Path(r) for r in settings.runs], settings.envs, settings.episodes, settings.seed)
+        run_dir = self.start(out)
+        grouped_bars(t.envs, {n: [t.results[n][e]["success_rate"] for e in t.envs] for n in t.names},
+                     "success rate", run_dir / "plots" / "zeroshot.png",
+                     f"Zero-shot success ({settings.episodes} episodes per env)", percent=True)
+        table = Table(title=f"zero-shot: {settings.episodes} episodes per env, seed {settings.seed}")
+        table.add_column("run")
+        for env_id in t.envs:
+            table.add_column(f"{env_id} success", justify="right")
+            table.add_column("return", justify="right")
+        for n in t.names:
+            table.add_row(n, *[cell for env_id in t.envs for cell in
+                               (f"{t.results[n][env_id]['success_rate']:.1%}",
+                                f"{t.results[n][env_id]['return_mean']:.1f}")])
+        (console or Console()).print(table)
+        per_run = {f"{n}.{env_id}.{key}": t.results[n][env_id][key]
+                   for n in t.names for env_id in t.envs for key in RESULT_KEYS}
+        summary = ZeroshotSummary(runs=t.names, envs=t.envs, episodes=settings.episodes, seed=settings.seed,
+                                  numerical_faults=len(t.fault_log), **per_run)
+        return self.finish(run_dir, settings, summary, t.fault_log)
+
+    def describe(self, settings: ZeroshotSettings, copies: int = 1) -> str:
+        return f"zero-shot {', '.join(settings.runs)} on {', '.join(settings.envs)}"
+
+    def headline(self, s: ZeroshotSummary) -> dict[str, Any]:
+        per_run = {k: v for k, v in s.keys().items() if "." in k}
+        groups: dict[str, list[float]] = {}  # "<step>.<env>.success_rate_mean": the mean over a step's seeds
+        for key, value in per_run.items():
+            if key.endswith(".success_rate") and value is not None:
+                label, env_id, _ = key.rsplit(".", 2)
+                groups.setdefault(f"{label.split('/')[0]}.{env_id}", []).append(value)
+        return {**per_run, **{f"{k}.success_rate_mean": statistics.fmean(v) for k, v in groups.items()}}
+
+    def row(self, settings: ZeroshotSettings, h: dict[str, Any]) -> Row:
+        means = {k[: -len(".success_rate_mean")]: v for k, v in h.items() if k.endswith(".success_rate_mean")}
+        return Row(note="; ".join(f"{k}: {v:.0%}" for k, v in means.items()) + " (success, mean over seeds)")
+
+
+ZEROSHOT = ZeroshotKind()

@@ -1,0 +1,50 @@
+"""The registry of step kinds. A new kind is one file (its settings, run and table row) and one
+line here; the CLI's sweeps, recipes and studies find it through this registry."""
+
+from __future__ import annotations
+
+from motorlab.control.steps import MPC
+from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
+from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
+from motorlab.report.steps import COMPARE, VIDEO
+from motorlab.rl.steps import TRAIN
+from motorlab.stepkind import StepKind
+from motorlab.synergy.steps import COLLECT, FIT, VAF
+
+KINDS: dict[str, StepKind] = {k.name: k for k in (
+    TRAIN,
+    EVALUATE,
+    VIDEO,
+    COLLECT,
+    VAF,
+    FIT,
+    ZEROSHOT,
+    COMPARE,
+    DYNAMICS_COLLECT,
+    DYNAMICS_FIT,
+    DYNAMICS_CHECK,
+    MPC,
+)}
+DEFAULT_KIND = TRAIN.name  # a recipe step that names no kind
+
+
+def kind(name: str) -> StepKind:
+    """The kind called `name`.
+
+    Raises:
+        MotorlabError: no such kind, with close matches.
+    """
+    if name not in KINDS:
+        raise MotorlabError(f"unknown kind {name!r}{did_you_mean(name, KINDS)}; kinds: {', '.join(KINDS)}.")
+    return KINDS[name]
+
+
+def for_command(command: str) -> StepKind | None:
+    """The kind the CLI command `command` ("train", "dynamics fit") runs, if any."""
+    return next((k for k in KINDS.values() if k.command == command), None)
+
+
+def providers(artifacts: tuple[str, ...]) -> list[str]:
+    """Names of the kinds whose runs provide one of `artifacts`."""
+    return [k.name for k in KINDS.values() if k.provides is not None and k.provides.name in artifacts]

@@ -1,0 +1,107 @@
+"""The `video` and `compare` step kinds: a policy's episodes as MP4, and learning curves of
+settings across seeds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from pydantic import Field
+from rich.console import Console
+
+from motorlab.report.compare import compare_curves, group_statistics
+from motorlab.report.video import render_video
+from motorlab.runs import require_run_dir
+from motorlab.settings import Settings, Summary
+from motorlab.stepkind import Ref, Row, StepKind
+
+# ---- video ------------------------------------------------------------------------------------
+
+
+class VideoSettings(Settings):
+    run: str = Field(description="A training run folder (or an evaluation's: its policy on its env)")
+    episodes: int = Field(5, gt=0, description="Episodes to render, one MP4 each")
+    camera: str | None = Field(None, description="Camera name or index (default: the model's first; -1: free "
+                               "camera)")
+    width: int = Field(640, ge=16, le=4096, description="Frame width in pixels")
+    height: int = Field(480, ge=16, le=4096, description="Frame height in pixels")
+    seed: int = Field(0, ge=0, description="Random seed (episode k starts from seed + k)")
+
+
+class VideoSummary(Summary):
+    videos: list[str]
+    frames: list[int]
+    fps: float
+    returns: list[float]
+    camera: str | int
+    width: int
+    height: int
+
+
+class VideoKind(StepKind[VideoSettings, VideoSummary]):
+    """Render episodes of a run's policy offscreen to H.264 MP4 (MUJOCO_GL=egl works without a display)."""
+
+    name = "video"
+    command = "video"
+    settings = VideoSettings
+    summary = VideoSummary
+    refs = (Ref("run", ("policy", "evaluation")),)
+
+    def run(self, settings: VideoSettings, out: Path | None = None, console: Console | None = None,
+            progress: bool = True) -> VideoSummary:
+        s = settings
+        run_dir = self.start(out if out is not None else require_run_dir(Path(s.run)) / "videos")
+        rendered = render_video(Path(s.run), s.episodes, s.seed, s.camera, s.width, s.height, out=run_dir)
+        return self.finish(run_dir, settings, VideoSummary.model_validate(rendered))
+
+    def describe(self, settings: VideoSettings, copies: int = 1) -> str:
+        return f"video of {settings.run}, {settings.episodes} episode{'s' * (settings.episodes > 1)}"
+
+    def headline(self, s: VideoSummary) -> dict[str, Any]:
+        return {"videos": s.videos, "returns": s.returns, "fps": s.fps}
+
+    def row(self, settings: VideoSettings, h: dict[str, Any]) -> Row:
+        return Row(note=", ".join(f"{Path(v).parent.name}/{Path(v).name}" for v in h["videos"]))
+
+
+VIDEO = VideoKind()
+
+
+# ---- compare ----------------------------------------------------------------------------------
+
+
+class CompareSettings(Settings):
+    groups: dict[str, list[str]] = Field(min_length=1, description="LABEL = [RUN_DIR, ...]: one setting, its seeds")
+    title: str = Field("Learning curves", description="Figure title")
+
+
+class CompareKind(StepKind[CompareSettings, Summary]):
+    """Learning curves (return and success vs env steps) of settings across seeds: mean and 95% band, PNG;
+    summary.json: "<group>.<key>" per group, rliable's IQMs and probabilities of improvement."""
+
+    name = "compare"
+    command = "compare"
+    settings = CompareSettings
+    summary = Summary
+    refs = (Ref("groups", ("policy",)),)
+
+    def run(self, settings: CompareSettings, out: Path | None = None, console: Console | None = None,
+            progress: bool = True) -> Summary:
+        groups = {g: [Path(d) for d in ds] for g, ds in settings.groups.items()}
+        run_dir = self.start(out)
+        result = compare_curves(groups, run_dir / "plots" / "learning_curves.png", settings.title)
+        summary = Summary(**{f"{label}.{k}": v for label, r in result.items() for k, v in r.items()},
+                          **group_statistics(groups))
+        return self.finish(run_dir, settings, summary)
+
+    def describe(self, settings: CompareSettings, copies: int = 1) -> str:
+        return f"compare {', '.join(settings.groups)}"
+
+    def headline(self, s: Summary) -> dict[str, Any]:
+        return {k: v for k, v in s.keys().items() if "." in k}  # already "<group>.<key>"
+
+    def row(self, settings: CompareSettings, h: dict[str, Any]) -> Row:
+        return Row(note="plots/learning_curves.png")
+
+
+COMPARE = CompareKind()

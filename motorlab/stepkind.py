@@ -1,0 +1,235 @@
+"""What a step kind is made of: settings, references, a run, and its row in a study's table.
+
+A step kind (train, evaluate, collect, fit, mpc, ...) is one object beside its domain code,
+e.g. `motorlab/dynamics/steps.py`. It holds:
+
+- `Settings`: a pydantic model, the one source of defaults, validation and help text;
+- `refs`: which of its fields may name an earlier step of a recipe ("@step"), and what that
+  step must provide (an `Artifact`: a policy, activations, a SAR, transitions, a model);
+- `run(settings, out) -> Summary`: the work, written to a run folder; `Summary` is typed
+  and is what summary.json holds;
+- what a study's table shows of it: `describe`, `headline`, `note`.
+
+The registry (`motorlab.kinds`) lists the kinds. The CLI, recipes, studies, sweeps and the
+Python API all go through these objects, so adding a capability is one new file.
+"""
+
+from __future__ import annotations
+
+import statistics
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar, Generic, TypeVar
+
+from pydantic import ValidationError
+from rich.console import Console
+
+from motorlab.errors import MotorlabError
+from motorlab.faults import write_faults_log
+from motorlab.runs import prepare_run_dir, write_config, write_summary
+from motorlab.settings import Settings, Summary
+
+
+@dataclass(frozen=True)
+class Artifact:
+    """What a step's run folder provides to later steps: `file` inside it, or the folder itself."""
+
+    name: str
+    file: str | None = None
+
+
+@dataclass(frozen=True)
+class Ref:
+    """A settings field that may name earlier steps ("@step") providing one of `accepts`."""
+
+    field: str
+    accepts: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Scores:
+    """Evaluation numbers of one run, for the study's return and success columns."""
+
+    return_mean: float | None
+    return_std: float | None
+    return_min: float | None
+    success_rate: float | None
+    episodes: int
+    episode_length_mean: float | None = None
+    falls: int | None = None
+
+
+@dataclass(frozen=True)
+class Row:
+    """A step's cells in a study's table, after its name and description."""
+
+    returns: str = "-"
+    min_return: str = "-"
+    success: str = "-"
+    steps_to_success: str = "n/a"
+    seconds: str = "-"
+    note: str = ""
+
+
+def number(value: Any, form: str = "{:,.1f}") -> str:
+    """A table cell: the value formatted, "-" when there is none."""
+    return "-" if value is None else form.format(value)
+
+
+S = TypeVar("S", bound=Settings)
+R = TypeVar("R", bound=Summary)
+
+
+class StepKind(Generic[S, R]):
+    """One kind of step. Subclasses set the class attributes and implement `run`."""
+
+    name: ClassVar[str]
+    command: ClassVar[str | None] = None  # the CLI command that runs it ("dynamics fit"); None: recipes only
+    settings: ClassVar[type[Settings]]
+    summary: ClassVar[type[Summary]]
+    refs: ClassVar[tuple[Ref, ...]] = ()
+    provides: ClassVar[Artifact | None] = None
+    # a study draws its returns figure from these kinds
+    scored: ClassVar[bool] = False
+    # training: a recipe's `seeds = N` runs it once per seed, as processes (see `process_argv`),
+    # it may run beside other steps, and a study charts its steps to success
+    trains: ClassVar[bool] = False
+    # a step of this kind that names a step trained with several seeds runs once per seed
+    per_seed: ClassVar[bool] = False
+
+    def run(self, settings: S, out: Path | None = None, console: Console | None = None, progress: bool = True) -> R:
+        """Run the step into the run folder `out` (default: runs/<kind>-<time>); `console` gets its
+        tables, `progress` says whether to show progress bars."""
+        raise NotImplementedError
+
+    def validate(self, fields: dict[str, Any]) -> S:
+        """Settings from recipe fields or CLI flags (pydantic.ValidationError when they are wrong)."""
+        return self.settings.model_validate(fields)
+
+    def make(self, **fields: Any) -> S:
+        """Settings from keyword arguments (None: the default), as the CLI and the Python API give them.
+
+        Raises:
+            MotorlabError: one line naming the option and what is wrong with it.
+        """
+        try:
+            return self.validate({k: v for k, v in fields.items() if v is not None})
+        except ValidationError as e:
+            raise MotorlabError(option_error(e)) from None
+
+    def check(self, settings: S) -> None:
+        """Checks a recipe runs before any step does (e.g. that the env exists)."""
+
+    def prepare(self, fields: dict[str, Any], referenced: dict[str, Settings]) -> dict[str, Any]:
+        """A recipe step's fields before validation, given the settings of the steps it names."""
+        return fields
+
+    def describe(self, settings: S, copies: int = 1) -> str:
+        """The "what" column of a study's table (`copies`: seeds it runs for)."""
+        return self.name
+
+    def headline(self, summary: R) -> dict[str, Any]:
+        """The numbers a study keeps of this step ("<step>.<key>" in its summary.json)."""
+        return summary.keys()
+
+    def aggregate(self, summaries: list[R]) -> dict[str, Any]:
+        """The headline of several runs of this step (one per seed)."""
+        if len(summaries) == 1:
+            return self.headline(summaries[0])
+        raise NotImplementedError(f"{self.name} steps run once")
+
+    def scores(self, summary: R) -> Scores | None:
+        """The run's evaluation numbers, where it has them."""
+        return None
+
+    def row(self, settings: S, headline: dict[str, Any]) -> Row:
+        """Its cells in a study's table."""
+        return Row()
+
+    def figures(self, run_dir: Path) -> None:
+        """Figures a study draws of a finished run (in its main thread: matplotlib is not
+        thread-safe, and training steps may run in the background)."""
+
+    def progress(self, settings: S, run_dir: Path) -> tuple[int, int]:
+        """(done, total) of a run going on in another process, for progress bars."""
+        return 0, 1
+
+    def process_argv(self, settings_file: Path, run_dir: Path) -> list[str]:
+        """The motorlab command line that runs these settings (a TOML file) in their own process."""
+        raise NotImplementedError(f"{self.name} steps run in the study's process")
+
+    def resume_argv(self, run_dir: Path) -> list[str] | None:
+        """The command line that continues an interrupted run in `run_dir`, where it can be."""
+        return None
+
+    # ---- the ending every run shares ------------------------------------------------------
+
+    def start(self, out: Path | None) -> Path:
+        """The run folder, created and marked unfinished (call once the settings are checked)."""
+        return prepare_run_dir(out, self.name)
+
+    def finish(self, run_dir: Path, settings: S, summary: R, faults: list[str] | None = None) -> R:
+        """config.toml, faults.log (where episodes ran) and summary.json, the last file written."""
+        if faults is not None:
+            write_faults_log(run_dir, faults)
+        write_config(run_dir, settings.config())
+        write_summary(run_dir, summary.keys())
+        summary.run_dir = Path(run_dir)
+        return summary
+
+
+def option_error(e: ValidationError) -> str:
+    """One line from a pydantic ValidationError, naming the option as the CLI spells it."""
+    first = e.errors()[0]
+    loc = [str(x) for x in first["loc"]]
+    name = loc[-1] if loc else "?"
+    if name == "id":
+        name = "env"
+    label = f"--{name.replace('_', '-')}"
+    if first["type"] == "extra_forbidden":
+        return f"unknown setting {label}"
+    given = first.get("input")
+    shown = f" {given!r}" if isinstance(given, (int, float, str)) and first["type"] != "missing" else ""
+    return f"{label}{shown}: {first['msg']}"
+
+
+def seeds_headline(all_scores: list[Scores], extra: list[dict[str, Any]]) -> dict[str, Any]:
+    """The headline of a train or evaluate step run for several seeds: the mean over seeds (std
+    across seeds) and rliable's IQM of the return with its 95% bootstrap CI."""
+    from motorlab.stats import iqm_with_ci
+
+    means = [s.return_mean for s in all_scores]
+    iqm, low, high = iqm_with_ci(means)
+    return {
+        "seeds": len(all_scores),
+        "return_mean": statistics.fmean(means),
+        "return_std": statistics.stdev(means),
+        "return_min": min(s.return_min for s in all_scores),
+        "return_iqm": iqm,
+        "return_iqm_ci_low": low,
+        "return_iqm_ci_high": high,
+        "success_rate": statistics.fmean(s.success_rate for s in all_scores),
+        "episodes": sum(s.episodes for s in all_scores),
+    }
+
+
+def scored_cells(h: dict[str, Any]) -> tuple[str, str, str]:
+    """The return (mean ± sd), min return and success cells of an evaluated step; ± is the spread
+    over evaluation episodes for one seed, over the seeds' means for several."""
+    spread = f" ({h['seeds']} seeds)" if h.get("seeds") else ""
+    return (f"{number(h.get('return_mean'))} ± {number(h.get('return_std'))}{spread}",
+            number(h.get("return_min"), "{:,.0f}"), number(h.get("success_rate"), "{:.0%}"))
+
+
+def iqm_note(h: dict[str, Any]) -> str:
+    """Several seeds: rliable's IQM of the return with its 95% bootstrap CI."""
+    if h.get("return_iqm") is None:
+        return ""
+    return f"return IQM {h['return_iqm']:,.1f} [{h['return_iqm_ci_low']:,.1f}, {h['return_iqm_ci_high']:,.1f}]"
+
+
+def falls_note(h: dict[str, Any]) -> str:
+    """Mean episode length and falls of the evaluation, where they were recorded."""
+    if h.get("falls") is None or h.get("episode_length_mean") is None:
+        return ""
+    return f"mean length {h['episode_length_mean']:,.0f} steps, falls {h['falls']}/{h.get('episodes', '?')}"
