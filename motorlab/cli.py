@@ -93,8 +93,10 @@ def _doc(kind: StepKind) -> str:
     return (type(kind).__doc__ or "").strip()
 
 
-def opt(model: type, field: str, *flags: str, **kw: Any) -> Any:
-    """An option whose help (and default, shown in it) is the settings field's."""
+def opt(model: type, *flags: str, **kw: Any) -> Any:
+    """An option whose help (and default, shown in it) is that of the settings field its first flag
+    names (--n-synergies: n_synergies; --normalize/--no-normalize: normalize)."""
+    field = flags[0].split("/")[0].removeprefix("--").replace("-", "_")
     return typer.Option(*flags, help=help_text(model, field), **kw)
 
 
@@ -104,10 +106,10 @@ def arg(model: type, field: str) -> Any:
 
 Out = Annotated[Optional[Path], typer.Option("--out", help="Run folder to write (default: runs/<step>-<timestamp>).")]
 Seed = Annotated[Optional[int], typer.Option("--seed", min=0, help="Random seed (default 0).")]
-Delay = Annotated[Optional[float], opt(EnvConfig, "delay", "--delay")]
-DelayOn = Annotated[Optional[str], opt(EnvConfig, "delay_on", "--delay-on")]
-History = Annotated[Optional[int], opt(EnvConfig, "history", "--history")]
-Success = Annotated[Optional[str], opt(EnvConfig, "success", "--success")]
+Delay = Annotated[Optional[float], opt(EnvConfig, "--delay")]
+DelayOn = Annotated[Optional[str], opt(EnvConfig, "--delay-on")]
+History = Annotated[Optional[int], opt(EnvConfig, "--history")]
+Success = Annotated[Optional[str], opt(EnvConfig, "--success")]
 EnvArgs = Annotated[Optional[list[str]], typer.Option(
     "--env-arg", help="Env keyword argument KEY=VALUE (VALUE as JSON), repeatable: --env-arg time_limit=5 "
                       "--env-arg 'init_rand={\"pitch\": 0.1}' (Upkie).")]
@@ -163,36 +165,36 @@ def train(
     resume: Annotated[Optional[Path], typer.Option(
         "--resume", help="Continue the interrupted run in this folder from its last checkpoint, to the same "
                          "total budget, with its own settings.")] = None,
-    checkpoint_every: Annotated[Optional[int], opt(T, "checkpoint_every")] = None,
-    algo: Annotated[Optional[str], opt(T, "algo")] = None,
+    checkpoint_every: Annotated[Optional[int], opt(T, "--checkpoint-every")] = None,
+    algo: Annotated[Optional[str], opt(T, "--algo")] = None,
     preset: Annotated[Optional[str], typer.Option(
         help="Named settings: fast (motorlab's most sample-efficient for balancing), sb3-ppo, sb3-sac, "
              "sar-sac (the SAR study's reference SAC), sar-sac-synergy (the same, learning_starts 5000), "
              "sar-sac-fast (the reference SAC with 4 env processes and 1 gradient step per 25 env steps: "
              "~18x faster on 2 cores). Flags override it.")] = None,
-    timesteps: Annotated[Optional[int], opt(T, "timesteps")] = None,
-    seed: Annotated[Optional[int], opt(T, "seed", "--seed", min=0)] = None,
+    timesteps: Annotated[Optional[int], opt(T, "--timesteps")] = None,
+    seed: Annotated[Optional[int], opt(T, "--seed", min=0)] = None,
     out: Out = None,
     delay: Delay = None,
     delay_on: DelayOn = None,
     history: History = None,
-    reward: Annotated[Optional[str], opt(EnvConfig, "reward")] = None,
-    lr: Annotated[Optional[str], opt(T, "lr")] = None,
-    clip_range: Annotated[Optional[str], opt(T, "clip_range")] = None,
-    until_solved: Annotated[bool, opt(T, "until_solved", "--until-solved")] = False,
-    solve_episodes: Annotated[Optional[int], opt(T, "solve_episodes")] = None,
-    solve_return: Annotated[Optional[float], opt(T, "solve_return")] = None,
-    eval_every: Annotated[Optional[int], opt(T, "eval_every")] = None,
-    n_envs: Annotated[Optional[int], opt(T, "n_envs")] = None,
-    normalize: Annotated[Optional[bool], opt(T, "normalize", "--normalize/--no-normalize")] = None,
-    device: Annotated[Optional[str], opt(T, "device")] = None,
-    sar: Annotated[Optional[Path], opt(EnvConfig, "sar")] = None,
-    phi: Annotated[Optional[float], opt(EnvConfig, "phi")] = None,
+    reward: Annotated[Optional[str], opt(EnvConfig, "--reward")] = None,
+    lr: Annotated[Optional[str], opt(T, "--lr")] = None,
+    clip_range: Annotated[Optional[str], opt(T, "--clip-range")] = None,
+    until_solved: Annotated[bool, opt(T, "--until-solved")] = False,
+    solve_episodes: Annotated[Optional[int], opt(T, "--solve-episodes")] = None,
+    solve_return: Annotated[Optional[float], opt(T, "--solve-return")] = None,
+    eval_every: Annotated[Optional[int], opt(T, "--eval-every")] = None,
+    n_envs: Annotated[Optional[int], opt(T, "--n-envs")] = None,
+    normalize: Annotated[Optional[bool], opt(T, "--normalize/--no-normalize")] = None,
+    device: Annotated[Optional[str], opt(T, "--device")] = None,
+    sar: Annotated[Optional[Path], opt(EnvConfig, "--sar")] = None,
+    phi: Annotated[Optional[float], opt(EnvConfig, "--phi")] = None,
     hp: Annotated[Optional[list[str]], typer.Option(
         "--set", help="Extra SB3 hyperparameter KEY=VALUE (VALUE as JSON), repeatable: --set n_steps=1024.")] = None,
     env_arg: EnvArgs = None,
     success: Success = None,
-    progress: Annotated[bool, opt(T, "progress", "--progress/--no-progress")] = True,
+    progress: Annotated[bool, opt(T, "--progress/--no-progress")] = True,
 ):
     """Train a policy on ENV_ID and write a run folder.
 
@@ -267,7 +269,7 @@ def evaluate(
     history: History = None,
     env_arg: EnvArgs = None,
     success: Success = None,
-    episodes: Annotated[Optional[int], opt(EvaluateSettings, "episodes")] = None,
+    episodes: Annotated[Optional[int], opt(EvaluateSettings, "--episodes")] = None,
     seed: Seed = None,
     out: Out = None,
 ):
@@ -298,8 +300,8 @@ def evaluate(
                           "myoHandReorientOOD-v0 --episodes 500")
 def zeroshot(
     run_dirs: Annotated[list[Path], arg(ZeroshotSettings, "runs")],
-    envs: Annotated[list[str], opt(ZeroshotSettings, "envs", "--envs")],
-    episodes: Annotated[Optional[int], opt(ZeroshotSettings, "episodes")] = None,
+    envs: Annotated[list[str], opt(ZeroshotSettings, "--envs")],
+    episodes: Annotated[Optional[int], opt(ZeroshotSettings, "--episodes")] = None,
     seed: Seed = None,
     out: Out = None,
 ):
@@ -319,10 +321,10 @@ def zeroshot(
 @command(VIDEO, epilog="Example:\n\n  MUJOCO_GL=egl motorlab video runs/play --episodes 5 --camera hand_side_inter")
 def video(
     run_dir: Annotated[Path, arg(VideoSettings, "run")],
-    episodes: Annotated[Optional[int], opt(VideoSettings, "episodes")] = None,
-    camera: Annotated[Optional[str], opt(VideoSettings, "camera")] = None,
-    width: Annotated[Optional[int], opt(VideoSettings, "width", min=16, max=4096)] = None,
-    height: Annotated[Optional[int], opt(VideoSettings, "height", min=16, max=4096)] = None,
+    episodes: Annotated[Optional[int], opt(VideoSettings, "--episodes")] = None,
+    camera: Annotated[Optional[str], opt(VideoSettings, "--camera")] = None,
+    width: Annotated[Optional[int], opt(VideoSettings, "--width", min=16, max=4096)] = None,
+    height: Annotated[Optional[int], opt(VideoSettings, "--height", min=16, max=4096)] = None,
     seed: Seed = None,
     out: Annotated[Optional[Path], typer.Option("--out", help="Folder for the videos (default RUN_DIR/videos).")] = None,
 ):
@@ -336,7 +338,7 @@ def video(
                          "--group RL-E2E=runs/e2e-s0,runs/e2e-s1")
 def compare(
     group: Annotated[list[str], typer.Option("--group", help="LABEL=RUN_DIR[,RUN_DIR...]: one setting, its seeds.")],
-    title: Annotated[Optional[str], opt(CompareSettings, "title")] = None,
+    title: Annotated[Optional[str], opt(CompareSettings, "--title")] = None,
     out: Out = None,
 ):
     groups = {}
@@ -355,12 +357,12 @@ def compare(
                          "--preview 100")
 def synergies_collect(
     run_dir: Annotated[Path, arg(CollectSettings, "run")],
-    episodes: Annotated[Optional[int], opt(CollectSettings, "episodes")] = None,
-    percentile: Annotated[Optional[float], opt(CollectSettings, "percentile")] = None,
-    preview: Annotated[Optional[int], opt(CollectSettings, "preview")] = None,
-    deterministic: Annotated[bool, opt(CollectSettings, "deterministic", "--deterministic/--stochastic")] = False,
-    workers: Annotated[Optional[int], opt(CollectSettings, "workers")] = None,
-    max_episodes: Annotated[Optional[int], opt(CollectSettings, "max_episodes")] = None,
+    episodes: Annotated[Optional[int], opt(CollectSettings, "--episodes")] = None,
+    percentile: Annotated[Optional[float], opt(CollectSettings, "--percentile")] = None,
+    preview: Annotated[Optional[int], opt(CollectSettings, "--preview")] = None,
+    deterministic: Annotated[bool, opt(CollectSettings, "--deterministic/--stochastic")] = False,
+    workers: Annotated[Optional[int], opt(CollectSettings, "--workers")] = None,
+    max_episodes: Annotated[Optional[int], opt(CollectSettings, "--max-episodes")] = None,
     seed: Seed = None,
     out: Out = None,
 ):
@@ -375,9 +377,9 @@ def synergies_collect(
 @command(VAF, epilog="Example:\n\n  motorlab synergies vaf runs/collect/activations.npz --threshold 0.8")
 def synergies_vaf(
     activations: Annotated[Path, arg(VafSettings, "activations")],
-    threshold: Annotated[Optional[float], opt(VafSettings, "threshold")] = None,
-    method: Annotated[Optional[str], opt(VafSettings, "method")] = None,
-    max_n: Annotated[Optional[int], opt(VafSettings, "max_n")] = None,
+    threshold: Annotated[Optional[float], opt(VafSettings, "--threshold")] = None,
+    method: Annotated[Optional[str], opt(VafSettings, "--method")] = None,
+    max_n: Annotated[Optional[int], opt(VafSettings, "--max-n")] = None,
     out: Out = None,
 ):
     settings = VAF.make(activations=str(activations), threshold=threshold, method=method, max_n=max_n)
@@ -397,9 +399,9 @@ def synergies_vaf(
                      "  motorlab synergies fit activations.npz --n 20 --method nmf")
 def synergies_fit(
     activations: Annotated[Path, arg(FitSettings, "activations")],
-    n: Annotated[Optional[int], opt(FitSettings, "n_synergies", "--n", "--n-synergies")] = None,
-    vaf: Annotated[Optional[float], opt(FitSettings, "vaf")] = None,
-    method: Annotated[Optional[str], opt(FitSettings, "method")] = None,
+    n: Annotated[Optional[int], opt(FitSettings, "--n-synergies", "--n")] = None,
+    vaf: Annotated[Optional[float], opt(FitSettings, "--vaf")] = None,
+    method: Annotated[Optional[str], opt(FitSettings, "--method")] = None,
     seed: Seed = None,
     out: Out = None,
 ):
@@ -437,11 +439,11 @@ def _hidden(text: str | None) -> list[int] | None:
                                   "  motorlab dynamics collect InvertedPendulum-v5 --episodes 200 --policy runs/ppo")
 def dynamics_collect(
     env_id: Annotated[str, arg(DynamicsCollectSettings, "env")],
-    episodes: Annotated[Optional[int], opt(DynamicsCollectSettings, "episodes")] = None,
-    policy: Annotated[Optional[str], opt(DynamicsCollectSettings, "policy")] = None,
-    workers: Annotated[Optional[int], opt(DynamicsCollectSettings, "workers")] = None,
-    state: Annotated[Optional[str], opt(DynamicsCollectSettings, "state")] = None,
-    simulator: Annotated[Optional[str], opt(DynamicsCollectSettings, "simulator")] = None,
+    episodes: Annotated[Optional[int], opt(DynamicsCollectSettings, "--episodes")] = None,
+    policy: Annotated[Optional[str], opt(DynamicsCollectSettings, "--policy")] = None,
+    workers: Annotated[Optional[int], opt(DynamicsCollectSettings, "--workers")] = None,
+    state: Annotated[Optional[str], opt(DynamicsCollectSettings, "--state")] = None,
+    simulator: Annotated[Optional[str], opt(DynamicsCollectSettings, "--simulator")] = None,
     seed: Seed = None,
     out: Out = None,
 ):
@@ -457,13 +459,13 @@ def dynamics_collect(
                               "--patience 5")
 def dynamics_fit(
     transitions: Annotated[Path, arg(DynamicsFitSettings, "transitions")],
-    epochs: Annotated[Optional[int], opt(DynamicsFitSettings, "epochs")] = None,
-    hidden: Annotated[Optional[str], opt(DynamicsFitSettings, "hidden")] = None,
-    ensemble: Annotated[Optional[int], opt(DynamicsFitSettings, "ensemble")] = None,
-    lr: Annotated[Optional[float], opt(DynamicsFitSettings, "lr")] = None,
-    batch_size: Annotated[Optional[int], opt(DynamicsFitSettings, "batch_size")] = None,
-    valid_fraction: Annotated[Optional[float], opt(DynamicsFitSettings, "valid_fraction")] = None,
-    patience: Annotated[Optional[int], opt(DynamicsFitSettings, "patience")] = None,
+    epochs: Annotated[Optional[int], opt(DynamicsFitSettings, "--epochs")] = None,
+    hidden: Annotated[Optional[str], opt(DynamicsFitSettings, "--hidden")] = None,
+    ensemble: Annotated[Optional[int], opt(DynamicsFitSettings, "--ensemble")] = None,
+    lr: Annotated[Optional[float], opt(DynamicsFitSettings, "--lr")] = None,
+    batch_size: Annotated[Optional[int], opt(DynamicsFitSettings, "--batch-size")] = None,
+    valid_fraction: Annotated[Optional[float], opt(DynamicsFitSettings, "--valid-fraction")] = None,
+    patience: Annotated[Optional[int], opt(DynamicsFitSettings, "--patience")] = None,
     seed: Seed = None,
     out: Out = None,
 ):
@@ -478,8 +480,8 @@ def dynamics_fit(
 @command(DYNAMICS_CHECK, epilog="Example:\n\n  motorlab dynamics check runs/reacher-model --episodes 5")
 def dynamics_check(
     model: Annotated[Path, arg(DynamicsCheckSettings, "model")],
-    episodes: Annotated[Optional[int], opt(DynamicsCheckSettings, "episodes")] = None,
-    steps: Annotated[Optional[int], opt(DynamicsCheckSettings, "steps")] = None,
+    episodes: Annotated[Optional[int], opt(DynamicsCheckSettings, "--episodes")] = None,
+    steps: Annotated[Optional[int], opt(DynamicsCheckSettings, "--steps")] = None,
     seed: Seed = None,
     out: Out = None,
 ):
@@ -497,15 +499,15 @@ def dynamics_check(
                      "--population 250 --iterations 20 --episodes 5")
 def mpc(
     env_id: Annotated[str, arg(MpcSettings, "env")],
-    model: Annotated[Path, opt(MpcSettings, "model", "--model")],
-    episodes: Annotated[Optional[int], opt(MpcSettings, "episodes")] = None,
-    horizon: Annotated[Optional[int], opt(MpcSettings, "horizon")] = None,
-    population: Annotated[Optional[int], opt(MpcSettings, "population")] = None,
-    iterations: Annotated[Optional[int], opt(MpcSettings, "iterations")] = None,
-    elites: Annotated[Optional[int], opt(MpcSettings, "elites")] = None,
-    optimizer: Annotated[Optional[str], opt(MpcSettings, "optimizer")] = None,
-    parallel: Annotated[Optional[int], opt(MpcSettings, "parallel")] = None,
-    video: Annotated[bool, opt(MpcSettings, "video", "--video")] = False,
+    model: Annotated[Path, opt(MpcSettings, "--model")],
+    episodes: Annotated[Optional[int], opt(MpcSettings, "--episodes")] = None,
+    horizon: Annotated[Optional[int], opt(MpcSettings, "--horizon")] = None,
+    population: Annotated[Optional[int], opt(MpcSettings, "--population")] = None,
+    iterations: Annotated[Optional[int], opt(MpcSettings, "--iterations")] = None,
+    elites: Annotated[Optional[int], opt(MpcSettings, "--elites")] = None,
+    optimizer: Annotated[Optional[str], opt(MpcSettings, "--optimizer")] = None,
+    parallel: Annotated[Optional[int], opt(MpcSettings, "--parallel")] = None,
+    video: Annotated[bool, opt(MpcSettings, "--video")] = False,
     seed: Seed = None,
     out: Out = None,
 ):

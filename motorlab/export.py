@@ -13,12 +13,17 @@ policy.safetensors, so that it never needs unpickling again.
 from __future__ import annotations
 
 import json
+import pickle
 import shutil
 import zipfile
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
+
+from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
+from motorlab.policies import decode_classes, encode_classes, policy_classes, save_sb3_policy
 from motorlab.runs import CONFIG, SUMMARY, atomic_path, prepare_run_dir, require_run_dir, write_config, write_summary
 
 # Files of a run folder that hold no pickle: what `export` copies and what is safe to send.
@@ -83,8 +88,6 @@ def export_sb3_zip(zip_path: Path, out: Path, trust: bool, env_id: str | None = 
     vecnorm = _load_vecnormalize(Path(vecnormalize)) if vecnormalize is not None else None
     _check_exportable(model, env_id, vecnorm)
 
-    from motorlab.policies import save_sb3_policy
-
     run = prepare_run_dir(out, "export")
     save_sb3_policy(run, model, algo, vecnorm)
     if env_id:
@@ -137,8 +140,6 @@ def _load_zip(zip_path: Path, algo: str):
 
 
 def _load_vecnormalize(path: Path):
-    import pickle
-
     from stable_baselines3.common.vec_env import VecNormalize
 
     try:
@@ -153,26 +154,20 @@ def _load_vecnormalize(path: Path):
 
 
 def _check_exportable(model, env_id: str | None, vecnorm) -> None:
-    import gymnasium as gym
-
-    from motorlab.policies import _decode, _encode, _policy_classes
-
-    if type(model.policy).__name__ not in _policy_classes():
+    if type(model.policy).__name__ not in policy_classes():
         raise MotorlabError(f"the policy is a {type(model.policy).__name__}; motorlab exports MLP policies "
-                            f"({', '.join(_policy_classes())}).")
+                            f"({', '.join(policy_classes())}).")
     for name, space in (("observation", model.observation_space), ("action", model.action_space)):
         if not isinstance(space, gym.spaces.Box):
             raise MotorlabError(f"the policy's {name} space is {space}; motorlab exports Box (continuous) spaces.")
     try:
-        _decode(_encode(dict(model.policy_kwargs)))
+        decode_classes(encode_classes(dict(model.policy_kwargs)))
     except MotorlabError as e:
         raise MotorlabError(f"the policy's policy_kwargs cannot be exported: {e}") from None
     if vecnorm is not None and vecnorm.norm_obs and vecnorm.obs_rms.mean.shape != model.observation_space.shape:
         raise MotorlabError(f"the VecNormalize statistics have shape {vecnorm.obs_rms.mean.shape}, the policy's "
                             f"observations {model.observation_space.shape}; give the file saved with this model.")
     if env_id:
-        from motorlab.envs import EnvConfig, make_env
-
         env = make_env(EnvConfig(id=env_id), shaped=False)
         try:
             for name, have, want in (("observation", env.observation_space, model.observation_space),

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from motorlab.runs import atomic_write_text
+
 FAULT_KEY = "numerical_fault"  # info key NumericalGuard sets, naming the cause
 FAULTS_LOG = "faults.log"
 
@@ -26,8 +28,6 @@ def fault_line(seed: int, length: int, reason: str) -> str:
 
 def write_faults_log(run_dir: Path, lines: list[str]) -> None:
     """faults.log in `run_dir` with one line per faulted episode (no file when none faulted)."""
-    from motorlab.runs import atomic_write_text
-
     path = Path(run_dir) / FAULTS_LOG
     if lines:
         atomic_write_text(path, "".join(f"{line}\n" for line in lines))

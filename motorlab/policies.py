@@ -63,7 +63,7 @@ class RandomPolicy:
 
 # ---- SB3 policies, pickle-free -------------------------------------------------
 
-def _policy_classes() -> dict[str, type]:
+def policy_classes() -> dict[str, type]:
     from stable_baselines3.common.policies import ActorCriticPolicy
     from stable_baselines3.sac.policies import SACPolicy
     from stable_baselines3.td3.policies import TD3Policy
@@ -71,26 +71,26 @@ def _policy_classes() -> dict[str, type]:
     return {"ActorCriticPolicy": ActorCriticPolicy, "SACPolicy": SACPolicy, "TD3Policy": TD3Policy}
 
 
-def _encode(value: Any) -> Any:
+def encode_classes(value: Any) -> Any:
     if isinstance(value, type):
         return {"class": f"{value.__module__}.{value.__qualname__}"}
     if isinstance(value, dict):
-        return {k: _encode(v) for k, v in value.items()}
+        return {k: encode_classes(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_encode(v) for v in value]
+        return [encode_classes(v) for v in value]
     return value
 
 
-def _decode(value: Any) -> Any:
+def decode_classes(value: Any) -> Any:
     if isinstance(value, dict) and set(value) == {"class"}:
         module, _, name = value["class"].rpartition(".")
         if not module.startswith(("torch.nn", "torch.optim")):
             raise MotorlabError(f"policy.json names class {value['class']!r}; only torch.nn / torch.optim classes are allowed.")
         return getattr(importlib.import_module(module), name)
     if isinstance(value, dict):
-        return {k: _decode(v) for k, v in value.items()}
+        return {k: decode_classes(v) for k, v in value.items()}
     if isinstance(value, list):
-        return [_decode(v) for v in value]
+        return [decode_classes(v) for v in value]
     return value
 
 
@@ -145,7 +145,7 @@ def save_sb3_policy(run_dir: Path, model, algo: str, vecnorm=None) -> None:
         "type": "sb3",
         "algo": algo,
         "policy_class": type(model.policy).__name__,
-        "policy_kwargs": _encode(dict(model.policy_kwargs)),
+        "policy_kwargs": encode_classes(dict(model.policy_kwargs)),
         "use_sde": bool(getattr(model, "use_sde", False)) if algo == "ppo" else None,
         "observation_space": _box(model.observation_space),
         "action_space": _box(model.action_space),
@@ -164,11 +164,11 @@ def _load_sb3(run_dir: Path, meta: dict) -> SB3Policy:
     from safetensors import SafetensorError
     from safetensors.numpy import load_file
 
-    classes = _policy_classes()
+    classes = policy_classes()
     cls = classes.get(meta.get("policy_class", ""))
     if cls is None:
         raise MotorlabError(f"{run_dir / POLICY_JSON}: unknown policy class {meta.get('policy_class')!r}.")
-    kwargs = _decode(meta.get("policy_kwargs") or {})
+    kwargs = decode_classes(meta.get("policy_kwargs") or {})
     if meta.get("use_sde") is not None:
         kwargs["use_sde"] = meta["use_sde"]
     try:

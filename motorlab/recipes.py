@@ -88,9 +88,6 @@ def fields_of(step_kind: StepKind) -> set[str]:
     return step_kind.settings.fields() | ({SEEDS} if step_kind.trains else set())
 
 
-ALL_FIELDS = set().union(*(fields_of(k) for k in KINDS.values()))
-
-
 def bundled() -> dict[str, Path]:
     """Bundled recipe names and their files."""
     folder = resources.files("motorlab") / "recipes"
@@ -190,10 +187,11 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
         raw = _RecipeFile.model_validate(data)
     except ValidationError as e:
         raise MotorlabError(_explain(e, source, set(_RecipeFile.model_fields))) from None
-    unknown_defaults = [k for k in raw.defaults if k not in ALL_FIELDS]
+    all_fields = set().union(*(fields_of(k) for k in KINDS.values()))
+    unknown_defaults = [k for k in raw.defaults if k not in all_fields]
     if unknown_defaults:
         k = unknown_defaults[0]
-        raise MotorlabError(f"{source}: [defaults]: unknown field {k!r}{did_you_mean(k, ALL_FIELDS)}")
+        raise MotorlabError(f"{source}: [defaults]: unknown field {k!r}{did_you_mean(k, all_fields)}")
     steps: list[Step] = []
     for i, given in enumerate(raw.steps):
         name = str(given.get("name", f"step{i + 1}"))

@@ -9,16 +9,20 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import io
 import json
 import math
 import os
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import tomli_w
 
+from motorlab.environment import describe
 from motorlab.errors import MotorlabError
 
 SUMMARY = "summary.json"
@@ -72,10 +76,6 @@ def atomic_write_text(path: Path, text: str) -> None:
 
 def atomic_write_npz(path: Path, **arrays: Any) -> None:
     """Plain arrays in one .npz (np.savez, no pickle), written atomically."""
-    import io
-
-    import numpy as np
-
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     atomic_write_bytes(path, buf.getvalue())
@@ -128,8 +128,6 @@ def _config_toml(config: dict[str, Any]) -> str:
 
 def write_config(run_dir: Path, config: dict[str, Any]) -> None:
     """Resolved settings as config.toml, and what they ran on as environment.json."""
-    from motorlab.environment import describe
-
     write_toml(Path(run_dir) / CONFIG, config)
     write_json(Path(run_dir) / ENVIRONMENT, describe())
 
@@ -142,8 +140,6 @@ def finished_with(run_dir: Path, config: dict[str, Any], filename: str = CONFIG)
 
 def toml_holds(path: Path, config: dict[str, Any]) -> bool:
     """True when the TOML file at `path` holds exactly `config` (False if missing or damaged)."""
-    import tomllib
-
     try:
         return tomllib.loads(Path(path).read_text()) == tomllib.loads(_config_toml(config))
     except (OSError, ValueError, UnicodeDecodeError):
@@ -155,8 +151,6 @@ def write_toml(path: Path, config: dict[str, Any]) -> None:
 
 
 def read_config(run_dir: Path) -> dict[str, Any]:
-    import tomllib
-
     return read_text_file(Path(run_dir) / CONFIG, tomllib.loads, "TOML",
                            f"{run_dir} is not a motorlab run folder.")
 

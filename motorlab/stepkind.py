@@ -19,7 +19,7 @@ from __future__ import annotations
 import statistics
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar, Generic, TypeVar
+from typing import Any, ClassVar, Generic, TypeVar, get_args, get_origin
 
 from pydantic import ValidationError
 from rich.console import Console
@@ -28,6 +28,7 @@ from motorlab.errors import MotorlabError
 from motorlab.faults import write_faults_log
 from motorlab.runs import prepare_run_dir, write_config, write_summary
 from motorlab.settings import Settings, Summary
+from motorlab.stats import iqm_with_ci
 
 
 @dataclass(frozen=True)
@@ -81,10 +82,13 @@ R = TypeVar("R", bound=Summary)
 
 
 class StepKind(Generic[S, R]):
-    """One kind of step. Subclasses set the class attributes and implement `run`."""
+    """One kind of step. Subclasses name their settings and summary types as the generic's
+    parameters (`class FitKind(StepKind[FitSettings, FitSummary])`), set the class attributes
+    and implement `run`."""
 
     name: ClassVar[str]
-    command: ClassVar[str | None] = None  # the CLI command that runs it ("dynamics fit"); None: recipes only
+    # the CLI command that runs it (default: the name, "dynamics-fit" -> "dynamics fit"); None: recipes only
+    command: ClassVar[str | None]
     settings: ClassVar[type[Settings]]
     summary: ClassVar[type[Summary]]
     refs: ClassVar[tuple[Ref, ...]] = ()
@@ -96,6 +100,20 @@ class StepKind(Generic[S, R]):
     trains: ClassVar[bool] = False
     # a step of this kind that names a step trained with several seeds runs once per seed
     per_seed: ClassVar[bool] = False
+    # the summary keys a study keeps of it (None: all of them); see `headline`
+    headline_keys: ClassVar[tuple[str, ...] | None] = None
+    # the table's "what" and "notes" cells, formatted with the settings and the headline (see
+    # `describe` and `row`; kinds whose cells need more than a format override those)
+    what: ClassVar[str | None] = None
+    note: ClassVar[str] = ""
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        for base in getattr(cls, "__orig_bases__", ()):
+            if get_origin(base) is StepKind:
+                cls.settings, cls.summary = get_args(base)
+        if "command" not in cls.__dict__ and "name" in cls.__dict__:
+            cls.command = cls.name.replace("-", " ")
 
     def run(self, settings: S, out: Path | None = None, console: Console | None = None, progress: bool = True) -> R:
         """Run the step into the run folder `out` (default: runs/<kind>-<time>); `console` gets its
@@ -126,11 +144,12 @@ class StepKind(Generic[S, R]):
 
     def describe(self, settings: S, copies: int = 1) -> str:
         """The "what" column of a study's table (`copies`: seeds it runs for)."""
-        return self.name
+        return self.what.format(**settings.model_dump()) if self.what else self.name
 
     def headline(self, summary: R) -> dict[str, Any]:
         """The numbers a study keeps of this step ("<step>.<key>" in its summary.json)."""
-        return summary.keys()
+        keys = summary.keys()
+        return keys if self.headline_keys is None else {k: keys.get(k) for k in self.headline_keys}
 
     def aggregate(self, summaries: list[R]) -> dict[str, Any]:
         """The headline of several runs of this step (one per seed)."""
@@ -144,7 +163,7 @@ class StepKind(Generic[S, R]):
 
     def row(self, settings: S, headline: dict[str, Any]) -> Row:
         """Its cells in a study's table."""
-        return Row()
+        return Row(note=self.note.format(**headline))
 
     def figures(self, run_dir: Path) -> None:
         """Figures a study draws of a finished run (in its main thread: matplotlib is not
@@ -193,11 +212,9 @@ def option_error(e: ValidationError) -> str:
     return f"{label}{shown}: {first['msg']}"
 
 
-def seeds_headline(all_scores: list[Scores], extra: list[dict[str, Any]]) -> dict[str, Any]:
+def seeds_headline(all_scores: list[Scores]) -> dict[str, Any]:
     """The headline of a train or evaluate step run for several seeds: the mean over seeds (std
     across seeds) and rliable's IQM of the return with its 95% bootstrap CI."""
-    from motorlab.stats import iqm_with_ci
-
     means = [s.return_mean for s in all_scores]
     iqm, low, high = iqm_with_ci(means)
     return {

@@ -11,6 +11,7 @@ one env at a time, for users of the reference notebook.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 
 import numpy as np
@@ -127,8 +128,6 @@ class EvoTorchCEM:
 
     @torch.no_grad()
     def plan(self, states: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
-        import logging
-
         from evotorch import Problem
         from evotorch.algorithms import CEM
 

@@ -15,6 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 import torch
+from rich.progress import Progress
 
 from motorlab.control.mpc import MPCPolicy, make_planner, model_scorer
 from motorlab.dynamics.model import load_model
@@ -61,8 +62,6 @@ class MPCEpisodes(NamedTuple):
 def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, parallel: int,
                  progress: bool = True) -> MPCEpisodes:
     """Episodes of `policy`, `parallel` at a time: returns, per-step distances, planning times."""
-    from rich.progress import Progress
-
     envs = [make_env(EnvConfig(id=env_id), shaped=False) for _ in range(parallel)]
     returns, distances, call_ms, per_env_ms, fault_log = [], [], [], [], []
     with Progress(disable=not progress) as bar:

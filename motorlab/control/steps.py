@@ -68,9 +68,9 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
     step); episodes.npz, metrics.csv (one row per episode), plots/distance.png."""
 
     name = "mpc"
-    command = "mpc"
-    settings = MpcSettings
-    summary = MpcSummary
+    what = "MPC ({optimizer}) on {model} · {env}"
+    headline_keys = ("return_mean", "return_std", "return_min", "final_distance_mean", "plan_ms_median", "episodes",
+                     "wall_seconds")
     refs = (Ref("model", ("model",)),)
 
     def check(self, settings: MpcSettings) -> None:
@@ -108,14 +108,6 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
                              parallel=parallel, optimizer=s.optimizer, **s.plan(), wall_seconds=wall,
                              numerical_faults=len(fault_log), **video)
         return self.finish(run_dir, settings, summary, fault_log)
-
-    def describe(self, settings: MpcSettings, copies: int = 1) -> str:
-        return f"MPC ({settings.optimizer}) on {settings.model} · {settings.env}"
-
-    def headline(self, s: MpcSummary) -> dict[str, Any]:
-        return {"return_mean": s.return_mean, "return_std": s.return_std, "return_min": s.return_min,
-                "final_distance_mean": s.final_distance_mean, "plan_ms_median": s.plan_ms_median,
-                "episodes": s.episodes, "wall_seconds": s.wall_seconds}
 
     def row(self, settings: MpcSettings, h: dict[str, Any]) -> Row:
         return Row(returns=f"{number(h['return_mean'], '{:.2f}')} ± {number(h['return_std'], '{:.2f}')}",

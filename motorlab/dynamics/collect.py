@@ -21,6 +21,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch
 from rich.progress import Progress
 
 from motorlab.dynamics.reacher_sim import arm_models, closed_form_arm, rollout_reacher, sample_initial_states
@@ -29,6 +30,7 @@ from motorlab.dynamics.transitions import Transitions
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.faults import fault_line, fault_of
+from motorlab.policies import load_policy_files, load_run_policy
 
 CHUNK = 4000  # episodes per batched rollout: bounds memory, paces the progress bar
 SIMULATORS = ("auto", "closed-form", "mujoco", "gymnasium")
@@ -102,10 +104,6 @@ _worker: dict[str, Any] = {}
 
 
 def _init_worker(env_cfg: dict, policy_dir: str | None) -> None:
-    import torch
-
-    from motorlab.policies import load_policy_files
-
     torch.set_num_threads(1)
     _worker["env"] = make_env(EnvConfig.model_validate(env_cfg), shaped=False)
     _worker["policy"] = load_policy_files(Path(policy_dir)) if policy_dir else None
@@ -190,8 +188,6 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
     layout = layout_for(env_id, env.observation_space.shape[0], state)
     policy_dir = None
     if policy != "random":
-        from motorlab.policies import load_run_policy
-
         policy_dir = str(Path(policy).resolve())
         if not Path(policy).exists():
             raise MotorlabError(f"--policy {policy!r} is neither 'random' nor a run folder from `motorlab train`.")

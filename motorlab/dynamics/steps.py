@@ -61,9 +61,9 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
     """Record transitions (state, action, next state, reward, done) to transitions.npz."""
 
     name = "dynamics-collect"
-    command = "dynamics collect"
-    settings = DynamicsCollectSettings
-    summary = DynamicsCollectSummary
+    what = "collect {episodes:,} {policy} episodes of {env}"
+    note = "{transitions:,} transitions at {transitions_per_second:,.0f}/s ({simulator})"
+    headline_keys = ("transitions", "transitions_per_second", "simulator", "collect_seconds")
     refs = (Ref("policy", ("policy",)),)
     provides = Artifact("transitions", TRANSITIONS)
 
@@ -84,16 +84,6 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
             return_mean=float(np.bincount(data.episode, weights=data.rewards)[np.unique(data.episode)].mean()),
             numerical_faults=data.meta["numerical_faults"])
         return self.finish(run_dir, settings, summary, data.meta["fault_log"])
-
-    def describe(self, settings: DynamicsCollectSettings, copies: int = 1) -> str:
-        return f"collect {settings.episodes:,} {settings.policy} episodes of {settings.env}"
-
-    def headline(self, s: DynamicsCollectSummary) -> dict[str, Any]:
-        return {"transitions": s.transitions, "transitions_per_second": s.transitions_per_second,
-                "simulator": s.simulator, "collect_seconds": s.collect_seconds}
-
-    def row(self, settings: DynamicsCollectSettings, h: dict[str, Any]) -> Row:
-        return Row(note=f"{h['transitions']:,} transitions at {h['transitions_per_second']:,.0f}/s ({h['simulator']})")
 
 
 DYNAMICS_COLLECT = DynamicsCollectKind()
@@ -135,9 +125,9 @@ class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
     """Fit a forward model predicting the normalized state delta; writes model.safetensors + model.json."""
 
     name = "dynamics-fit"
-    command = "dynamics fit"
-    settings = DynamicsFitSettings
-    summary = DynamicsFitSummary
+    what = "fit a forward model {ensemble}x{hidden} to {transitions}"
+    note = "valid MSE {valid_mse:.2e} (normalized delta), {epochs_run} epochs, {wall_seconds:.1f} s"
+    headline_keys = ("valid_mse", "epochs_run", "wall_seconds", "train_rows")
     refs = (Ref("transitions", ("transitions",)),)
     provides = Artifact("model")
 
@@ -157,17 +147,6 @@ class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
                                      members=model.members, hidden=list(s.hidden))
         model.save(run_dir, metrics={k: v for k, v in summary.keys().items() if k not in ("env_id", "state_layout")})
         return self.finish(run_dir, settings, summary)
-
-    def describe(self, settings: DynamicsFitSettings, copies: int = 1) -> str:
-        return f"fit a forward model {settings.ensemble}x{settings.hidden} to {settings.transitions}"
-
-    def headline(self, s: DynamicsFitSummary) -> dict[str, Any]:
-        return {"valid_mse": s.valid_mse, "epochs_run": s.epochs_run, "wall_seconds": s.wall_seconds,
-                "train_rows": s.train_rows}
-
-    def row(self, settings: DynamicsFitSettings, h: dict[str, Any]) -> Row:
-        return Row(note=f"valid MSE {h['valid_mse']:.2e} (normalized delta), {h['epochs_run']} epochs, "
-                        f"{h['wall_seconds']:.1f} s")
 
 
 DYNAMICS_FIT = DynamicsFitKind()
@@ -196,9 +175,7 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
     """Model vs simulator under the same actions, open loop: error vs horizon, x-y traces, summary numbers."""
 
     name = "dynamics-check"
-    command = "dynamics check"
-    settings = DynamicsCheckSettings
-    summary = DynamicsCheckSummary
+    what = "check {model} open loop, {episodes} episodes"
     refs = (Ref("model", ("model",)),)
 
     def run(self, settings: DynamicsCheckSettings, out: Path | None = None, console: Console | None = None,
@@ -233,9 +210,6 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
         atomic_write_npz(run_dir / "rollouts.npz", **r)
         summary = DynamicsCheckSummary(env_id=env_id, episodes=settings.episodes, horizon=last, **keys)
         return self.finish(run_dir, settings, summary)
-
-    def describe(self, settings: DynamicsCheckSettings, copies: int = 1) -> str:
-        return f"check {settings.model} open loop, {settings.episodes} episodes"
 
     def headline(self, s: DynamicsCheckSummary) -> dict[str, Any]:
         return {k: v for k, v in s.keys().items() if k.startswith(("tip_error_mean_", "state_nrmse_"))}

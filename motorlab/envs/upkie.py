@@ -32,6 +32,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from motorlab.envs.isolated import ProcessEnv
 from motorlab.errors import MotorlabError
 from motorlab.extras import require
 
@@ -181,6 +182,5 @@ def make_upkie(env_id: str, render_mode: str | None = None, **kwargs: Any) -> gy
 
     if not pybullet.isConnected(0):  # PyBullet reuses client 0 once it is disconnected
         return build(env_id, render_mode, kwargs)
-    from motorlab.envs.isolated import ProcessEnv
 
     return ProcessEnv(functools.partial(build, env_id, render_mode, kwargs))

@@ -89,9 +89,6 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
     """Evaluate a policy; returns are the task's own (training-time reward shaping is not applied)."""
 
     name = "evaluate"
-    command = "evaluate"
-    settings = EvaluateSettings
-    summary = EvaluateSummary
     refs = (Ref("policy", ("policy",)), Ref("sar", ("sar",)))
     provides = Artifact("evaluation")
     scored = True
@@ -184,9 +181,6 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
     """Zero-shot success of trained policies on unseen envs: table, summary.json, grouped bar chart."""
 
     name = "zeroshot"
-    command = "zeroshot"
-    settings = ZeroshotSettings
-    summary = ZeroshotSummary
     refs = (Ref("runs", ("policy",)),)
 
     def run(self, settings: ZeroshotSettings, out: Path | None = None, console: Console | None = None,

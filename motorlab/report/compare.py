@@ -7,6 +7,7 @@ seeds; the band is the t-interval of that mean (none for a single seed).
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,7 @@ from scipy import stats
 from motorlab.errors import MotorlabError
 from motorlab.report.plots import STYLE, plt, save_figure, steps_axis
 from motorlab.runs import read_json, read_metrics, require_run_dir
+from motorlab.stats import aggregate, trial_scores
 
 GRID_POINTS = 100
 
@@ -39,8 +41,6 @@ def _curve(run_dir: Path, column: str, grid: np.ndarray, window: int = 100) -> n
 
 def mean_and_band(curves: np.ndarray, confidence: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
     """Mean over seeds (rows) and the half-width of its t confidence interval (0 for one seed)."""
-    import warnings
-
     n = np.sum(np.isfinite(curves), axis=0)
     with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # grid points before any seed's first episode
@@ -94,8 +94,6 @@ def group_statistics(groups: dict[str, list[Path | str]]) -> dict[str, Any]:
     Returns:
         Flat keys "<group>.final_return_iqm", "..._iqm_ci_low", "<A>.final_return_p_better_than[<B>]", ...
     """
-    from motorlab.stats import aggregate, trial_scores
-
     scores = {g: [trial_scores(read_json(Path(d) / "summary.json")) for d in ds] for g, ds in groups.items()}
     flat, _ = aggregate(scores)
     return {k: v for k, v in flat.items() if "steps_to_success" not in k and not k.endswith(".seeds")}

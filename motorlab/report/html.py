@@ -13,11 +13,14 @@ CSS in the page, no scripts or network assets), so it opens offline and can be m
 from __future__ import annotations
 
 import base64
+import datetime
 import os
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from motorlab.environment import describe
 from motorlab.errors import MotorlabError
 from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, read_json
 
@@ -134,8 +137,6 @@ class _Collector:
         config_text = config_path.read_text() if config_path.is_file() else ""
         seed = None
         if config_text:
-            import tomllib
-
             try:
                 seed = tomllib.loads(config_text).get("seed")
             except tomllib.TOMLDecodeError:
@@ -159,8 +160,6 @@ class _Collector:
         return view
 
     def study(self, path: Path) -> StudyView:
-        import tomllib
-
         config = tomllib.loads((path / CONFIG).read_text())
         summary = read_json(path / SUMMARY)
         steps = list(summary.get("steps") or config.get("steps") or [])
@@ -192,8 +191,6 @@ class _Collector:
 
 
 def _is_study(path: Path) -> bool:
-    import tomllib
-
     try:
         config = tomllib.loads((path / CONFIG).read_text())
         return "recipe" in config or "sweep" in config
@@ -223,8 +220,6 @@ def _comparison(runs: list[RunView]) -> tuple[list[RunView], list[str]]:
 
 def _environments(runs: list[RunView]) -> list[tuple[dict, list[str]]]:
     """Distinct environments with the runs that used each (report-time one if no run recorded any)."""
-    from motorlab.environment import describe
-
     distinct: list[tuple[dict, list[str]]] = []
     for r in runs:
         if r.environment is None:
@@ -245,11 +240,7 @@ def build_report(paths: list[Path], out: Path | None = None) -> Path:
     Raises:
         MotorlabError: a path that is not a finished run or study folder.
     """
-    import datetime
-
     import jinja2
-
-    from motorlab.environment import describe
 
     if not paths:
         raise MotorlabError("give at least one run or study folder.")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from motorlab.envs import EnvConfig
+from motorlab.envs import EnvConfig, make_env
 from motorlab.evaluation import evaluate, trained_env_settings
 from motorlab.policies import load_policy
 from motorlab.report.plots import learning_curve, obs_labels, observation_trace
@@ -28,7 +28,6 @@ def plot_run(run_dir: Path) -> list[Path]:
     written = [p for p in [plot_learning_curve(run_dir)] if p is not None]
     env_cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
     spec = config.get("policy", str(run_dir))
-    from motorlab.envs import make_env
 
     probe = make_env(env_cfg)
     policy = load_policy(spec, probe, env_cfg.id)

@@ -42,9 +42,7 @@ class VideoKind(StepKind[VideoSettings, VideoSummary]):
     """Render episodes of a run's policy offscreen to H.264 MP4 (MUJOCO_GL=egl works without a display)."""
 
     name = "video"
-    command = "video"
-    settings = VideoSettings
-    summary = VideoSummary
+    headline_keys = ("videos", "returns", "fps")
     refs = (Ref("run", ("policy", "evaluation")),)
 
     def run(self, settings: VideoSettings, out: Path | None = None, console: Console | None = None,
@@ -56,9 +54,6 @@ class VideoKind(StepKind[VideoSettings, VideoSummary]):
 
     def describe(self, settings: VideoSettings, copies: int = 1) -> str:
         return f"video of {settings.run}, {settings.episodes} episode{'s' * (settings.episodes > 1)}"
-
-    def headline(self, s: VideoSummary) -> dict[str, Any]:
-        return {"videos": s.videos, "returns": s.returns, "fps": s.fps}
 
     def row(self, settings: VideoSettings, h: dict[str, Any]) -> Row:
         return Row(note=", ".join(f"{Path(v).parent.name}/{Path(v).name}" for v in h["videos"]))
@@ -80,9 +75,7 @@ class CompareKind(StepKind[CompareSettings, Summary]):
     summary.json: "<group>.<key>" per group, rliable's IQMs and probabilities of improvement."""
 
     name = "compare"
-    command = "compare"
-    settings = CompareSettings
-    summary = Summary
+    note = "plots/learning_curves.png"
     refs = (Ref("groups", ("policy",)),)
 
     def run(self, settings: CompareSettings, out: Path | None = None, console: Console | None = None,
@@ -99,9 +92,6 @@ class CompareKind(StepKind[CompareSettings, Summary]):
 
     def headline(self, s: Summary) -> dict[str, Any]:
         return {k: v for k, v in s.keys().items() if "." in k}  # already "<group>.<key>"
-
-    def row(self, settings: CompareSettings, h: dict[str, Any]) -> Row:
-        return Row(note="plots/learning_curves.png")
 
 
 COMPARE = CompareKind()

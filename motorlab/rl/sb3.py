@@ -2,8 +2,14 @@
 
 from __future__ import annotations
 
+import inspect
+import io
+import sys
+import typing
 from pathlib import Path
 
+from pydantic import TypeAdapter, ValidationError
+from pydantic.errors import PydanticSchemaGenerationError
 from stable_baselines3 import PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
@@ -112,11 +118,6 @@ def check_hyperparams(algo: str, params: dict) -> dict:
     Raises:
         MotorlabError: naming the parameter, what it should be and close matches.
     """
-    import inspect
-
-    from pydantic import TypeAdapter, ValidationError
-    from pydantic.errors import PydanticSchemaGenerationError
-
     cls = ALGORITHMS[algo]
     fixed = {"self", "policy", "env", "seed", "device", "verbose", "tensorboard_log", "_init_setup_model"}
     allowed = [p for p in inspect.signature(cls.__init__).parameters if p not in fixed]
@@ -167,8 +168,6 @@ def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, tracker: Tr
 def _save_model(model: BaseAlgorithm, run_dir: Path) -> None:
     """SB3's zip (optimizer state included), written atomically. Loading it unpickles,
     so motorlab itself reads policy.safetensors instead."""
-    import io
-
     buf = io.BytesIO()
     model.save(buf)
     atomic_write_bytes(run_dir / "model.zip", buf.getvalue())
@@ -178,9 +177,6 @@ def _init_annotations(cls: type) -> dict:
     """Resolved annotations of `cls.__init__` and its bases (SB3 annotates with strings), each
     resolved on its own with typing.get_type_hints: names SB3 imports only for type checking do
     not resolve and are left to SB3."""
-    import sys
-    import typing
-
     hints: dict = {}
     for base in reversed(cls.__mro__):
         init = base.__dict__.get("__init__")

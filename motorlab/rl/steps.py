@@ -68,9 +68,6 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
     """Train a policy (PPO, SAC, TD3 or the model-based LQR learner) on an env."""
 
     name = "train"
-    command = "train"
-    settings = TrainConfig
-    summary = TrainSummary
     refs = (Ref("sar", ("sar",)),)  # train in the synergy space a fit step made
     provides = Artifact("policy")
     scored = True

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import torch
 from rich.progress import Progress
 
 from motorlab.control.lqr import learn_lqr
@@ -24,7 +25,10 @@ from motorlab.envs import make_env, max_return
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import success_mode
 from motorlab.policies import load_policy_files, save_controller
+from motorlab.report.run import plot_learning_curve
+from motorlab.rl.checkpoint import has_checkpoint, load_checkpoint
 from motorlab.rl.config import TrainConfig
+from motorlab.rl.sb3 import build_model, train_sb3
 from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker
 from motorlab.runs import prepare_run_dir, run_path, write_config, write_summary
 
@@ -71,20 +75,15 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
     solve_return = cfg.solve_return if cfg.solve_return is not None else max_return(cfg.env.id)
     if cfg.until_solved and solve_return is None:
         raise MotorlabError(f"{cfg.env.id} has no known maximum return; give --solve-return for --until-solved.")
-    import torch
 
     torch.set_num_threads(cfg.torch_threads)
     run_dir = run_path(out, f"train-{cfg.algo}")
     t0 = time.perf_counter()
     model = None
     if cfg.algo != "lqr":
-        from motorlab.rl.sb3 import build_model, train_sb3
-
         model = build_model(cfg, run_dir)  # SB3 checks its settings here, before the folder is touched
     record = None
     if resume and model is not None:
-        from motorlab.rl.checkpoint import has_checkpoint, load_checkpoint
-
         if has_checkpoint(run_dir):
             record = load_checkpoint(run_dir, model)
     prepare_run_dir(run_dir, f"train-{cfg.algo}")
@@ -128,7 +127,6 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
     }
     write_summary(run_dir, summary)
     shutil.rmtree(run_dir / "checkpoint", ignore_errors=True)  # finished: nothing left to resume (replay buffers are big)
-    from motorlab.report.run import plot_learning_curve
 
     plot_learning_curve(run_dir)  # people would rather look at the curve than read metrics.csv
     summary["run_dir"] = str(run_dir)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -119,8 +120,6 @@ def check_execution(backend: str, address: str | None, max_parallel: int | None)
 
 def check_address(address: str) -> None:
     """Fail in seconds, not minutes: Ray's own connect retries for a long time on a wrong address."""
-    import socket
-
     if address == "auto":
         return
     host, sep, port = address.removeprefix("ray://").rpartition(":")

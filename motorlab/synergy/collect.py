@@ -18,12 +18,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 from rich.progress import Progress
 
-from motorlab.envs import EnvConfig, make_env
+from motorlab.envs import EnvConfig, make_env, max_return
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import EpisodeSuccess, success_mode, trained_env_settings
 from motorlab.faults import fault_line, fault_of
+from motorlab.policies import load_policy_files
 from motorlab.runs import atomic_write_npz, require_run_dir
 
 ACTIVATIONS = "activations.npz"
@@ -56,10 +58,6 @@ _worker: dict[str, Any] = {}
 
 
 def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool) -> None:
-    import torch
-
-    from motorlab.policies import load_policy_files
-
     torch.set_num_threads(1)
     cfg = EnvConfig.model_validate(env_cfg)
     _worker["env"] = make_env(cfg, shaped=False)
@@ -67,15 +65,12 @@ def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool) -> None:
     if hasattr(policy, "deterministic"):
         policy.deterministic = deterministic
     _worker["policy"] = policy
-    from motorlab.envs import max_return
 
     _worker["target"] = max_return(cfg.id)
     _worker["success"] = success_mode(cfg)
 
 
 def _run_episode(seed: int) -> Episode:
-    import torch
-
     env, policy = _worker["env"], _worker["policy"]
     torch.manual_seed(seed)  # stochastic actions repeat for the same seed
     obs, _ = env.reset(seed=seed)

@@ -57,9 +57,10 @@ class CollectKind(StepKind[CollectSettings, CollectSummary]):
     not depend on the number of workers."""
 
     name = "collect"
+    what = "collect {episodes} episodes from {run} (≥ {percentile:g}th pct.)"
+    note = "kept {episodes_kept} episodes, {samples:,} samples x {n_muscles} muscles"
+    headline_keys = ("samples", "n_muscles", "episodes_kept", "threshold", "kept_success_rate")
     command = "synergies collect"
-    settings = CollectSettings
-    summary = CollectSummary
     refs = (Ref("run", ("policy",)),)
     provides = Artifact("activations", ACTIVATIONS)
 
@@ -81,16 +82,6 @@ class CollectKind(StepKind[CollectSettings, CollectSummary]):
             kept_return_mean=float(np.mean([e.ret for e in c.kept])),
             kept_success_rate=float(np.mean([e.solved for e in c.kept])), numerical_faults=len(c.fault_log))
         return self.finish(run_dir, settings, summary, c.fault_log)
-
-    def describe(self, settings: CollectSettings, copies: int = 1) -> str:
-        return f"collect {settings.episodes} episodes from {settings.run} (≥ {settings.percentile:g}th pct.)"
-
-    def headline(self, s: CollectSummary) -> dict[str, Any]:
-        return {"samples": s.samples, "n_muscles": s.n_muscles, "episodes_kept": s.episodes_kept,
-                "threshold": s.threshold, "kept_success_rate": s.kept_success_rate}
-
-    def row(self, settings: CollectSettings, h: dict[str, Any]) -> Row:
-        return Row(note=f"kept {h['episodes_kept']} episodes, {h['samples']:,} samples x {h['n_muscles']} muscles")
 
 
 COLLECT = CollectKind()
@@ -120,9 +111,9 @@ class VafKind(StepKind[VafSettings, VafSummary]):
     """Variance accounted for by N = 1..n_muscles synergies: vaf.png and the smallest N reaching the threshold."""
 
     name = "vaf"
+    what = "VAF of {activations} ({method})"
+    headline_keys = ("n_for_threshold", "threshold", "n_muscles")
     command = "synergies vaf"
-    settings = VafSettings
-    summary = VafSummary
     refs = (Ref("activations", ("activations",)),)
 
     def run(self, settings: VafSettings, out: Path | None = None, console: Console | None = None,
@@ -139,12 +130,6 @@ class VafKind(StepKind[VafSettings, VafSummary]):
         summary = VafSummary(method=settings.method, n_muscles=acts.shape[1], samples=acts.shape[0],
                              threshold=settings.threshold, n_for_threshold=n_needed, vaf=[float(v) for v in curve])
         return self.finish(run_dir, settings, summary)
-
-    def describe(self, settings: VafSettings, copies: int = 1) -> str:
-        return f"VAF of {settings.activations} ({settings.method})"
-
-    def headline(self, s: VafSummary) -> dict[str, Any]:
-        return {"n_for_threshold": s.n_for_threshold, "threshold": s.threshold, "n_muscles": s.n_muscles}
 
     def row(self, settings: VafSettings, h: dict[str, Any]) -> Row:
         n = h["n_for_threshold"]
@@ -181,9 +166,9 @@ class FitKind(StepKind[FitSettings, FitSummary]):
     """Fit a Synergistic Action Representation; writes sar.npz (plain arrays + JSON metadata, no pickle)."""
 
     name = "fit"
+    note = "{n_synergies} synergies, VAF {vaf:.1%}"
+    headline_keys = ("n_synergies", "n_muscles", "vaf")
     command = "synergies fit"
-    settings = FitSettings
-    summary = FitSummary
     refs = (Ref("activations", ("activations",)),)
     provides = Artifact("sar", SAR_FILE)
 
@@ -202,12 +187,6 @@ class FitKind(StepKind[FitSettings, FitSummary]):
     def describe(self, settings: FitSettings, copies: int = 1) -> str:
         return (f"fit {settings.method} to {settings.activations}"
                 + (f", N = {settings.n_synergies}" if settings.n_synergies else f", VAF ≥ {settings.vaf}"))
-
-    def headline(self, s: FitSummary) -> dict[str, Any]:
-        return {"n_synergies": s.n_synergies, "n_muscles": s.n_muscles, "vaf": s.vaf}
-
-    def row(self, settings: FitSettings, h: dict[str, Any]) -> Row:
-        return Row(note=f"{h['n_synergies']} synergies, VAF {h['vaf']:.1%}")
 
 
 FIT = FitKind()

@@ -1,0 +1,128 @@
+"""The shape of the code (docs/design.md): imports point down the layers, never up or in a
+circle; step kinds are named in one place; settings are written once. Read from the import
+graph (grimp, import-linter's graph library) and the source, not by running anything."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import grimp
+import pytest
+
+import motorlab
+from motorlab.kinds import KINDS
+
+PACKAGE = Path(motorlab.__file__).parent
+CLI, STUDIES, KIND_REGISTRY, STEP_KINDS, DOMAIN, GROUND = 5, 4, 3, 2, 1, 0
+GROUND_FLOOR = {"motorlab.runs", "motorlab.errors", "motorlab.faults", "motorlab.environment", "motorlab.extras",
+                "motorlab.settings", "motorlab"}
+
+
+def layer(module: str) -> int:
+    if module in ("motorlab.cli", "motorlab.__main__"):
+        return CLI
+    if module.startswith(("motorlab.studies", "motorlab.sweeps")) or module == "motorlab.recipes":
+        return STUDIES
+    if module == "motorlab.kinds":
+        return KIND_REGISTRY
+    if module == "motorlab.stepkind" or module.endswith(".steps"):
+        return STEP_KINDS
+    if module in GROUND_FLOOR:
+        return GROUND
+    return DOMAIN
+
+
+@pytest.fixture(scope="module")
+def graph():
+    return grimp.build_graph("motorlab", cache_dir=None)
+
+
+def test_every_module_is_in_the_graph(graph):
+    """Every .py file is a module grimp sees (a folder without __init__.py would hide its modules
+    from the checks below, and from setuptools' package list)."""
+    files = {".".join(p.relative_to(PACKAGE.parent).with_suffix("").parts).removesuffix(".__init__")
+             for p in PACKAGE.rglob("*.py")}
+    assert files == set(graph.modules)
+
+
+def test_imports_point_down_the_layers(graph):
+    upward = [f"{a} ({layer(a)}) imports {b} ({layer(b)})" for a in graph.modules
+              for b in graph.find_modules_directly_imported_by(a) if layer(b) > layer(a)]
+    assert not upward, "\n".join(upward)
+
+
+def test_no_module_imports_another_in_a_circle(graph):
+    cycles = []
+    for a in graph.modules:
+        for b in graph.find_modules_directly_imported_by(a):
+            chain = graph.find_shortest_chain(importer=b, imported=a)
+            if chain is not None:
+                cycles.append(" -> ".join((a, *chain)))
+    assert not cycles, "\n".join(sorted(cycles))
+
+
+def test_the_layer_check_catches_an_upward_import(tmp_path):
+    """The two checks above are able to fail: an upward import and a cycle in a small package."""
+    pkg = tmp_path / "toy"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "low.py").write_text("import toy.high\n")
+    (pkg / "high.py").write_text("import toy.low\n")
+    import sys
+
+    sys.path.insert(0, str(tmp_path))
+    try:
+        toy = grimp.build_graph("toy", cache_dir=None)
+    finally:
+        sys.path.remove(str(tmp_path))
+    assert toy.find_shortest_chain(importer="toy.low", imported="toy.high") == ("toy.low", "toy.high")
+    assert toy.find_shortest_chain(importer="toy.high", imported="toy.low") is not None
+
+
+def _strings(path: Path) -> set[str]:
+    """String literals a module's code uses as values: not docstrings, not data keys (dict
+    display keys, subscripts such as metadata["vaf"]) and not the Python names in __all__."""
+    tree = ast.parse(path.read_text())
+    skip = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body \
+                and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant):
+            skip.add(id(node.body[0].value))
+        elif isinstance(node, ast.Dict):
+            skip.update(id(k) for k in node.keys if k is not None)
+        elif isinstance(node, ast.Subscript):
+            skip.add(id(node.slice))
+        elif isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
+            skip.update(id(n) for n in ast.walk(node.value))
+    return {node.value for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip}
+
+
+def test_each_kind_is_named_in_one_library_file():
+    """A kind's name, as a value the code compares, looks up or passes, stands only in its own
+    file: the CLI, recipes, studies and sweeps reach kinds through the registry."""
+    named: dict[str, list[str]] = {name: [] for name in KINDS}
+    for path in PACKAGE.rglob("*.py"):
+        strings = _strings(path)
+        for name in KINDS:
+            if name in strings:
+                named[name].append(str(path.relative_to(PACKAGE)))
+    assert all(len(files) == 1 for files in named.values()), named
+    for name, kind in KINDS.items():
+        assert named[name] == [str(Path(type(kind).__module__.replace(".", "/")).relative_to("motorlab"))
+                               + ".py"]
+
+
+def test_kind_settings_are_the_one_source_of_defaults():
+    """Every settings field has help text, and the CLI shows the field's own default."""
+    from motorlab.settings import help_text
+
+    for kind in KINDS.values():
+        for name, info in kind.settings.model_fields.items():
+            if name in ("env", "lqr", "hyperparams"):  # nested settings: the env's flags, presets and --set
+                continue
+            assert info.description, f"{kind.name}.{name} has no description"
+            default = info.get_default(call_default_factory=True)
+            if isinstance(default, (int, float, str)) and not isinstance(default, bool):
+                assert f"(default {default})" in help_text(kind.settings, name), (kind.name, name)
