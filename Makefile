@@ -4,7 +4,7 @@ STAMP  := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: demo test bench setup clean
+.PHONY: demo test test-fast lint bench setup clean
 
 $(STAMP): pyproject.toml requirements.lock scripts/setup.sh
 	@VENV=$(VENV) bash scripts/setup.sh
@@ -24,8 +24,15 @@ demo: $(STAMP)  ## the pendulum study, the SAR pipeline on the MyoSuite hand and
 	@echo "  runs/demo-sar-hand-quick/report.html"
 	@echo "  runs/demo-reacher-quick/report.html"
 
-test: $(STAMP) $(VENV)/.browser  ## the test suite (a few minutes on 2 cores)
+lint: $(STAMP)  ## ruff (pyflakes, isort, bugbear) and the import layers (lint-imports; see docs/design.md)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/lint-imports
+
+test: lint $(VENV)/.browser  ## the whole test suite, as CI runs it (under 15 min on 2 cores)
 	$(VENV)/bin/python -m pytest -q
+
+test-fast: lint $(VENV)/.browser  ## the edit loop: unit tests and one end-to-end test per workflow (under 3 min)
+	$(VENV)/bin/python -m pytest -q -m fast
 
 bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/pendulum_steps_to_success.py

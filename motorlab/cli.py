@@ -8,12 +8,14 @@ folder without summary.json, i.e. visibly unfinished.
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import sys
 import tomllib
 from pathlib import Path
-from typing import Annotated, Any, Optional
+from types import UnionType
+from typing import Annotated, Any, Literal, Optional, Union, get_args, get_origin
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering works without a display
 
@@ -24,24 +26,21 @@ from rich.console import Console  # noqa: E402
 from rich.markup import escape  # noqa: E402
 from rich.table import Table  # noqa: E402
 
-from motorlab.control.steps import MPC, MpcSettings  # noqa: E402
+from motorlab.control.steps import MPC  # noqa: E402
 from motorlab.dynamics.steps import (  # noqa: E402
     DYNAMICS_CHECK,
     DYNAMICS_COLLECT,
     DYNAMICS_FIT,
-    DynamicsCheckSettings,
-    DynamicsCollectSettings,
-    DynamicsFitSettings,
 )
 from motorlab.envs import EnvConfig, register_myosuite  # noqa: E402
 from motorlab.errors import MotorlabError  # noqa: E402
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT, EvaluateSettings, ZeroshotSettings, settings_for  # noqa: E402
 from motorlab.export import export_run, export_sb3_zip  # noqa: E402
 from motorlab.kinds import KINDS  # noqa: E402
-from motorlab.recipes import bundled, fields_of, load_recipe  # noqa: E402
+from motorlab.recipes import bundled, fields_of, load_recipe, step_union  # noqa: E402
 from motorlab.report.html import build_report  # noqa: E402
 from motorlab.report.run import plot_run  # noqa: E402
-from motorlab.report.steps import COMPARE, VIDEO, CompareSettings, VideoSettings  # noqa: E402
+from motorlab.report.steps import COMPARE, VIDEO, CompareSettings  # noqa: E402
 from motorlab.rl.config import TrainConfig  # noqa: E402
 from motorlab.rl.steps import TRAIN  # noqa: E402
 from motorlab.runs import is_complete, read_text_file  # noqa: E402
@@ -50,7 +49,7 @@ from motorlab.stepkind import StepKind, option_error  # noqa: E402
 from motorlab.studies import Execution, run_study  # noqa: E402
 from motorlab.sweeps.sweep import run_sweep  # noqa: E402
 from motorlab.synergy.sklearn_import import import_sklearn  # noqa: E402
-from motorlab.synergy.steps import COLLECT, FIT, VAF, CollectSettings, FitSettings, VafSettings  # noqa: E402
+from motorlab.synergy.steps import COLLECT, FIT, VAF  # noqa: E402
 
 app = typer.Typer(
     name="motorlab",
@@ -102,6 +101,71 @@ def opt(model: type, *flags: str, **kw: Any) -> Any:
 
 def arg(model: type, field: str) -> Any:
     return typer.Argument(help=help_text(model, field))
+
+
+def kind_command(kind: StepKind, argument: str, epilog: str = "", flags: dict[str, tuple[str, ...]] | None = None,
+                 out_help: str = "Run folder to write (default: runs/<step>-<timestamp>)."):
+    """Register a command whose options are `kind`'s settings, one per field (`argument` is the
+    positional one): their types, defaults and help come from the settings model, nothing is
+    written twice. The decorated function reports the summary: `report(summary, settings)`."""
+    flags = flags or {}
+
+    def register(report):
+        params, convert = [], {}
+        for name, info in kind.settings.model_fields.items():
+            kind_of, convert[name] = _cli_type(info.annotation, "--" + name.replace("_", "-"))
+            text = help_text(kind.settings, name)
+            if name == argument:
+                params.insert(0, inspect.Parameter(name, inspect.Parameter.POSITIONAL_OR_KEYWORD,
+                                                   annotation=Annotated[kind_of, typer.Argument(help=text)]))
+                continue
+            names = flags.get(name, ("--" + name.replace("_", "-"),))
+            limits = {"min": 0} if name == "seed" else {}
+            if kind_of is bool:  # a switch: absent is the field's default
+                default, annotation = info.default, Annotated[bool, typer.Option(*names, help=text)]
+            elif info.is_required():
+                default, annotation = inspect.Parameter.empty, Annotated[kind_of, typer.Option(*names, help=text)]
+            else:
+                default, annotation = None, Annotated[Optional[kind_of], typer.Option(*names, help=text, **limits)]
+            params.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default,
+                                            annotation=annotation))
+        params.append(inspect.Parameter("out", inspect.Parameter.KEYWORD_ONLY, default=None, annotation=Annotated[
+            Optional[Path], typer.Option("--out", help=out_help)]))
+
+        def run_command(**given: Any) -> None:
+            out = given.pop("out")
+            settings = kind.make(**{k: convert[k](v) for k, v in given.items() if v is not None})
+            report(kind.run(settings, out), settings)
+
+        run_command.__signature__ = inspect.Signature(params)
+        run_command.__annotations__ = {p.name: p.annotation for p in params}
+        run_command.__name__, run_command.__doc__ = report.__name__, report.__doc__
+        return command(kind, epilog)(run_command)
+
+    return register
+
+
+def _cli_type(annotation: Any, flag: str) -> tuple[type, Any]:
+    """The type a command-line value of a settings field is read as, and how it becomes the field's
+    value: numbers and text as they are, choices as text (the settings check them), lists of
+    numbers as "64,64"."""
+    args = [a for a in get_args(annotation) if a is not type(None)]
+    base = args[0] if get_origin(annotation) in (Union, UnionType) and len(args) == 1 else annotation
+    if get_origin(base) is Literal:
+        return str, str
+    if get_origin(base) is list and get_args(base)[0] in (int, float):
+        item = get_args(base)[0]
+
+        def numbers(text: str) -> list:
+            try:
+                return [item(x) for x in text.split(",") if x.strip()]
+            except ValueError:
+                raise MotorlabError(f"{flag} {text!r}: write numbers separated by commas, e.g. 64,64.") from None
+
+        return str, numbers
+    if get_origin(base) is list:
+        return list[str], list
+    return base, (lambda v: v)
 
 
 Out = Annotated[Optional[Path], typer.Option("--out", help="Run folder to write (default: runs/<step>-<timestamp>).")]
@@ -318,18 +382,9 @@ def zeroshot(
     _warn_faults(s)
 
 
-@command(VIDEO, epilog="Example:\n\n  MUJOCO_GL=egl motorlab video runs/play --episodes 5 --camera hand_side_inter")
-def video(
-    run_dir: Annotated[Path, arg(VideoSettings, "run")],
-    episodes: Annotated[Optional[int], opt(VideoSettings, "--episodes")] = None,
-    camera: Annotated[Optional[str], opt(VideoSettings, "--camera")] = None,
-    width: Annotated[Optional[int], opt(VideoSettings, "--width", min=16, max=4096)] = None,
-    height: Annotated[Optional[int], opt(VideoSettings, "--height", min=16, max=4096)] = None,
-    seed: Seed = None,
-    out: Annotated[Optional[Path], typer.Option("--out", help="Folder for the videos (default RUN_DIR/videos).")] = None,
-):
-    s = VIDEO.run(VIDEO.make(run=str(run_dir), episodes=episodes, camera=camera, width=width, height=height,
-                             seed=seed), out)
+@kind_command(VIDEO, "run", out_help="Folder for the videos (default RUN_DIR/videos).",
+              epilog="Example:\n\n  MUJOCO_GL=egl motorlab video runs/play --episodes 5 --camera hand_side_inter")
+def video(s, settings) -> None:
     for path, ret in zip(s.videos, s.returns, strict=True):
         stdout.print(f"written: {path}  (return {ret:.1f})")
 
@@ -353,37 +408,17 @@ def compare(
 
 # ---- synergies --------------------------------------------------------------------------------
 
-@command(COLLECT, epilog="Example:\n\n  motorlab synergies collect runs/play --episodes 1000 --percentile 80 "
-                         "--preview 100")
-def synergies_collect(
-    run_dir: Annotated[Path, arg(CollectSettings, "run")],
-    episodes: Annotated[Optional[int], opt(CollectSettings, "--episodes")] = None,
-    percentile: Annotated[Optional[float], opt(CollectSettings, "--percentile")] = None,
-    preview: Annotated[Optional[int], opt(CollectSettings, "--preview")] = None,
-    deterministic: Annotated[bool, opt(CollectSettings, "--deterministic/--stochastic")] = False,
-    workers: Annotated[Optional[int], opt(CollectSettings, "--workers")] = None,
-    max_episodes: Annotated[Optional[int], opt(CollectSettings, "--max-episodes")] = None,
-    seed: Seed = None,
-    out: Out = None,
-):
-    s = COLLECT.run(COLLECT.make(run=str(run_dir), episodes=episodes, percentile=percentile, preview=preview,
-                                 deterministic=deterministic, workers=workers, max_episodes=max_episodes,
-                                 seed=seed), out)
+@kind_command(COLLECT, "run", flags={"deterministic": ("--deterministic/--stochastic",)},
+              epilog="Example:\n\n  motorlab synergies collect runs/play --episodes 1000 --percentile 80 --preview 100")
+def synergies_collect(s, settings) -> None:
     stdout.print(f"kept {s.episodes_kept} episodes (return >= {s.threshold:.3g}), {s.samples:,} samples "
                  f"x {s.n_muscles} muscles -> {s.run_dir}/activations.npz")
     _warn_faults(s)
 
 
-@command(VAF, epilog="Example:\n\n  motorlab synergies vaf runs/collect/activations.npz --threshold 0.8")
-def synergies_vaf(
-    activations: Annotated[Path, arg(VafSettings, "activations")],
-    threshold: Annotated[Optional[float], opt(VafSettings, "--threshold")] = None,
-    method: Annotated[Optional[str], opt(VafSettings, "--method")] = None,
-    max_n: Annotated[Optional[int], opt(VafSettings, "--max-n")] = None,
-    out: Out = None,
-):
-    settings = VAF.make(activations=str(activations), threshold=threshold, method=method, max_n=max_n)
-    s = VAF.run(settings, out)
+@kind_command(VAF, "activations", epilog="Example:\n\n  motorlab synergies vaf runs/collect/activations.npz "
+                                         "--threshold 0.8")
+def synergies_vaf(s, settings) -> None:
     table = Table(title=f"VAF ({s.method}), {s.samples:,} samples x {s.n_muscles} muscles")
     table.add_column("N", justify="right")
     table.add_column("VAF", justify="right")
@@ -395,17 +430,10 @@ def synergies_vaf(
                  f"written: {s.run_dir}/vaf.png")
 
 
-@command(FIT, epilog="Examples:\n\n  motorlab synergies fit activations.npz --vaf 0.8\n\n"
+@kind_command(FIT, "activations", flags={"n_synergies": ("--n-synergies", "--n")},
+              epilog="Examples:\n\n  motorlab synergies fit activations.npz --vaf 0.8\n\n"
                      "  motorlab synergies fit activations.npz --n 20 --method nmf")
-def synergies_fit(
-    activations: Annotated[Path, arg(FitSettings, "activations")],
-    n: Annotated[Optional[int], opt(FitSettings, "--n-synergies", "--n")] = None,
-    vaf: Annotated[Optional[float], opt(FitSettings, "--vaf")] = None,
-    method: Annotated[Optional[str], opt(FitSettings, "--method")] = None,
-    seed: Seed = None,
-    out: Out = None,
-):
-    s = FIT.run(FIT.make(activations=str(activations), n_synergies=n, vaf=vaf, method=method, seed=seed), out)
+def synergies_fit(s, settings) -> None:
     stdout.print(f"{s.n_synergies} synergies ({s.method}) for {s.n_muscles} muscles, VAF {s.vaf:.1%} -> {s.sar}")
 
 
@@ -425,67 +453,28 @@ def synergies_import(
 
 # ---- dynamics and MPC -------------------------------------------------------------------------
 
-def _hidden(text: str | None) -> list[int] | None:
-    if text is None:
-        return None
-    try:
-        return [int(h) for h in text.split(",") if h.strip()]
-    except ValueError:
-        raise MotorlabError(f"--hidden {text!r}: write layer widths separated by commas, e.g. 64,64.") from None
-
-
-@command(DYNAMICS_COLLECT, epilog="Examples:\n\n  motorlab dynamics collect Reacher-v5 --episodes 20000 "
-                                  "--out runs/reacher-data\n\n"
-                                  "  motorlab dynamics collect InvertedPendulum-v5 --episodes 200 --policy runs/ppo")
-def dynamics_collect(
-    env_id: Annotated[str, arg(DynamicsCollectSettings, "env")],
-    episodes: Annotated[Optional[int], opt(DynamicsCollectSettings, "--episodes")] = None,
-    policy: Annotated[Optional[str], opt(DynamicsCollectSettings, "--policy")] = None,
-    workers: Annotated[Optional[int], opt(DynamicsCollectSettings, "--workers")] = None,
-    state: Annotated[Optional[str], opt(DynamicsCollectSettings, "--state")] = None,
-    simulator: Annotated[Optional[str], opt(DynamicsCollectSettings, "--simulator")] = None,
-    seed: Seed = None,
-    out: Out = None,
-):
-    s = DYNAMICS_COLLECT.run(DYNAMICS_COLLECT.make(env=env_id, episodes=episodes, policy=policy, workers=workers,
-                                                   state=state, simulator=simulator, seed=seed), out)
+@kind_command(DYNAMICS_COLLECT, "env", epilog="Examples:\n\n  motorlab dynamics collect Reacher-v5 --episodes 20000 "
+                                              "--out runs/reacher-data\n\n"
+                                              "  motorlab dynamics collect InvertedPendulum-v5 --episodes 200 "
+                                              "--policy runs/ppo")
+def dynamics_collect(s, settings) -> None:
     stdout.print(f"{s.transitions:,} transitions ({s.state_size} state, {s.action_size} action entries) "
                  f"at {s.transitions_per_second:,.0f}/s via {s.simulator} -> {s.run_dir}/transitions.npz")
     _warn_faults(s)
 
 
-@command(DYNAMICS_FIT, epilog="Examples:\n\n  motorlab dynamics fit runs/reacher-data --out runs/reacher-model\n\n"
-                              "  motorlab dynamics fit runs/reacher-data/transitions.npz --hidden 128,128 --ensemble 5 "
-                              "--patience 5")
-def dynamics_fit(
-    transitions: Annotated[Path, arg(DynamicsFitSettings, "transitions")],
-    epochs: Annotated[Optional[int], opt(DynamicsFitSettings, "--epochs")] = None,
-    hidden: Annotated[Optional[str], opt(DynamicsFitSettings, "--hidden")] = None,
-    ensemble: Annotated[Optional[int], opt(DynamicsFitSettings, "--ensemble")] = None,
-    lr: Annotated[Optional[float], opt(DynamicsFitSettings, "--lr")] = None,
-    batch_size: Annotated[Optional[int], opt(DynamicsFitSettings, "--batch-size")] = None,
-    valid_fraction: Annotated[Optional[float], opt(DynamicsFitSettings, "--valid-fraction")] = None,
-    patience: Annotated[Optional[int], opt(DynamicsFitSettings, "--patience")] = None,
-    seed: Seed = None,
-    out: Out = None,
-):
-    s = DYNAMICS_FIT.run(DYNAMICS_FIT.make(
-        transitions=str(transitions), epochs=epochs, hidden=_hidden(hidden), ensemble=ensemble, lr=lr,
-        batch_size=batch_size, valid_fraction=valid_fraction, patience=patience, seed=seed), out)
+@kind_command(DYNAMICS_FIT, "transitions", epilog="Examples:\n\n  motorlab dynamics fit runs/reacher-data "
+                                                  "--out runs/reacher-model\n\n"
+                                                  "  motorlab dynamics fit runs/reacher-data/transitions.npz "
+                                                  "--hidden 128,128 --ensemble 5 --patience 5")
+def dynamics_fit(s, settings) -> None:
     valid = f"valid_mse {s.valid_mse:.2e} (normalized)" if s.valid_mse is not None else "no validation"
     stdout.print(f"{valid} after {s.epochs_run} epochs, {s.wall_seconds:.1f} s -> {s.run_dir}/model.json, "
                  f"plots/loss.png")
 
 
-@command(DYNAMICS_CHECK, epilog="Example:\n\n  motorlab dynamics check runs/reacher-model --episodes 5")
-def dynamics_check(
-    model: Annotated[Path, arg(DynamicsCheckSettings, "model")],
-    episodes: Annotated[Optional[int], opt(DynamicsCheckSettings, "--episodes")] = None,
-    steps: Annotated[Optional[int], opt(DynamicsCheckSettings, "--steps")] = None,
-    seed: Seed = None,
-    out: Out = None,
-):
-    s = DYNAMICS_CHECK.run(DYNAMICS_CHECK.make(model=str(model), episodes=episodes, steps=steps, seed=seed), out)
+@kind_command(DYNAMICS_CHECK, "model", epilog="Example:\n\n  motorlab dynamics check runs/reacher-model --episodes 5")
+def dynamics_check(s, settings) -> None:
     keys = s.keys()
     tip = {k: v for k, v in keys.items() if k.startswith("tip_error_mean_h")}
     stdout.print("open-loop error: " + ", ".join(
@@ -494,26 +483,10 @@ def dynamics_check(
     stdout.print(f"written: {s.run_dir}/plots/error_vs_horizon.png, traces.png")
 
 
-@command(MPC, epilog="Examples:\n\n  motorlab mpc Reacher-v5 --model runs/reacher-model --episodes 50\n\n"
-                     "  motorlab mpc Reacher-v5 --model runs/reacher-model --optimizer evotorch --horizon 4 "
-                     "--population 250 --iterations 20 --episodes 5")
-def mpc(
-    env_id: Annotated[str, arg(MpcSettings, "env")],
-    model: Annotated[Path, opt(MpcSettings, "--model")],
-    episodes: Annotated[Optional[int], opt(MpcSettings, "--episodes")] = None,
-    horizon: Annotated[Optional[int], opt(MpcSettings, "--horizon")] = None,
-    population: Annotated[Optional[int], opt(MpcSettings, "--population")] = None,
-    iterations: Annotated[Optional[int], opt(MpcSettings, "--iterations")] = None,
-    elites: Annotated[Optional[int], opt(MpcSettings, "--elites")] = None,
-    optimizer: Annotated[Optional[str], opt(MpcSettings, "--optimizer")] = None,
-    parallel: Annotated[Optional[int], opt(MpcSettings, "--parallel")] = None,
-    video: Annotated[bool, opt(MpcSettings, "--video")] = False,
-    seed: Seed = None,
-    out: Out = None,
-):
-    s = MPC.run(MPC.make(env=env_id, model=str(model), episodes=episodes, horizon=horizon, population=population,
-                         iterations=iterations, elites=elites, optimizer=optimizer, parallel=parallel, video=video,
-                         seed=seed), out)
+@kind_command(MPC, "env", epilog="Examples:\n\n  motorlab mpc Reacher-v5 --model runs/reacher-model --episodes 50\n\n"
+                                 "  motorlab mpc Reacher-v5 --model runs/reacher-model --optimizer evotorch --horizon 4 "
+                                 "--population 250 --iterations 20 --episodes 5")
+def mpc(s, settings) -> None:
     stdout.print(f"return {s.return_mean:.2f} ± {s.return_std:.2f}, final distance "
                  f"{s.final_distance_mean * 1000:.1f} mm (mean), planning {s.plan_ms_median:.2f} ms/step "
                  f"(median) over {s.episodes} episodes -> {s.run_dir}")
@@ -649,8 +622,13 @@ def export(
 def recipes(
     kinds: Annotated[bool, typer.Option("--kinds", help="List the step kinds a recipe can use, with their "
                                                        "fields and defaults.")] = False,
+    schema: Annotated[bool, typer.Option("--schema", help="Print the JSON Schema of a recipe's [[steps]] "
+                                                         "(for editors that check TOML against a schema).")] = False,
 ):
     """List the bundled recipes (or, with --kinds, the step kinds and their fields)."""
+    if schema:
+        print(json.dumps(step_union().json_schema(), indent=2))
+        return
     if kinds:
         for k in KINDS.values():
             stdout.print(f"[bold]{k.name}[/bold]: {_doc(k).splitlines()[0]}")

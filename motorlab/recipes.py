@@ -34,11 +34,11 @@ import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, create_model
 
-from motorlab.envs import ENV_KEYS
+from motorlab.envs import ENV_KEYS, EnvConfig
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.kinds import DEFAULT_KIND, KINDS, kind, providers
 from motorlab.settings import Settings
@@ -86,6 +86,25 @@ class _RecipeFile(BaseModel):
 def fields_of(step_kind: StepKind) -> set[str]:
     """The fields a recipe step of this kind may set."""
     return step_kind.settings.fields() | ({SEEDS} if step_kind.trains else set())
+
+
+def step_union() -> TypeAdapter:
+    """A recipe's [[steps]] table as one type, built from the registry: a union of every kind's
+    settings told apart by `kind` (a discriminated union). Its JSON Schema (`motorlab recipes
+    --schema`) lets an editor check a recipe as it is written."""
+    env_fields = {key: (EnvConfig.model_fields[field].annotation, EnvConfig.model_fields[field])
+                  for key, field in ENV_KEYS.items() if key != "env"}
+    models = []
+    for k in KINDS.values():
+        fields: dict[str, Any] = {"kind": (Literal[k.name], ...), "name": (str, ...)}
+        fields.update({f: (info.annotation, info) for f, info in k.settings.model_fields.items()})
+        for alias in k.settings.aliases:  # the flat env settings: env = "id", delay, history, ...
+            fields[alias] = (str | None, Field(None, description="Gymnasium env id")) if alias == "env" else env_fields[alias]
+        if k.trains:
+            fields[SEEDS] = (int | list[int] | None, Field(None, description="Run once per seed: a count or a list"))
+        models.append(create_model(f"{type(k).__name__.removesuffix('Kind')}Step", __doc__=type(k).__doc__,
+                                   __config__=ConfigDict(extra="forbid"), **fields))
+    return TypeAdapter(Annotated[Union[tuple(models)], Field(discriminator="kind")])
 
 
 def bundled() -> dict[str, Path]:

@@ -52,10 +52,10 @@ def test_collect_fit_check_mpc(pipeline, tmp_path):
 
 @pytest.mark.parametrize("args, fragments", [
     (["dynamics", "collect", "Reacher-v9"], ["unknown env id", "Reacher-v5"]),
-    (["dynamics", "collect", "Reacher-v5", "--episodes", "0"], ["--episodes must be positive"]),
+    (["dynamics", "collect", "Reacher-v5", "--episodes", "0"], ["--episodes 0", "greater than 0"]),
     (["dynamics", "collect", "Pendulum-v1", "--state", "reacher"], ["--state observation"]),
     (["dynamics", "collect", "Pendulum-v1", "--simulator", "closed-form"], ["Reacher", "use auto or gymnasium"]),
-    (["dynamics", "collect", "Reacher-v5", "--simulator", "bullet"], ["closed-form", "mujoco or gymnasium"]),
+    (["dynamics", "collect", "Reacher-v5", "--simulator", "bullet"], ["--simulator 'bullet'", "closed-form", "'mujoco' or 'gymnasium'"]),
     (["dynamics", "fit", "missing.npz"], ["missing.npz is missing", "dynamics collect"]),
 ])
 def test_bad_collect_and_fit_input(args, fragments, tmp_path):
@@ -69,8 +69,8 @@ def test_bad_model_and_plan_input_leave_finished_runs_intact(pipeline, tmp_path)
                       "--population", "8", "--iterations", "1", "--elites", "2", "--out", done))
     before = (done / "summary.json").read_bytes()
     cases = [
-        (["--horizon", "0"], ["--horizon must be positive"]),
-        (["--population", "-5"], ["--population must be positive"]),
+        (["--horizon", "0"], ["--horizon 0", "greater than 0"]),
+        (["--population", "-5"], ["--population -5", "greater than 0"]),
         (["--elites", "50", "--population", "10"], ["cannot exceed --population"]),
         (["--optimizer", "adam"], ["--optimizer 'adam'"]),
     ]

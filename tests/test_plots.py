@@ -93,13 +93,13 @@ def test_comparison_bars_without_any_value_draws_no_negative_axis(tmp_path):
 
     import motorlab.report.plots as plots
     seen = {}
-    real_save = plots._save
+    real_save = plots.save_figure
 
     def spy(fig, path):
         seen["ylim"] = fig.axes[0].get_ylim()
         return real_save(fig, path)
 
-    with mock.patch("motorlab.report.plots._save", spy):
+    with mock.patch("motorlab.report.plots.save_figure", spy):
         comparison_bars(["ppo"], [None], "environment steps", tmp_path / "sts.png", "t", steps=True)
         assert seen["ylim"] == (0.0, 1.0)
         comparison_bars(["a", "b"], [-5.0, None], "return", tmp_path / "r.png", "t")

@@ -352,3 +352,21 @@ def test_study_rerun_redoes_only_changed_steps(study, tmp_path):
     assert {k: after[k] for k in kept} == {k: before[k] for k in kept}
     assert read_summary(out / "pid")["episodes"] == 2
     assert proc.stdout.count("already done") == len(kept)
+
+
+def test_the_step_schema_is_a_union_of_the_registered_kinds():
+    """The registry builds the recipe schema: every kind once, told apart by `kind`, and every
+    step of every bundled recipe is one of them."""
+    from motorlab.kinds import KINDS
+    from motorlab.recipes import step_union
+
+    union = step_union()
+    schema = union.json_schema()
+    assert set(schema["discriminator"]["mapping"]) == set(KINDS)
+    for name in bundled():
+        raw = tomllib.loads(bundled()[name].read_text())
+        for step in raw["steps"]:
+            parsed = union.validate_python({"kind": "train", **step})
+            assert parsed.kind == step.get("kind", "train") and parsed.name == step["name"]
+    with pytest.raises(ValueError, match="episodes"):
+        union.validate_python({"kind": "evaluate", "name": "e", "policy": "pid", "episodes": 0})

@@ -117,7 +117,7 @@ def test_bad_activations_file(tmp_path, command, name, fragments):
 def test_vaf_threshold_out_of_range(hand_activations, tmp_path, threshold):
     """A VAF threshold is a fraction in (0, 1], as `fit --vaf` and recipes insist."""
     proc = run_cli("synergies", "vaf", hand_activations, "--threshold", threshold, "--out", tmp_path / "out")
-    assert_one_line_error(proc, "(0, 1]")
+    assert_one_line_error(proc, "--threshold", "than or equal to 1" if threshold == "1.5" else "greater than 0")
     assert not (tmp_path / "out" / "summary.json").exists()
 
 

@@ -214,20 +214,20 @@ def test_bundled_sar_recipes_parse(name):
     recipe = load_recipe(name)
     assert recipe.name == name
     assert [(s.name, s.kind.name) for s in recipe.steps] == [(r["name"], r["kind"]) for r in raw["steps"]]
-    kinds = [s.kind for s in recipe.steps]
+    kinds = [s.kind.name for s in recipe.steps]
     assert kinds[:4] == ["train", "collect", "vaf", "fit"] and kinds[-1] == "compare"
     assert ("zeroshot" in kinds) == name.startswith("sar-hand")
     by_name = {s.name: s for s in recipe.steps}
     sar_rl = by_name["sar-rl"]
-    assert sar_rl.sar_ref == "@fit" and sar_rl.train.env.sar is None  # resolved when the study runs
-    assert sar_rl.train.env.phi == pytest.approx(next(r for r in raw["steps"] if r["name"] == "sar-rl")["phi"])
-    assert by_name["rl-e2e"].train.env.sar is None and by_name["rl-e2e"].sar_ref is None
+    assert sar_rl.fields["sar"] == "@fit" and sar_rl.inputs() == ["fit"]  # resolved when the study runs
+    assert sar_rl.settings.env.phi == pytest.approx(next(r for r in raw["steps"] if r["name"] == "sar-rl")["phi"])
+    assert by_name["rl-e2e"].settings.env.sar is None and by_name["rl-e2e"].inputs() == []
     assert by_name["collect"].settings.run == "@play"
     for r in raw["steps"]:
         if r["kind"] == "train":
             step = by_name[r["name"]]
-            assert step.train.env.id == r["env"] and step.train.timesteps == r["timesteps"]
-            assert step.train.algo == "sac"  # the SAR study's SAC presets
+            assert step.settings.env.id == r["env"] and step.settings.timesteps == r["timesteps"]
+            assert step.settings.algo == "sac"  # the SAR study's SAC presets
 
 
 def test_fast_preset_changes_only_the_compute_per_env_step():
@@ -250,11 +250,11 @@ def test_sar_hand_is_the_reference_study_with_the_fast_preset():
     fast, ref = load_recipe("sar-hand"), load_recipe("sar-hand-reference")
     assert [(s.name, s.kind) for s in fast.steps] == [(s.name, s.kind) for s in ref.steps]
     for f, r in zip(fast.steps, ref.steps):
-        if f.kind == "train":
-            assert (f.train.env, f.train.timesteps) == (r.train.env, r.train.timesteps)
-            assert f.train.hyperparams["learning_starts"] == r.train.hyperparams["learning_starts"]
-            assert (f.train.n_envs, r.train.n_envs) == (4, 1)
-            assert f.train.torch_threads == r.train.torch_threads == 1  # two trainings at once share 2 cores
+        if f.kind.name == "train":
+            assert (f.settings.env, f.settings.timesteps) == (r.settings.env, r.settings.timesteps)
+            assert f.settings.hyperparams["learning_starts"] == r.settings.hyperparams["learning_starts"]
+            assert (f.settings.n_envs, r.settings.n_envs) == (4, 1)
+            assert f.settings.torch_threads == r.settings.torch_threads == 1  # two trainings at once share 2 cores
         else:
             assert f.settings == r.settings
 

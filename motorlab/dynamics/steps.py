@@ -8,14 +8,14 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 from rich.console import Console
 
 from motorlab.dynamics.check import REPORT_STEPS, open_loop
 from motorlab.dynamics.collect import collect_transitions
 from motorlab.dynamics.model import load_model
 from motorlab.dynamics.state import xy_columns
-from motorlab.dynamics.train import fit_model
+from motorlab.dynamics.train import check_settings, fit_model
 from motorlab.dynamics.transitions import TRANSITIONS, load_transitions
 from motorlab.envs import check_env_id
 from motorlab.report.dynamics_plots import error_vs_horizon, loss_curve, xy_traces
@@ -104,6 +104,13 @@ class DynamicsFitSettings(Settings):
     patience: int | None = Field(None, gt=0, description="Early stopping: epochs without a better valid_mse")
     seed: int = Field(0, ge=0, description="Random seed (initialization, batch order, validation split)")
 
+    @model_validator(mode="after")
+    def _usable(self):
+        # fit_model's own check, run here once, so bad settings fail before a run folder is touched
+        check_settings(self.epochs, tuple(self.hidden), self.ensemble, self.lr, self.batch_size, self.valid_fraction,
+                       self.patience)
+        return self
+
 
 class DynamicsFitSummary(Summary):
     env_id: str
@@ -138,7 +145,7 @@ class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
         data = load_transitions(Path(s.transitions))
         run_dir = self.start(out)
         model, result = fit_model(data, s.epochs, tuple(s.hidden), s.ensemble, s.lr, s.batch_size, s.valid_fraction,
-                                  s.patience, s.seed, run_dir=run_dir, progress=progress)
+                                  s.patience, s.seed, run_dir=run_dir, progress=progress, checked=True)
         history = result.pop("history")
         loss_curve(history, run_dir / "plots" / "loss.png",
                    f"{data.env_id}: forward model ({model.members}x{list(s.hidden)})")

@@ -60,7 +60,7 @@ def check_settings(epochs: int, hidden: tuple[int, ...], ensemble: int, lr: floa
 def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64, 64), ensemble: int = 1,
               lr: float = 2e-3, batch_size: int = 2000, valid_fraction: float = 0.1, patience: int | None = None,
               seed: int = 0, threads: int | None = None, run_dir: Path | None = None,
-              progress: bool = True) -> tuple[ForwardModel, dict[str, Any]]:
+              progress: bool = True, checked: bool = False) -> tuple[ForwardModel, dict[str, Any]]:
     """Train a normalized-delta forward model.
 
     Args:
@@ -72,11 +72,13 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
         valid_fraction: share of episodes held out to measure valid_mse.
         patience: stop after this many epochs without a better valid_mse, keeping the best weights.
         run_dir: where metrics.csv, tensorboard/ go (nothing is written without it).
+        checked: the settings were checked already (DynamicsFitSettings checks them once).
 
     Returns:
         The model (best weights when validating) and its metrics.
     """
-    check_settings(epochs, hidden, ensemble, lr, batch_size, valid_fraction, patience)
+    if not checked:
+        check_settings(epochs, hidden, ensemble, lr, batch_size, valid_fraction, patience)
     if threads:
         torch.set_num_threads(threads)
     torch.manual_seed(seed)
