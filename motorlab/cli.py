@@ -35,20 +35,14 @@ from motorlab.dynamics.steps import (  # noqa: E402
 from motorlab.envs import EnvConfig, register_myosuite  # noqa: E402
 from motorlab.errors import MotorlabError  # noqa: E402
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT, EvaluateSettings, ZeroshotSettings, settings_for  # noqa: E402
-from motorlab.export import export_run, export_sb3_zip  # noqa: E402
 from motorlab.kinds import KINDS  # noqa: E402
 from motorlab.recipes import bundled, fields_of, load_recipe, step_union  # noqa: E402
-from motorlab.report.html import build_report  # noqa: E402
-from motorlab.report.run import plot_run  # noqa: E402
 from motorlab.report.steps import COMPARE, VIDEO, CompareSettings  # noqa: E402
 from motorlab.rl.config import TrainConfig  # noqa: E402
 from motorlab.rl.steps import TRAIN  # noqa: E402
 from motorlab.runs import is_complete, read_text_file  # noqa: E402
 from motorlab.settings import Settings, help_text  # noqa: E402
 from motorlab.stepkind import StepKind, option_error  # noqa: E402
-from motorlab.studies import Execution, run_study  # noqa: E402
-from motorlab.sweeps.sweep import run_sweep  # noqa: E402
-from motorlab.synergy.sklearn_import import import_sklearn  # noqa: E402
 from motorlab.synergy.steps import COLLECT, FIT, VAF  # noqa: E402
 
 app = typer.Typer(
@@ -445,6 +439,8 @@ def synergies_import(
     trust: Annotated[bool, typer.Option("--trust", help="Allow unpickling these files (they can run code).")] = False,
 ):
     """Convert a published scikit-learn SAR (joblib pickles) to sar.npz, checked against sklearn's own inverse chain."""
+    from motorlab.synergy.sklearn_import import import_sklearn
+
     sar = import_sklearn(folder, trust=trust, out=out)
     err_max = sar.metadata.get("import_check_max_abs_error")
     stdout.print(f"{sar.n_synergies} synergies x {sar.n_muscles} muscles -> {out}"
@@ -503,12 +499,16 @@ def report(
 ):
     """Write one self-contained HTML report: headline tables, every plot and video, the runs
     side by side, settings, library versions and TensorBoard links. Opens offline."""
+    from motorlab.report.html import build_report
+
     stdout.print(f"written: {build_report(paths, out)}")
 
 
 @app.command(epilog="Example:\n\n  motorlab plot runs/ppo   # -> runs/ppo/plots/*.png")
 def plot(run_dir: Annotated[Path, typer.Argument(help="A run folder from train or evaluate.")]):
     """Plot a run: learning curve (training runs) and the observation trace of one evaluation episode."""
+    from motorlab.report.run import plot_run
+
     for path in plot_run(run_dir):
         stdout.print(f"written: {path}")
 
@@ -534,6 +534,8 @@ def run(
     `seeds = N` trains every train step for N seeds in parallel and reports IQMs with
     confidence intervals; `motorlab sweep RECIPE --seeds N` repeats the whole study instead.
     """
+    from motorlab.studies import Execution, run_study
+
     study = load_recipe(recipe)
     if check:
         stdout.print(f"{study.source}: valid, {len(study.steps)} steps: "
@@ -577,6 +579,8 @@ def sweep(
     between settings; performance profiles. Writes summary.json, aggregate.json, table.txt,
     plots/ and report.html in the sweep folder, and one run folder per trial (<setting>/seed<k>/).
     """
+    from motorlab.sweeps.sweep import run_sweep
+
     summary = run_sweep(target, seeds, grid, backend, address, max_parallel, out, console=stdout,
                         commands=typer.main.get_command(app))
     stdout.print(f"\n[bold]Results:[/bold] {summary['sweep_dir']}  (report.html, table.txt, summary.json, "
@@ -604,6 +608,8 @@ def export(
     From an SB3 zip (with --trust): loads it once and writes policy.json + policy.safetensors,
     which `motorlab evaluate`, `video` and `synergies collect` read without unpickling.
     """
+    from motorlab.export import export_run, export_sb3_zip
+
     if source.is_dir():
         if env or vecnormalize or algo or trust:
             raise MotorlabError(f"{source} is a run folder: it is exported as it is, without --trust, --env, "

@@ -18,7 +18,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 from pydantic import BaseModel, ConfigDict, Field
 
 from motorlab.envs import EnvConfig, make_env
@@ -135,6 +134,8 @@ def companion_form(A_top: np.ndarray, B_top: np.ndarray, obs_lags: int, act_lags
 
 def lqr_gain(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray) -> np.ndarray:
     """Infinite-horizon discrete LQR gain K (u = -K z), from scipy's DARE solver."""
+    import scipy.linalg  # heavy: loaded when a controller is designed, not when settings are read
+
     P = scipy.linalg.solve_discrete_are(A, B, Q, R)
     return np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
 

@@ -10,9 +10,7 @@ import numpy as np
 from pydantic import Field
 from rich.console import Console
 
-from motorlab.control.mpc_episodes import build_policy, record_video, run_episodes
 from motorlab.envs import EnvConfig, check_env_id, make_env
-from motorlab.report.dynamics_plots import distance_over_time
 from motorlab.runs import MetricsWriter, atomic_write_npz
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Ref, Row, StepKind, number
@@ -78,6 +76,9 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
 
     def run(self, settings: MpcSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> MpcSummary:
+        from motorlab.control.mpc_episodes import build_policy, record_video, run_episodes
+        from motorlab.report.dynamics_plots import distance_over_time
+
         s = settings
         env = make_env(EnvConfig(id=s.env), shaped=False)
         policy = build_policy(env, s.env, Path(s.model), s.optimizer, s.seed, **s.plan())

@@ -11,14 +11,9 @@ import numpy as np
 from pydantic import Field, model_validator
 from rich.console import Console
 
-from motorlab.dynamics.check import REPORT_STEPS, open_loop
-from motorlab.dynamics.collect import collect_transitions
-from motorlab.dynamics.model import load_model
 from motorlab.dynamics.state import xy_columns
-from motorlab.dynamics.train import check_settings, fit_model
 from motorlab.dynamics.transitions import TRANSITIONS, load_transitions
 from motorlab.envs import check_env_id
-from motorlab.report.dynamics_plots import error_vs_horizon, loss_curve, xy_traces
 from motorlab.runs import atomic_write_npz
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Artifact, Ref, Row, StepKind
@@ -72,6 +67,8 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
 
     def run(self, settings: DynamicsCollectSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> DynamicsCollectSummary:
+        from motorlab.dynamics.collect import collect_transitions
+
         s = settings
         data = collect_transitions(s.env, s.episodes, s.policy, s.workers, s.seed, s.state, s.simulator, progress)
         run_dir = self.start(out)
@@ -107,6 +104,8 @@ class DynamicsFitSettings(Settings):
     @model_validator(mode="after")
     def _usable(self):
         # fit_model's own check, run here once, so bad settings fail before a run folder is touched
+        from motorlab.dynamics.train import check_settings
+
         check_settings(self.epochs, tuple(self.hidden), self.ensemble, self.lr, self.batch_size, self.valid_fraction,
                        self.patience)
         return self
@@ -140,6 +139,9 @@ class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
 
     def run(self, settings: DynamicsFitSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> DynamicsFitSummary:
+        from motorlab.dynamics.train import fit_model
+        from motorlab.report.dynamics_plots import loss_curve
+
         s = settings
         start = time.perf_counter()
         data = load_transitions(Path(s.transitions))
@@ -187,6 +189,10 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
 
     def run(self, settings: DynamicsCheckSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> DynamicsCheckSummary:
+        from motorlab.dynamics.check import REPORT_STEPS, open_loop
+        from motorlab.dynamics.model import load_model
+        from motorlab.report.dynamics_plots import error_vs_horizon, xy_traces
+
         model = load_model(Path(settings.model))
         r = open_loop(model, settings.episodes, settings.seed, settings.steps)
         run_dir = self.start(out)

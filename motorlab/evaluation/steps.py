@@ -14,10 +14,7 @@ from rich.table import Table
 from motorlab.envs import ENV_KEYS, EnvSettings, describe_env, fold_env, make_env, max_return
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.rollouts import evaluate, success_mode, trained_env_settings
-from motorlab.evaluation.zeroshot import transfer
 from motorlab.policies import BUILTIN_POLICIES, load_policy, unknown_policy_message
-from motorlab.report.plots import grouped_bars
-from motorlab.report.run import plot_run
 from motorlab.runs import require_run_dir
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Artifact, Ref, Row, Scores, StepKind, falls_note, iqm_note, scored_cells, seeds_headline
@@ -149,6 +146,8 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
         return Row(*scored_cells(h), note="; ".join(x for x in (iqm_note(h), falls_note(h)) if x))
 
     def figures(self, run_dir: Path) -> None:
+        from motorlab.report.run import plot_run
+
         plot_run(run_dir)
 
 
@@ -185,6 +184,9 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
 
     def run(self, settings: ZeroshotSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> ZeroshotSummary:
+        from motorlab.evaluation.zeroshot import transfer
+        from motorlab.report.plots import grouped_bars
+
         t = transfer([Path(r) for r in settings.runs], settings.envs, settings.episodes, settings.seed)
         run_dir = self.start(out)
         grouped_bars(t.envs, {n: [t.results[n][e]["success_rate"] for e in t.envs] for n in t.names},

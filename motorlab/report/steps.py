@@ -9,8 +9,6 @@ from typing import Any
 from pydantic import Field
 from rich.console import Console
 
-from motorlab.report.compare import compare_curves, group_statistics
-from motorlab.report.video import render_video
 from motorlab.runs import require_run_dir
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Ref, Row, StepKind
@@ -47,6 +45,8 @@ class VideoKind(StepKind[VideoSettings, VideoSummary]):
 
     def run(self, settings: VideoSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> VideoSummary:
+        from motorlab.report.video import render_video
+
         s = settings
         run_dir = self.start(out if out is not None else require_run_dir(Path(s.run)) / "videos")
         rendered = render_video(Path(s.run), s.episodes, s.seed, s.camera, s.width, s.height, out=run_dir)
@@ -80,6 +80,8 @@ class CompareKind(StepKind[CompareSettings, Summary]):
 
     def run(self, settings: CompareSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> Summary:
+        from motorlab.report.compare import compare_curves, group_statistics
+
         groups = {g: [Path(d) for d in ds] for g, ds in settings.groups.items()}
         run_dir = self.start(out)
         result = compare_curves(groups, run_dir / "plots" / "learning_curves.png", settings.title)

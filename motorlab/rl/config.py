@@ -13,7 +13,7 @@ from pydantic import Field, field_validator, model_validator
 from motorlab.control.lqr import LQRSettings
 from motorlab.envs import EnvSettings
 from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.rl.schedules import parse_schedule
+from motorlab.rl.schedules import schedule_ends
 
 Algo = Literal["ppo", "sac", "td3", "lqr"]
 
@@ -72,7 +72,7 @@ class TrainConfig(EnvSettings):
     @classmethod
     def _check_schedule(cls, v, info):
         if v is not None:
-            parse_schedule(v, "learning-rate" if info.field_name == "lr" else "clip-range")
+            schedule_ends(v, "learning-rate" if info.field_name == "lr" else "clip-range")
         return v
 
 

@@ -9,10 +9,7 @@ from typing import Any
 from rich.console import Console
 
 from motorlab.envs import describe_env, make_env
-from motorlab.report.run import plot_run
-from motorlab.rl.checkpoint import has_checkpoint
 from motorlab.rl.config import TrainConfig, resolve
-from motorlab.rl.train import train
 from motorlab.runs import last_timesteps
 from motorlab.settings import Summary
 from motorlab.stepkind import (
@@ -78,6 +75,8 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
 
     def run(self, settings: TrainConfig, out: Path | None = None, console: Console | None = None,
             progress: bool = True, resume: bool = False) -> TrainSummary:
+        from motorlab.rl.train import train
+
         if not progress:
             settings = settings.model_copy(update={"progress": False})
         return TrainSummary.model_validate(train(settings, out, resume=resume))
@@ -126,6 +125,8 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
                                               if rate is not None else falls_note(h)) if x))
 
     def figures(self, run_dir: Path) -> None:
+        from motorlab.report.run import plot_run
+
         plot_run(run_dir)
 
     def progress(self, settings: TrainConfig, run_dir: Path) -> tuple[int, int]:
@@ -135,6 +136,8 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
         return [*self.command.split(), "--config", str(settings_file), "--out", str(run_dir), "--no-progress"]
 
     def resume_argv(self, run_dir: Path) -> list[str] | None:
+        from motorlab.rl.checkpoint import has_checkpoint
+
         if has_checkpoint(run_dir):
             return [*self.command.split(), "--resume", str(run_dir), "--no-progress"]
         return None

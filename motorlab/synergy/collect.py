@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 from rich.progress import Progress
 
 from motorlab.envs import EnvConfig, make_env, max_return
@@ -58,6 +57,8 @@ _worker: dict[str, Any] = {}
 
 
 def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool) -> None:
+    import torch  # heavy: the worker processes load it, not every command that reads these settings
+
     torch.set_num_threads(1)
     cfg = EnvConfig.model_validate(env_cfg)
     _worker["env"] = make_env(cfg, shaped=False)
@@ -71,6 +72,8 @@ def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool) -> None:
 
 
 def _run_episode(seed: int) -> Episode:
+    import torch
+
     env, policy = _worker["env"], _worker["policy"]
     torch.manual_seed(seed)  # stochastic actions repeat for the same seed
     obs, _ = env.reset(seed=seed)

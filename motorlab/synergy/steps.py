@@ -11,7 +11,6 @@ from pydantic import Field
 from rich.console import Console
 
 from motorlab.errors import MotorlabError
-from motorlab.report.plots import vaf_plot
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Artifact, Ref, Row, StepKind
 from motorlab.synergy.collect import ACTIVATIONS, collect, load_activations, save_activations
@@ -118,6 +117,8 @@ class VafKind(StepKind[VafSettings, VafSummary]):
 
     def run(self, settings: VafSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> VafSummary:
+        from motorlab.report.plots import vaf_plot
+
         acts, meta = load_activations(Path(settings.activations))
         curve = vaf_curve(acts, method=settings.method, max_n=settings.max_n)
         try:
