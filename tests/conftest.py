@@ -12,6 +12,26 @@ pytest.register_assert_rewrite("helpers")
 
 from helpers import ENV_ID, TINY_PPO, assert_ok, run_cli  # noqa: E402
 
+# `make test-fast` (pytest -m fast), the edit loop: every cheap unit-level file, and one end-to-end
+# test per workflow (robust pendulum, SAR on the MyoSuite hand, forward model + MPC on Reacher).
+FAST_FILES = {
+    "test_layers.py", "test_runner.py", "test_recipes.py", "test_schedules.py", "test_wrappers.py", "test_sar.py",
+    "test_lqr.py", "test_pid.py", "test_dynamics_collect.py", "test_sklearn_import.py", "test_faults_success.py",
+    "test_steps_to_success.py", "test_myosuite.py", "test_synergy_wrapper.py", "test_plots.py", "test_dynamics.py",
+    "test_extras.py", "test_runs.py",
+}
+FAST_TESTS = {
+    "tests/test_train_evaluate.py::test_evaluate_run_folder",  # pendulum: train (CLI), evaluate, plot
+    "tests/test_sar_cli.py::test_fit_by_vaf_writes_a_loadable_sar",  # SAR: play, collect, fit
+    "tests/test_reacher_study.py::test_study_runs_every_step",  # Reacher: collect, fit, check, MPC
+}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.name in FAST_FILES or item.nodeid in FAST_TESTS:
+            item.add_marker(pytest.mark.fast)
+
 
 @pytest.fixture(scope="session")
 def ppo_run(tmp_path_factory) -> Path:

@@ -111,7 +111,9 @@ def test_require_returns_the_module():
 
 
 def test_require_gives_one_line_with_the_pip_command(monkeypatch):
+    # block the submodule too: an earlier test may have imported it into this process already
     monkeypatch.setitem(sys.modules, "evotorch", None)
+    monkeypatch.setitem(sys.modules, "evotorch.algorithms", None)
     with pytest.raises(MotorlabError) as e:
         require("evotorch.algorithms", "evotorch", "the thing needs EvoTorch")
     assert str(e.value) == f"the thing needs EvoTorch, which is not installed: {EVOTORCH_HINT}"
