@@ -28,8 +28,10 @@ lint: $(STAMP)  ## ruff (pyflakes, isort, bugbear) and the import layers (lint-i
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/lint-imports
 
+# Two workers, each test file on one of them (tests of one file share their fixtures and folders):
+# most tests wait on `motorlab` subprocesses, so two files at a time keep both cores busy.
 test: lint $(VENV)/.browser  ## the whole test suite, as CI runs it (under 15 min on 2 cores)
-	$(VENV)/bin/python -m pytest -q
+	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile
 
 test-fast: lint $(VENV)/.browser  ## the edit loop: unit tests and one end-to-end test per workflow (under 3 min)
 	$(VENV)/bin/python -m pytest -q -m fast

@@ -185,6 +185,11 @@ class StepKind(Generic[S, R]):
         """The command line that continues an interrupted run in `run_dir`, where it can be."""
         return None
 
+    def warm_up(self) -> None:
+        """Import, in the calling thread, what this kind imports when it runs in the background. A
+        study calls it before it starts steps in threads: two threads importing one package at once
+        can fail where the package imports itself in a circle (SB3 does)."""
+
     # ---- the ending every run shares ------------------------------------------------------
 
     def start(self, out: Path | None) -> Path:

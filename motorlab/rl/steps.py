@@ -135,6 +135,10 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
     def process_argv(self, settings_file: Path, run_dir: Path) -> list[str]:
         return [*self.command.split(), "--config", str(settings_file), "--out", str(run_dir), "--no-progress"]
 
+    def warm_up(self) -> None:
+        import motorlab.report.run  # noqa: F401  (the study's figures: SB3 policies, torch)
+        import motorlab.rl.checkpoint  # noqa: F401  (resume_argv, in the background thread: SB3)
+
     def resume_argv(self, run_dir: Path) -> list[str] | None:
         from motorlab.rl.checkpoint import has_checkpoint
 

@@ -235,6 +235,8 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
     overlaps = Overlaps()
     if parallel_steps > 1:
         console.print(f"      training steps that need nothing from each other run at once, at most {parallel_steps}")
+        for kind in {s.kind.name: s.kind for s in recipe.steps}.values():
+            kind.warm_up()  # before any thread starts: threads must not import a package at the same time
         results, overlaps = run_overlapped(
             recipe.steps, lambda step, detached, stop: _run_step(step, study_dir, outputs, console, execution,
                                                                  detached, stop),
