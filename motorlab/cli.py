@@ -21,7 +21,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering works without a
 
 import gymnasium as gym  # noqa: E402
 import typer  # noqa: E402
-from pydantic import ValidationError  # noqa: E402
 from rich.console import Console  # noqa: E402
 from rich.markup import escape  # noqa: E402
 from rich.table import Table  # noqa: E402
@@ -42,7 +41,7 @@ from motorlab.rl.config import TrainConfig  # noqa: E402
 from motorlab.rl.steps import TRAIN  # noqa: E402
 from motorlab.runs import is_complete, read_text_file  # noqa: E402
 from motorlab.settings import Settings, help_text  # noqa: E402
-from motorlab.stepkind import StepKind, option_error  # noqa: E402
+from motorlab.stepkind import StepKind  # noqa: E402
 from motorlab.synergy.steps import COLLECT, FIT, VAF  # noqa: E402
 
 app = typer.Typer(
@@ -336,11 +335,8 @@ def evaluate(
     summary.json: return_mean, return_std, return_min, return_max, success_rate,
     episode_lengths. Returns are the task's own (training-time reward shaping is not applied).
     """
-    try:
-        settings = settings_for(policy, _env_flags(env, delay, delay_on, history, env_args=env_arg, success=success),
-                                episodes, seed)
-    except ValidationError as e:
-        raise MotorlabError(option_error(e)) from None
+    settings = settings_for(policy, _env_flags(env, delay, delay_on, history, env_args=env_arg, success=success),
+                            episodes, seed)
     s = EVALUATE.run(settings, out)
     env_cfg = settings.env
     table = Table(title=f"{policy} on {env_cfg.id}" + (f", delay {env_cfg.delay} s" if env_cfg.delay else "")

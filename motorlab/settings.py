@@ -25,15 +25,6 @@ class Settings(BaseModel):
         """The names a recipe step of this kind may set."""
         return set(cls.model_fields) | set(cls.aliases)
 
-    @classmethod
-    def help(cls, name: str) -> str:
-        """Help for the option that sets `name`: its description and default."""
-        return help_text(cls, name)
-
-    @classmethod
-    def default(cls, name: str) -> Any:
-        return cls.model_fields[name].get_default(call_default_factory=True)
-
     def config(self) -> dict[str, Any]:
         """What config.toml records of these settings."""
         return self.model_dump()

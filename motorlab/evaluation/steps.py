@@ -58,8 +58,7 @@ def settings_for(policy: str, env: dict[str, Any], episodes: int | None = None,
     folder), with the given env settings (id, delay, history, kwargs, ...) on top.
 
     Raises:
-        MotorlabError: no env id known (a built-in controller without --env).
-        pydantic.ValidationError: a bad env setting.
+        MotorlabError: no env id known (a built-in controller without --env), a bad setting.
     """
     base: dict[str, Any] = {}
     if Path(policy).exists():
@@ -69,9 +68,7 @@ def settings_for(policy: str, env: dict[str, Any], episodes: int | None = None,
     merged = merge_env(base, env)
     if "id" not in merged:
         raise MotorlabError(f"no env for {policy!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")
-    given = {"episodes": episodes, "seed": seed}
-    return EvaluateSettings.model_validate({"policy": policy, "env": merged,
-                                            **{k: v for k, v in given.items() if v is not None}})
+    return EVALUATE.make(policy=policy, env=merged, episodes=episodes, seed=seed)
 
 
 def merge_env(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:

@@ -93,6 +93,11 @@ def _fan_out(step: Step, outputs: _Outputs) -> str | None:
                  if isinstance(step.fields.get(ref.field), str) and len(outputs.dirs[name]) > 1), None)
 
 
+def _run_dirs(step: Step, study_dir: Path) -> list[Path]:
+    """A step's run folders by its own seeds: <step>/, or <step>/seed<k>/ for each of several."""
+    return [study_dir / step.name / f"seed{s}" for s in step.seeds] if step.seeds else [study_dir / step.name]
+
+
 def _runs(step: Step, study_dir: Path, outputs: _Outputs) -> list[tuple[Path, Settings]]:
     """The run folders of a step and the settings each runs with, references resolved."""
     k = step.kind
@@ -100,7 +105,7 @@ def _runs(step: Step, study_dir: Path, outputs: _Outputs) -> list[tuple[Path, Se
     fields = {f: outputs.resolve(v) if f in is_ref else v for f, v in step.fields.items()}
     if step.seeds:
         settings = k.validate(fields)
-        return [(study_dir / step.name / f"seed{s}", settings.model_copy(update={"seed": s})) for s in step.seeds]
+        return [(d, settings.model_copy(update={"seed": s})) for d, s in zip(_run_dirs(step, study_dir), step.seeds)]
     fan = _fan_out(step, outputs)
     if fan is None:
         return [(study_dir / step.name, k.validate(fields))]
@@ -133,8 +138,7 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
     asked = {d: {"settings": settings.config(), "upstream": upstream} for d, settings in runs}
     kept = [d for d, _ in runs if finished_with(d, asked[d], STEP_FILE)]
     for d in kept:
-        console.print(f"      {d.name if len(runs) > 1 else ''}{': ' if len(runs) > 1 else ''}"
-                      "already done with these settings; kept")
+        console.print(f"      {f'{d.name}: ' if len(runs) > 1 else ''}already done with these settings; kept")
     todo = [(d, settings) for d, settings in runs if d not in kept]
     for d, _ in todo:
         # What the study asks is written first, and any older summary removed: a summary.json
@@ -268,8 +272,7 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
 
 def _progress(step: Step, study_dir: Path) -> tuple[int, int]:
     """Work a background step has done so far (all its seeds), and its total."""
-    dirs = [study_dir / step.name / f"seed{s}" for s in step.seeds] if step.seeds else [study_dir / step.name]
-    done = [step.kind.progress(step.settings, d) for d in dirs]
+    done = [step.kind.progress(step.settings, d) for d in _run_dirs(step, study_dir)]
     return sum(d for d, _ in done), sum(t for _, t in done)
 
 

@@ -21,7 +21,7 @@ import tomli_w
 
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.kinds import DEFAULT_KIND, KINDS, for_command, kind
-from motorlab.recipes import fields_of, parse_recipe
+from motorlab.recipes import SEEDS, fields_of, parse_recipe
 from motorlab.runs import atomic_write_text, finished_with, is_complete, toml_holds, write_toml
 from motorlab.sweeps.grid import label
 
@@ -164,8 +164,8 @@ def recipe_variant(data: dict[str, Any], setting: dict[str, str], seed: int, sou
         MotorlabError: a step name or field the recipe does not have.
     """
     data = {**data, "steps": [dict(s) for s in data.get("steps", [])]}
-    data.pop("seeds", None)  # one seed per trial: the sweep's
-    defaults = {k: v for k, v in data.get("defaults", {}).items() if k != "seeds"}
+    data.pop(SEEDS, None)  # one seed per trial: the sweep's
+    defaults = {k: v for k, v in data.get("defaults", {}).items() if k != SEEDS}
     data["defaults"] = defaults
     steps = data["steps"]
     names = [str(s.get("name", f"step{i + 1}")) for i, s in enumerate(steps)]
@@ -184,7 +184,7 @@ def recipe_variant(data: dict[str, Any], setting: dict[str, str], seed: int, sou
         for i in hit:
             steps[i][field] = value
     for s in steps:
-        s.pop("seeds", None)
+        s.pop(SEEDS, None)
         if "seed" in _fields(s):
             s["seed"] = seed
     return data
