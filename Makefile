@@ -4,7 +4,7 @@ STAMP  := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: demo test test-fast lint bench setup clean
+.PHONY: demo test test-fast lint bench setup clean screenshots
 
 $(STAMP): pyproject.toml requirements.lock scripts/setup.sh
 	@VENV=$(VENV) bash scripts/setup.sh
@@ -23,6 +23,16 @@ demo: $(STAMP)  ## the pendulum study, the SAR pipeline on the MyoSuite hand and
 	@echo "  runs/demo-pendulum/report.html"
 	@echo "  runs/demo-sar-hand-quick/report.html"
 	@echo "  runs/demo-reacher-quick/report.html"
+
+# The README's pictures: the demo studies (finished steps kept), then each report's first screen in Chromium
+screenshots: $(VENV)/.browser  ## docs/screenshots/*.png, the three demo reports as a reader first sees them
+	$(VENV)/bin/motorlab run pendulum --out runs/demo-pendulum
+	$(VENV)/bin/motorlab run sar-hand-quick --out runs/demo-sar-hand-quick
+	$(VENV)/bin/motorlab run reacher-quick --out runs/demo-reacher-quick
+	$(VENV)/bin/python scripts/screenshots.py \
+	  runs/demo-pendulum/report.html=docs/screenshots/pendulum.png \
+	  runs/demo-sar-hand-quick/report.html=docs/screenshots/sar-hand-quick.png \
+	  runs/demo-reacher-quick/report.html=docs/screenshots/reacher-quick.png
 
 lint: $(STAMP)  ## ruff (pyflakes, isort, bugbear) and the import layers (lint-imports; see docs/design.md)
 	$(VENV)/bin/ruff check .

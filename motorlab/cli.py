@@ -31,7 +31,7 @@ from motorlab.dynamics.steps import (  # noqa: E402
     DYNAMICS_COLLECT,
     DYNAMICS_FIT,
 )
-from motorlab.envs import EnvConfig, register_myosuite  # noqa: E402
+from motorlab.envs import EnvConfig, early_end_label, register_myosuite  # noqa: E402
 from motorlab.errors import MotorlabError  # noqa: E402
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT, EvaluateSettings, ZeroshotSettings, settings_for  # noqa: E402
 from motorlab.kinds import KINDS  # noqa: E402
@@ -341,7 +341,7 @@ def evaluate(
     env_cfg = settings.env
     table = Table(title=f"{policy} on {env_cfg.id}" + (f", delay {env_cfg.delay} s" if env_cfg.delay else "")
                   + (f", history {env_cfg.history}" if env_cfg.history > 1 else ""))
-    for col in ("episodes", "return mean ± std", "min", "max", "success", "mean length", "falls"):
+    for col in ("episodes", "return mean ± std", "min", "max", "success", "mean length", early_end_label(env_cfg.id)):
         table.add_column(col, justify="right")
     table.add_row(str(s.episodes), f"{s.return_mean:.1f} ± {s.return_std:.1f}", f"{s.return_min:.1f}",
                   f"{s.return_max:.1f}", f"{s.success_rate:.0%}", f"{s.episode_length_mean:.0f}", str(s.falls))

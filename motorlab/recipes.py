@@ -23,6 +23,11 @@
     policy = "@ppo"            # the policy trained by an earlier step (or pid, pid:kp=..., a folder)
     delay = 0.2
 
+    [[findings]]               # optional: the numbers the study is about, first in its report
+    step = "ppo"               # (default: each step's own, e.g. a training's steps to success)
+    key = "steps_to_success"   # a key of the step in the study's summary.json ("ppo.steps_to_success")
+    label = "PPO: env steps until solved"
+
 A step's fields are its kind's settings (`motorlab recipes --kinds` lists them, with their
 defaults); "@step" names an earlier step's output. Bundled recipes live in motorlab/recipes/
 and are addressed by name.
@@ -31,7 +36,7 @@ and are addressed by name.
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
@@ -70,6 +75,17 @@ class Recipe:
     description: str = ""
     source: str = ""
     parallel_steps: int = 1
+    findings: list[FindingSpec] = field(default_factory=list)
+
+
+class FindingSpec(BaseModel):
+    """One number a study is about (`[[findings]]` in a recipe): a headline key of one step."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    step: str = Field(description="The step's name")
+    key: str = Field(description="Its headline key, as in the study's summary.json after \"<step>.\"")
+    label: str | None = Field(None, description="What the report calls it (default: the step and the number's label)")
 
 
 class _RecipeFile(BaseModel):
@@ -81,6 +97,7 @@ class _RecipeFile(BaseModel):
     parallel_steps: int = Field(1, ge=1)  # training steps that need nothing from each other, run at once
     defaults: dict[str, Any] = Field(default_factory=dict)
     steps: list[dict[str, Any]] = Field(min_length=1)
+    findings: list[FindingSpec] = Field(default_factory=list)  # default: each step's own (see StepKind.findings)
 
 
 def fields_of(step_kind: StepKind) -> set[str]:
@@ -239,8 +256,12 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
         except MotorlabError as e:
             raise MotorlabError(f"{where}: {e}") from None
         steps.append(Step(name, step_kind, fields, settings, seeds))
+    for i, f in enumerate(raw.findings):
+        if not any(s.name == f.step for s in steps):
+            names = [s.name for s in steps]
+            raise MotorlabError(f"{source}: findings[{i}]: no step named {f.step!r}{did_you_mean(f.step, names)}")
     return Recipe(name=raw.name, description=raw.description, source=source, parallel_steps=raw.parallel_steps,
-                  steps=steps)
+                  steps=steps, findings=raw.findings)
 
 
 def load_recipe(name_or_path: str) -> Recipe:

@@ -8,7 +8,9 @@ e.g. `motorlab/dynamics/steps.py`. It holds:
   step must provide (an `Artifact`: a policy, activations, a SAR, transitions, a model);
 - `run(settings, out) -> Summary`: the work, written to a run folder; `Summary` is typed
   and is what summary.json holds;
-- what a study's table shows of it: `describe`, `headline`, `note`.
+- what a study shows of it: `describe` (the "what" column), `headline` (the numbers it keeps)
+  and `metrics` (those numbers as people read them: label, unit, format; see
+  motorlab.report.results), and which of them are its findings by default.
 
 The registry (`motorlab.kinds`) lists the kinds. The CLI, recipes, studies, sweeps and the
 Python API all go through these objects, so adding a capability is one new file.
@@ -28,8 +30,10 @@ from typing import Any, ClassVar, Generic, TypeVar, get_args, get_origin
 from pydantic import ValidationError
 from rich.console import Console
 
+from motorlab.envs import early_end_label
 from motorlab.errors import MotorlabError
 from motorlab.faults import write_faults_log
+from motorlab.report.results import Metric, Number, RunResults, write_run_results
 from motorlab.runs import prepare_run_dir, write_config, write_summary
 from motorlab.settings import Settings, Summary
 from motorlab.stats import iqm_with_ci
@@ -64,23 +68,6 @@ class Scores:
     falls: int | None = None
 
 
-@dataclass(frozen=True)
-class Row:
-    """A step's cells in a study's table, after its name and description."""
-
-    returns: str = "-"
-    min_return: str = "-"
-    success: str = "-"
-    steps_to_success: str = "n/a"
-    seconds: str = "-"
-    note: str = ""
-
-
-def number(value: Any, form: str = "{:,.1f}") -> str:
-    """A table cell: the value formatted, "-" when there is none."""
-    return "-" if value is None else form.format(value)
-
-
 S = TypeVar("S", bound=Settings)
 R = TypeVar("R", bound=Summary)
 
@@ -106,8 +93,14 @@ class StepKind(Generic[S, R]):
     per_seed: ClassVar[bool] = False
     # the summary keys a study keeps of it (None: all of them); see `headline`
     headline_keys: ClassVar[tuple[str, ...] | None] = None
-    # the table's "what" and "notes" cells, formatted with the settings and the headline (see
-    # `describe` and `row`; kinds whose cells need more than a format override those)
+    # its headline numbers as reports and table.txt show them, in this order (see `numbers`)
+    metrics: ClassVar[tuple[Metric, ...]] = ()
+    # the keys of those a study's findings show by default, when the recipe names none
+    findings: ClassVar[tuple[str, ...]] = ()
+    # figures of its run folder a study's report shows beside its own (paths inside the folder)
+    key_figures: ClassVar[tuple[str, ...]] = ()
+    # the table's "what" and "notes" cells, formatted with the settings and the headline (kinds
+    # whose cells need more than a format override `describe` and `notes`)
     what: ClassVar[str | None] = None
     note: ClassVar[str] = ""
 
@@ -165,9 +158,29 @@ class StepKind(Generic[S, R]):
         """The run's evaluation numbers, where it has them."""
         return None
 
-    def row(self, settings: S, headline: dict[str, Any]) -> Row:
-        """Its cells in a study's table."""
-        return Row(note=self.note.format(**headline))
+    def numbers(self, settings: S, headline: dict[str, Any]) -> list[Number]:
+        """Its headline numbers as people read them (those it has values for), from `metrics`."""
+        return [n for m in self.metrics if (n := m.number(headline)) is not None]
+
+    def notes(self, settings: S, headline: dict[str, Any]) -> str:
+        """The table's notes cell: what the numbers do not say."""
+        return self.note.format(**headline)
+
+    def metric(self, key: str) -> Metric:
+        """How the headline number `key` is shown (a plain number where the kind names none)."""
+        return next((m for m in self.metrics if m.key == key), None) or Metric(key, key.replace("_", " "))
+
+    def default_findings(self, settings: S, headline: dict[str, Any]) -> list[str]:
+        """The headline keys a study's findings show of this step when the recipe names none."""
+        return [k for k in self.findings if headline.get(k) is not None]
+
+    def seed_values(self, runs: list[tuple[str, R]], key: str) -> list[tuple[str, Any]]:
+        """Each seed's value of the headline number `key`, from its runs (label, summary)."""
+        return [(label, self.headline(s).get(key)) for label, s in runs]
+
+    def results(self, settings: S, summary: R) -> RunResults:
+        """results.json of one run: its headline numbers as shown."""
+        return RunResults(self.name, self.numbers(settings, self.headline(summary)))
 
     def figures(self, run_dir: Path) -> None:
         """Figures a study draws of a finished run (in its main thread: matplotlib is not
@@ -197,10 +210,11 @@ class StepKind(Generic[S, R]):
         return prepare_run_dir(out, self.name)
 
     def finish(self, run_dir: Path, settings: S, summary: R, faults: list[str] | None = None) -> R:
-        """config.toml, faults.log (where episodes ran) and summary.json, the last file written."""
+        """config.toml, faults.log (where episodes ran), results.json and summary.json, the last file written."""
         if faults is not None:
             write_faults_log(run_dir, faults)
         write_config(run_dir, settings.config())
+        write_run_results(run_dir, self.results(settings, summary))
         write_summary(run_dir, summary.keys())
         summary.run_dir = Path(run_dir)
         return summary
@@ -239,23 +253,31 @@ def seeds_headline(all_scores: list[Scores]) -> dict[str, Any]:
     }
 
 
-def scored_cells(h: dict[str, Any]) -> tuple[str, str, str]:
-    """The return (mean ± sd), min return and success cells of an evaluated step; ± is the spread
-    over evaluation episodes for one seed, over the seeds' means for several."""
-    spread = f" ({h['seeds']} seeds)" if h.get("seeds") else ""
-    return (f"{number(h.get('return_mean'))} ± {number(h.get('return_std'))}{spread}",
-            number(h.get("return_min"), "{:,.0f}"), number(h.get("success_rate"), "{:.0%}"))
+# Numbers of the kinds that evaluate a policy (train, evaluate): the same labels everywhere.
+RETURN = Metric("return_mean", "return", "return", spread="return_std")
+SCORED_METRICS = (
+    RETURN,
+    Metric("return_iqm", "return IQM", "return"),
+    Metric("return_min", "min return", "return"),
+    Metric("success_rate", "success", "percent"),
+    Metric("episode_length_mean", "mean length", "steps"),
+    Metric("falls", "falls", "count", of="episodes"),
+    Metric("seeds", "seeds", "count", setup=True),
+    Metric("episodes", "evaluation episodes", "count", setup=True),
+)
 
 
-def iqm_note(h: dict[str, Any]) -> str:
-    """Several seeds: rliable's IQM of the return with its 95% bootstrap CI."""
-    if h.get("return_iqm") is None:
-        return ""
-    return f"return IQM {h['return_iqm']:,.1f} [{h['return_iqm_ci_low']:,.1f}, {h['return_iqm_ci_high']:,.1f}]"
-
-
-def falls_note(h: dict[str, Any]) -> str:
-    """Mean episode length and falls of the evaluation, where they were recorded."""
-    if h.get("falls") is None or h.get("episode_length_mean") is None:
-        return ""
-    return f"mean length {h['episode_length_mean']:,.0f} steps, falls {h['falls']}/{h.get('episodes', '?')}"
+def scored_numbers(metrics: tuple[Metric, ...], h: dict[str, Any], env_id: str) -> list[Number]:
+    """Numbers of an evaluated policy: the IQM with its CI where there are seeds, and episodes
+    that ended early called falls only where the env defines a fall."""
+    out = []
+    for m in metrics:
+        if m.key == "falls":
+            m = Metric(m.key, early_end_label(env_id), m.form, of=m.of)
+        n = m.number(h)
+        if n is not None and m.key == "return_iqm" and h.get("return_iqm_ci_low") is not None:
+            n = Number(n.key, n.label, n.value, f"{n.text} [{h['return_iqm_ci_low']:,.1f}, "
+                       f"{h['return_iqm_ci_high']:,.1f}]")
+        if n is not None:
+            out.append(n)
+    return out

@@ -18,7 +18,7 @@ FAST_FILES = {
     "test_layers.py", "test_runner.py", "test_recipes.py", "test_schedules.py", "test_wrappers.py", "test_sar.py",
     "test_lqr.py", "test_pid.py", "test_dynamics_collect.py", "test_sklearn_import.py", "test_faults_success.py",
     "test_steps_to_success.py", "test_myosuite.py", "test_synergy_wrapper.py", "test_plots.py", "test_dynamics.py",
-    "test_extras.py", "test_runs.py",
+    "test_extras.py", "test_runs.py", "test_results.py",
 }
 FAST_TESTS = {
     "tests/test_train_evaluate.py::test_evaluate_run_folder",  # pendulum: train (CLI), evaluate, plot

@@ -79,7 +79,8 @@ def test_obs_labels():
 
 
 def test_comparison_bars_mark_missing_values(tmp_path):
-    path = comparison_bars(["pid", "ppo", "fast"], [1000.0, None, 100.0], "steps", tmp_path / "bars.png", "bars")
+    path = comparison_bars(["pid", "ppo", "fast"], [1000.0, None, 100.0], "steps", tmp_path / "bars.png", "bars",
+                           "Steps of each step.")
     assert_png(path)
 
 
@@ -88,20 +89,20 @@ def test_step_tick_labels_read_at_a_glance():
     assert [step_count(x) for x in (0, 500, 250_000, 1_000_000, 1_500_000)] == ["0", "500", "250k", "1M", "1.5M"]
 
 
-def test_comparison_bars_without_any_value_draws_no_negative_axis(tmp_path):
+def test_comparison_bars_without_any_value_draw_nothing_and_negatives_show(tmp_path):
     from unittest import mock
 
     import motorlab.report.plots as plots
     seen = {}
     real_save = plots.save_figure
 
-    def spy(fig, path):
+    def spy(fig, path, caption):
         seen["ylim"] = fig.axes[0].get_ylim()
-        return real_save(fig, path)
+        return real_save(fig, path, caption)
 
     with mock.patch("motorlab.report.plots.save_figure", spy):
-        comparison_bars(["ppo"], [None], "environment steps", tmp_path / "sts.png", "t", steps=True)
-        assert seen["ylim"] == (0.0, 1.0)
-        comparison_bars(["a", "b"], [-5.0, None], "return", tmp_path / "r.png", "t")
+        assert comparison_bars(["ppo"], [None], "environment steps", tmp_path / "sts.png", "t", "c", steps=True) is None
+        assert "ylim" not in seen and not (tmp_path / "sts.png").exists()  # no chart of nothing
+        comparison_bars(["a", "b"], [-5.0, None], "return", tmp_path / "r.png", "t", "c")
         assert seen["ylim"][0] <= -5.0  # a negative return still shows
-    assert_png(tmp_path / "sts.png")
+    assert_png(tmp_path / "r.png")

@@ -62,7 +62,7 @@ def test_study_runs_every_step(study):
     assert s["mpc.return_mean"] == read_summary(out / "mpc")["return_mean"]
     assert "check.tip_error_mean_h1" in s and s["mpc.plan_ms_median"] > 0
     table = (out / "table.txt").read_text()
-    assert "10,000 transitions" in table and "final distance" in table and "valid MSE" in table
+    assert "transitions 10,000" in table and "final distance" in table and "valid MSE" in table
 
 
 def test_rerun_keeps_finished_steps(study):

@@ -1,6 +1,7 @@
 """HTML reports, opened in a real headless Chromium (Debian's, driven by Playwright):
-no console errors, no network, every image decoded, every video playable, and the
-tables show exactly the numbers in summary.json."""
+no console errors, no network, every image decoded and captioned, every video playable,
+the findings and each step's labelled numbers first, and the full tables showing exactly
+the numbers in summary.json."""
 
 from __future__ import annotations
 
@@ -93,6 +94,7 @@ def _check_page(opened: Opened) -> None:
     assert all(u.startswith(("file:", "data:")) for u in opened.requests), opened.requests  # nothing online
     images = page.eval_on_selector_all("img", "imgs => imgs.map(i => [i.complete, i.naturalWidth, i.src.slice(0, 15)])")
     assert images and all(done and width > 0 and src == "data:image/png;" for done, width, src in images)
+    check_captions(page)
     videos = page.evaluate("""() => Promise.all(Array.from(document.querySelectorAll('video')).map(v =>
         v.readyState >= 1 ? Promise.resolve([v.duration, v.error, v.src.slice(0, 15)]) : new Promise(resolve => {
             v.addEventListener('loadedmetadata', () => resolve([v.duration, v.error, v.src.slice(0, 15)]));
@@ -101,6 +103,25 @@ def _check_page(opened: Opened) -> None:
     for duration, error, src in videos:
         assert error is None and duration > 0 and src == "data:video/mp4;"
     assert page.evaluate("document.createElement('video').canPlayType('video/mp4; codecs=\"avc1.42E01E\"')")
+
+
+def check_captions(page) -> None:
+    """Every figure and video says in one line what it shows (not just its file name)."""
+    captions = page.eval_on_selector_all("figure", "fs => fs.map(f => [f.querySelector('img, video').title || '', "
+                                                   "(f.querySelector('figcaption') || {}).textContent || ''])")
+    for name, caption in captions:
+        if "learning curve" in name or "·" in caption:
+            continue  # the comparison's curves are captioned with their run and seed
+        assert len(caption) > 25 and not caption.endswith((".png", ".mp4")) and "\n" not in caption.strip(), caption
+
+
+def headline_numbers(page, selector: str = "table.steps") -> dict[str, list[tuple[str, str, str | None]]]:
+    """Per step row: (label, text, data-value) of each headline number it shows."""
+    rows = page.eval_on_selector_all(f"{selector} tbody tr", """rows => rows.map(r => [r.dataset.step,
+        Array.from(r.querySelectorAll('.number')).map(n => [n.querySelector('.label').textContent,
+            n.querySelector('.text').textContent, n.dataset.value === undefined ? null : n.dataset.value,
+            n.dataset.key])])""")
+    return {step: [tuple(n) for n in numbers] for step, numbers in rows}
 
 
 def _numbers(summary: dict) -> dict[str, float]:
@@ -115,11 +136,23 @@ def test_study_report_opens_cleanly_and_shows_the_summary_numbers(study, browser
     assert len(opened.page.query_selector_all("video")) == 2  # the video step took episodes = 2 from [defaults]
 
     summary = read_summary(study)
-    shown = opened.cells("table.study")
+    shown = opened.cells("table.study")  # the full summary, one click away
     expected = {k: v for k, v in _numbers(summary).items() if "." in k}
     assert expected and set(expected) <= set(shown)
     for key, value in expected.items():
         assert shown[key] == (pytest.approx(value), fmt(value)), key
+
+    numbers = headline_numbers(opened.page)
+    assert list(numbers) == summary["steps"]
+    for step, cells in numbers.items():
+        assert cells and all(label and text.strip() and text != "–" for label, text, _, _ in cells), step
+        for _, _, value, key in cells:  # each shown number is the summary's
+            if value is not None and isinstance(summary.get(key), (int, float)):
+                assert float(value) == pytest.approx(summary[key]), key
+    labels = {label: text for label, text, _, _ in numbers["pid"]}
+    assert labels["success"] == "100%" and labels["falls"] == "0/2" and labels["return"] == "1,000.0 ± 0.0"
+    assert {label for label, *_ in numbers["ppo"]} >= {"return", "return IQM", "success", "seeds",
+                                                      "trained for (all seeds)"}
 
     runs = {"pid": study / "pid", "ppo/seed0": study / "ppo" / "seed0", "ppo/seed1": study / "ppo" / "seed1",
             "ppo-eval/seed0": study / "ppo-eval" / "seed0", "ppo-eval/seed1": study / "ppo-eval" / "seed1",
@@ -130,12 +163,36 @@ def test_study_report_opens_cleanly_and_shows_the_summary_numbers(study, browser
             assert cells[key] == (pytest.approx(value), fmt(value)), (label, key)
 
 
+def test_study_report_opens_with_its_findings(study, browser):
+    page = Opened(browser, study / "report.html").page
+    findings = page.eval_on_selector_all("table.findings tbody tr", """rows => rows.map(r => [r.dataset.step,
+        r.dataset.key, r.querySelector('th').textContent, r.querySelector('td.value').textContent,
+        r.querySelectorAll('td')[1].textContent, r.querySelectorAll('td')[2].textContent])""")
+    # the recipe names none: each step's own (success where the task defines it)
+    assert [(step, key) for step, key, *_ in findings] == [("pid", "success_rate"), ("ppo", "success_rate"),
+                                                           ("ppo-eval", "success_rate")]
+    pid, ppo = findings[0], findings[1]
+    assert pid[2:] == ["pid: success", "100%", "one run", "–"]
+    assert ppo[4].startswith("seed0 ") and ", seed1 " in ppo[4] and ppo[5].count("%") == 3  # IQM [low, high]
+    first = page.evaluate("Array.from(document.querySelectorAll('h3, table.steps, figure')).map(e => e.tagName)")
+    assert first[0] == "H3" and first.index("TABLE") > first.index("FIGURE")  # findings, figures, then the steps
+
+
+def test_no_empty_figure(study):
+    assert (study / "plots" / "returns.png").is_file()
+    assert not (study / "plots" / "steps_to_success.png").exists()  # no step trains until solved: nothing to chart
+
+
 def test_study_report_compares_seeds_side_by_side(study, browser):
     page = Opened(browser, study / "report.html").page
     seeds = page.eval_on_selector_all('table.comparison td[data-key="seed"]', "tds => tds.map(t => [t.dataset.run, t.dataset.value])")
     assert seeds == [["ppo/seed0", "0"], ["ppo/seed1", "1"]]
-    returns = page.eval_on_selector_all('table.comparison td[data-key="eval_return_mean"]', "tds => tds.map(t => +t.dataset.value)")
+    returns = page.eval_on_selector_all('table.comparison td[data-key="return_mean"]', "tds => tds.map(t => +t.dataset.value)")
     assert returns == [pytest.approx(read_summary(study / "ppo" / f"seed{s}")["eval_return_mean"]) for s in (0, 1)]
+    groups = page.eval_on_selector_all("table.comparison tr.group, table.comparison tbody th",
+                                       "ths => ths.map(t => t.textContent)")
+    assert groups.index("results") < groups.index("return") < groups.index("setup") < groups.index("trained for")
+    assert "wall_seconds" not in groups  # raw keys stay in the full table
     captions = page.eval_on_selector_all("#comparison ~ .grid figcaption", "f => f.map(x => x.textContent)")
     assert "ppo/seed0 · seed 0" in captions and "ppo/seed1 · seed 1" in captions
 

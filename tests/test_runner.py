@@ -15,9 +15,10 @@ from rich.console import Console
 from motorlab import kinds
 from motorlab.errors import MotorlabError
 from motorlab.recipes import parse_recipe
+from motorlab.report.results import Metric
 from motorlab.runs import read_json
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Artifact, Ref, Row, StepKind
+from motorlab.stepkind import Artifact, Ref, StepKind
 from motorlab.studies import run_study
 
 RUNS: list[str] = []  # the run folders the fake kind ran, in order
@@ -58,8 +59,7 @@ class DoubleKind(StepKind[DoubleSettings, DoubleSummary]):
     def headline(self, s: DoubleSummary) -> dict[str, Any]:
         return {"result": s.result}
 
-    def row(self, settings: DoubleSettings, headline: dict[str, Any]) -> Row:
-        return Row(note=f"result {headline['result']:g}")
+    metrics = (Metric("result", "result"),)
 
 
 @pytest.fixture

@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
 from rich.console import Console
 
 from motorlab.envs import EnvConfig, check_env_id, make_env
+from motorlab.report.results import Metric
 from motorlab.runs import MetricsWriter, atomic_write_npz
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Ref, Row, StepKind, number
+from motorlab.stepkind import Ref, StepKind
 
 PLAN = ("horizon", "population", "iterations", "elites")
 
@@ -70,6 +71,14 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
     headline_keys = ("return_mean", "return_std", "return_min", "final_distance_mean", "plan_ms_median", "episodes",
                      "wall_seconds")
     refs = (Ref("model", ("model",)),)
+    metrics = (Metric("return_mean", "return", spread="return_std"),
+               Metric("return_min", "min return"),
+               Metric("final_distance_mean", "final distance", "mm", scale=1000),
+               Metric("plan_ms_median", "planning time per step", "ms"),
+               Metric("episodes", "episodes", "count", setup=True),
+               Metric("wall_seconds", "wall time", "s", setup=True))
+    findings = ("return_mean", "final_distance_mean", "plan_ms_median")
+    key_figures = ("plots/distance.png",)
 
     def check(self, settings: MpcSettings) -> None:
         check_env_id(settings.env)
@@ -109,12 +118,6 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
                              parallel=parallel, optimizer=s.optimizer, **s.plan(), wall_seconds=wall,
                              numerical_faults=len(fault_log), **video)
         return self.finish(run_dir, settings, summary, fault_log)
-
-    def row(self, settings: MpcSettings, h: dict[str, Any]) -> Row:
-        return Row(returns=f"{number(h['return_mean'], '{:.2f}')} ± {number(h['return_std'], '{:.2f}')}",
-                   min_return=number(h.get("return_min"), "{:.2f}"),
-                   note=f"final distance {h['final_distance_mean'] * 1000:.1f} mm (mean), "
-                        f"planning {h['plan_ms_median']:.2f} ms/step")
 
 
 MPC = MpcKind()

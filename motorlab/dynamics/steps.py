@@ -14,9 +14,10 @@ from rich.console import Console
 from motorlab.dynamics.state import xy_columns
 from motorlab.dynamics.transitions import TRANSITIONS, load_transitions
 from motorlab.envs import check_env_id
+from motorlab.report.results import Metric, Number
 from motorlab.runs import atomic_write_npz
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Artifact, Ref, Row, StepKind
+from motorlab.stepkind import Artifact, Ref, StepKind
 
 # ---- dynamics-collect -------------------------------------------------------------------------
 
@@ -57,8 +58,11 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
 
     name = "dynamics-collect"
     what = "collect {episodes:,} {policy} episodes of {env}"
-    note = "{transitions:,} transitions at {transitions_per_second:,.0f}/s ({simulator})"
     headline_keys = ("transitions", "transitions_per_second", "simulator", "collect_seconds")
+    metrics = (Metric("transitions", "transitions", "count"),
+               Metric("transitions_per_second", "transitions per second", "count"),
+               Metric("simulator", "simulator", "text", setup=True),
+               Metric("collect_seconds", "collection time", "s", setup=True))
     refs = (Ref("policy", ("policy",)),)
     provides = Artifact("transitions", TRANSITIONS)
 
@@ -132,8 +136,12 @@ class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
 
     name = "dynamics-fit"
     what = "fit a forward model {ensemble}x{hidden} to {transitions}"
-    note = "valid MSE {valid_mse:.2e} (normalized delta), {epochs_run} epochs, {wall_seconds:.1f} s"
+    note = "MSE of the normalized state change on held-out transitions"
     headline_keys = ("valid_mse", "epochs_run", "wall_seconds", "train_rows")
+    metrics = (Metric("valid_mse", "valid MSE"),
+               Metric("epochs_run", "epochs", "count", setup=True),
+               Metric("train_rows", "training rows", "count", setup=True),
+               Metric("wall_seconds", "training time", "s", setup=True))
     refs = (Ref("transitions", ("transitions",)),)
     provides = Artifact("model")
 
@@ -185,6 +193,7 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
 
     name = "dynamics-check"
     what = "check {model} open loop, {episodes} episodes"
+    key_figures = ("plots/tip_error.png", "plots/traces.png")
     refs = (Ref("model", ("model",)),)
 
     def run(self, settings: DynamicsCheckSettings, out: Path | None = None, console: Console | None = None,
@@ -227,12 +236,19 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
     def headline(self, s: DynamicsCheckSummary) -> dict[str, Any]:
         return {k: v for k, v in s.keys().items() if k.startswith(("tip_error_mean_", "state_nrmse_"))}
 
-    def row(self, settings: DynamicsCheckSettings, h: dict[str, Any]) -> Row:
-        tips = [(k.removeprefix("tip_error_mean_"), v) for k, v in h.items() if k.startswith("tip_error_mean_h")]
-        if tips:
-            return Row(note="open-loop fingertip error " + ", ".join(f"{k}: {v * 1000:.1f} mm" for k, v in tips))
-        return Row(note="open-loop state NRMSE " + ", ".join(f"{k.removeprefix('state_nrmse_')}: {v:.3f}"
-                                                             for k, v in h.items() if k.startswith("state_nrmse_h")))
+    def metric(self, key: str) -> Metric:
+        horizon = key.rsplit("_", 1)[-1].removeprefix("h")  # "h10" -> "10", "final"
+        where = "at the last step" if horizon == "final" else f"after {horizon} step{'s' * (horizon != '1')}"
+        if key.startswith("tip_error_mean_"):
+            return Metric(key, f"fingertip error {where}", "mm", scale=1000)
+        if key.startswith("state_nrmse_"):
+            return Metric(key, f"state NRMSE {where}")
+        return super().metric(key)
+
+    def numbers(self, settings: DynamicsCheckSettings, h: dict[str, Any]) -> list[Number]:
+        """The open-loop fingertip error where the state has a fingertip, else the state's NRMSE."""
+        tips = [k for k in h if k.startswith("tip_error_mean_")]
+        return [n for k in (tips or [k for k in h if k.startswith("state_nrmse_")]) if (n := self.metric(k).number(h))]
 
 
 DYNAMICS_CHECK = DynamicsCheckKind()

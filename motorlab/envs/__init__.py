@@ -210,3 +210,15 @@ def max_return(env_id: str) -> float | None:
     if env_id.startswith(_ALIVE_REWARD_PREFIXES) and spec.max_episode_steps:
         return float(spec.max_episode_steps)
     return float(spec.reward_threshold) if spec.reward_threshold is not None else None
+
+
+# Envs whose early end of an episode is a fall: the pole or the body fell (Gymnasium's
+# "unhealthy" states, Upkie's fall detection, MyoSuite's legs below their height limit).
+# Elsewhere (the MyoSuite hand drops its object, a user's task ends) it is only an early end.
+_FALL_PREFIXES = ("InvertedPendulum", "InvertedDoublePendulum", "Upkie", "Hopper", "Walker2d", "Humanoid-",
+                  "Ant-", "myoLeg")
+
+
+def early_end_label(env_id: str) -> str:
+    """What reports call episodes of this env that ended before the time limit."""
+    return "falls" if env_id.startswith(_FALL_PREFIXES) else "ended early"

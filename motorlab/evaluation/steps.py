@@ -15,9 +15,10 @@ from motorlab.envs import ENV_KEYS, EnvSettings, describe_env, fold_env, make_en
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.rollouts import evaluate, success_mode, trained_env_settings
 from motorlab.policies import BUILTIN_POLICIES, load_policy, unknown_policy_message
+from motorlab.report.results import Metric, Number, show
 from motorlab.runs import require_run_dir
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Artifact, Ref, Row, Scores, StepKind, falls_note, iqm_note, scored_cells, seeds_headline
+from motorlab.stepkind import SCORED_METRICS, Artifact, Ref, Scores, StepKind, scored_numbers, seeds_headline
 
 # ---- evaluate ---------------------------------------------------------------------------------
 
@@ -87,6 +88,7 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
     provides = Artifact("evaluation")
     scored = True
     per_seed = True
+    metrics = SCORED_METRICS
 
     def prepare(self, fields: dict[str, Any], referenced: dict[str, Settings]) -> dict[str, Any]:
         trained = getattr(referenced.get("policy"), "env", None)
@@ -139,8 +141,11 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
         return {**seeds_headline([self.scores(s) for s in summaries]), "falls": sum(s.falls for s in summaries),
                 "episode_length_mean": statistics.fmean(s.episode_length_mean for s in summaries)}
 
-    def row(self, settings: EvaluateSettings, h: dict[str, Any]) -> Row:
-        return Row(*scored_cells(h), note="; ".join(x for x in (iqm_note(h), falls_note(h)) if x))
+    def numbers(self, settings: EvaluateSettings, h: dict[str, Any]) -> list[Number]:
+        return scored_numbers(self.metrics, h, settings.env.id)
+
+    def default_findings(self, settings: EvaluateSettings, h: dict[str, Any]) -> list[str]:
+        return ["success_rate" if h.get("success_rate") is not None else "return_mean"]
 
     def figures(self, run_dir: Path) -> None:
         from motorlab.report.run import plot_run
@@ -177,6 +182,7 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
     """Zero-shot success of trained policies on unseen envs: table, summary.json, grouped bar chart."""
 
     name = "zeroshot"
+    key_figures = ("plots/zeroshot.png",)
     refs = (Ref("runs", ("policy",)),)
 
     def run(self, settings: ZeroshotSettings, out: Path | None = None, console: Console | None = None,
@@ -188,7 +194,9 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
         run_dir = self.start(out)
         grouped_bars(t.envs, {n: [t.results[n][e]["success_rate"] for e in t.envs] for n in t.names},
                      "success rate", run_dir / "plots" / "zeroshot.png",
-                     f"Zero-shot success ({settings.episodes} episodes per env)", percent=True)
+                     f"Zero-shot success ({settings.episodes} episodes per env)",
+                     f"Success rate of each trained policy on envs it never trained on, {settings.episodes} "
+                     "episodes per env.", percent=True)
         table = Table(title=f"zero-shot: {settings.episodes} episodes per env, seed {settings.seed}")
         table.add_column("run")
         for env_id in t.envs:
@@ -217,9 +225,32 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
                 groups.setdefault(f"{label.split('/')[0]}.{env_id}", []).append(value)
         return {**per_run, **{f"{k}.success_rate_mean": statistics.fmean(v) for k, v in groups.items()}}
 
-    def row(self, settings: ZeroshotSettings, h: dict[str, Any]) -> Row:
-        means = {k[: -len(".success_rate_mean")]: v for k, v in h.items() if k.endswith(".success_rate_mean")}
-        return Row(note="; ".join(f"{k}: {v:.0%}" for k, v in means.items()) + " (success, mean over seeds)")
+    def metric(self, key: str) -> Metric:
+        if key.endswith(".success_rate_mean"):  # "<step>.<env>.success_rate_mean"
+            step, env_id = key[: -len(".success_rate_mean")].split(".", 1)
+            return Metric(key, f"{step} on {env_id}: success", "percent")
+        if key.endswith(".success_rate"):
+            return Metric(key, f"{key[: -len('.success_rate')].replace('.', ' on ', 1)}: success", "percent")
+        return super().metric(key)
+
+    def numbers(self, settings: ZeroshotSettings, h: dict[str, Any]) -> list[Number]:
+        """Success of each trained step on each env (the mean over its seeds)."""
+        return [n for k in h if k.endswith(".success_rate_mean") and (n := self.metric(k).number(h))]
+
+    def default_findings(self, settings: ZeroshotSettings, h: dict[str, Any]) -> list[str]:
+        return [k for k in h if k.endswith(".success_rate_mean")]
+
+    def seed_values(self, runs: list[tuple[str, ZeroshotSummary]], key: str) -> list[tuple[str, Any]]:
+        if not key.endswith(".success_rate_mean"):
+            return super().seed_values(runs, key)
+        step, env_id = key[: -len(".success_rate_mean")].split(".", 1)
+        (_, s), = runs  # one zero-shot run holds every seed of the steps it compares
+        return [(label.split("/", 1)[-1], v) for k, v in s.keys().items()
+                if k.endswith(f".{env_id}.success_rate") and (label := k[: -len(f".{env_id}.success_rate")])
+                .split("/")[0] == step]
+
+    def notes(self, settings: ZeroshotSettings, h: dict[str, Any]) -> str:
+        return f"success: mean over each step's seeds, {show(settings.episodes, 'count')} episodes per env"
 
 
 ZEROSHOT = ZeroshotKind()

@@ -83,7 +83,8 @@ def compare_curves(groups: dict[str, list[Path]], path: Path, title: str = "Lear
             steps_axis(ax.xaxis)
             ax.legend(fontsize=8)
         fig.suptitle(f"{title} — mean and 95% confidence band over seeds", fontsize=11)
-        save_figure(fig, path)
+        save_figure(fig, path, "Training return and success (running means over episodes) against environment "
+                               "steps, per setting: the mean over its seeds with a 95% confidence band.")
     return result
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from motorlab.report.plots import STYLE, plt, save_figure
 
 
-def loss_curve(history: list[dict], path: Path, title: str = "") -> Path:
+def loss_curve(history: list[dict], path: Path, title: str = "") -> Path | None:
     """Training and validation MSE (normalized delta units, log scale) per epoch."""
     epochs = [r["epoch"] for r in history]
     with plt.rc_context(STYLE):
@@ -24,11 +24,12 @@ def loss_curve(history: list[dict], path: Path, title: str = "") -> Path:
         ax.set_ylabel("MSE of the normalized state delta")
         ax.set_title(title)
         ax.legend()
-        return save_figure(fig, path)
+        return save_figure(fig, path, "Mean squared error of the model's predicted state change per epoch, on "
+                                      "training transitions and on held-out episodes.")
 
 
 def error_vs_horizon(horizons: np.ndarray, errors: dict[str, np.ndarray], path: Path, title: str = "",
-                     ylabel: str = "error") -> Path:
+                     ylabel: str = "error") -> Path | None:
     """Open-loop prediction error vs steps ahead: mean over episodes with the 10-90% range."""
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(6, 3.8))
@@ -41,11 +42,13 @@ def error_vs_horizon(horizons: np.ndarray, errors: dict[str, np.ndarray], path: 
         ax.set_ylabel(ylabel)
         ax.set_title(title)
         ax.legend()
-        return save_figure(fig, path)
+        return save_figure(fig, path, f"Open-loop prediction error ({', '.join(errors)}) against steps ahead: the "
+                                      "model is fed the simulator's actions and never corrected; mean over "
+                                      "episodes with the 10–90% range.")
 
 
 def xy_traces(true_xy: np.ndarray, model_xy: np.ndarray, goals: np.ndarray | None, path: Path, title: str = "",
-              labels: tuple[str, str] = ("x (m)", "y (m)")) -> Path:
+              labels: tuple[str, str] = ("x (m)", "y (m)")) -> Path | None:
     """The reference notebook's plot: simulator vs model paths in the plane, one colour per episode."""
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(5.2, 5))
@@ -61,10 +64,11 @@ def xy_traces(true_xy: np.ndarray, model_xy: np.ndarray, goals: np.ndarray | Non
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_title(title)
         ax.legend(loc="best")
-        return save_figure(fig, path)
+        return save_figure(fig, path, "Paths of the same episodes in the simulator (solid) and predicted open loop "
+                                      "by the model (dashed), one colour per episode.")
 
 
-def distance_over_time(distances: np.ndarray, path: Path, title: str = "", dt: float | None = None) -> Path:
+def distance_over_time(distances: np.ndarray, path: Path, title: str = "", dt: float | None = None) -> Path | None:
     """Fingertip-to-target distance per control step under MPC: every episode, and their median."""
     steps = np.arange(distances.shape[1])
     x = steps * dt if dt else steps
@@ -77,4 +81,5 @@ def distance_over_time(distances: np.ndarray, path: Path, title: str = "", dt: f
         ax.set_yscale("log")
         ax.set_title(title)
         ax.legend()
-        return save_figure(fig, path)
+        return save_figure(fig, path, "Distance from fingertip to target under MPC at each control step: every "
+                                      "episode (thin) and their median (bold).")

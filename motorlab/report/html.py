@@ -3,11 +3,17 @@
 The file carries everything inline (plots as PNG data URIs, videos as MP4 data URIs,
 CSS in the page, no scripts or network assets), so it opens offline and can be mailed:
 
-    headline table     summary.json of each run, or the study's "<step>.<key>" table
-    comparison         training runs side by side, one column per run and seed, with their curves
-    runs               per run: headline numbers, every plot, every video, the resolved
-                       settings (config.toml), a link to its TensorBoard logs
+    findings           a study's few numbers it is about, with seeds, IQM and 95% CI
+    study              its figures (each with a caption), then each step's headline numbers,
+                       labelled and in their units; the full summary.json one click away
+    comparison         training runs side by side, one column per run and seed: their results,
+                       then their budgets, with their curves
+    runs               per run: headline numbers, every plot and video with its caption, the full
+                       summary, the resolved settings (config.toml), a link to its TensorBoard logs
     environment        Python, machine and library versions (the runs' environment.json)
+
+Labels, units and findings come from the results.json files motorlab writes beside each
+summary.json (motorlab.report.results); folders without one show their summary.json keys.
 """
 
 from __future__ import annotations
@@ -22,6 +28,8 @@ from typing import Any
 
 from motorlab.environment import describe
 from motorlab.errors import MotorlabError
+from motorlab.report.plots import figure_caption
+from motorlab.report.results import Finding, Number, StepResults, read_run_results, read_study_results
 from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, read_json
 
 REPORT = "report.html"
@@ -62,6 +70,7 @@ class Cell:
 class Media:
     name: str
     src: str  # a data: URI, or a relative link when over the video budget
+    caption: str = ""  # what it shows (figures: stored in the PNG by save_figure)
 
 
 @dataclass
@@ -76,6 +85,7 @@ class RunView:
     tensorboard: str | None = None  # relative link from the report
     tensorboard_dir: str | None = None
     environment: dict | None = None
+    numbers: list[Number] | None = None  # its headline numbers as shown (results.json), where it has them
 
     @property
     def cells(self) -> list[Cell]:
@@ -101,6 +111,8 @@ class StudyView:
     plots: list[Media]
     runs: list[RunView]
     table_text: str | None
+    findings: list[Finding] = field(default_factory=list)
+    results: list[StepResults] | None = None  # each step's numbers as shown, where the study wrote them
 
 
 def _scalar(v: Any) -> bool:
@@ -142,16 +154,20 @@ class _Collector:
             except tomllib.TOMLDecodeError:
                 pass
         view = RunView(label=label, path=path, summary=read_json(path / SUMMARY), config_text=config_text, seed=seed)
+        results = read_run_results(path)
+        view.numbers = results.numbers if results else None
         files = sorted(p for p in path.rglob("*") if p.is_file() and "tensorboard" not in p.relative_to(path).parts)
-        view.plots = [Media(p.relative_to(path).as_posix(), _data_uri(p, "image/png")) for p in files
-                      if p.suffix == ".png"]
+        view.plots = [_figure(p, p.relative_to(path).as_posix()) for p in files if p.suffix == ".png"]
+        captions = _video_captions(path, view.summary)
         for p in (p for p in files if p.suffix == ".mp4"):
             size = p.stat().st_size
+            name = p.relative_to(path).as_posix()
+            caption = captions.get(p.name, f"An episode filmed by the {label} step ({name})")
             if self.video_bytes + size <= VIDEO_BUDGET:
                 self.video_bytes += size
-                view.videos.append(Media(p.relative_to(path).as_posix(), _data_uri(p, "video/mp4")))
+                view.videos.append(Media(name, _data_uri(p, "video/mp4"), caption))
             else:
-                view.videos.append(Media(p.relative_to(path).as_posix(), self._rel(p)))
+                view.videos.append(Media(name, self._rel(p), caption))
         if (path / "tensorboard").is_dir():
             view.tensorboard = self._rel(path / "tensorboard") + "/"
             view.tensorboard_dir = str((path / "tensorboard").resolve())
@@ -174,7 +190,10 @@ class _Collector:
                 if rest not in columns:
                     columns.append(rest)
         rows = [(s, [Cell(f"{s}.{c}", per_step[s][c]) if c in per_step[s] else None for c in columns]) for s in steps]
-        plots = [Media(p.name, _data_uri(p, "image/png")) for p in sorted((path / "plots").glob("*.png"))]
+        plots = [_figure(p, p.name) for p in sorted((path / "plots").glob("*.png"))]
+        results = read_study_results(path)
+        plots += [_figure(path / f, f) for r in (results.steps if results else []) for f in r.figures
+                  if (path / f).is_file()]  # each step's key figures (e.g. MPC's distances)
         runs = []
         for step in steps:
             step_dir = path / step
@@ -187,7 +206,22 @@ class _Collector:
         name = config.get("recipe") or (f"sweep of {config['sweep']}" if "sweep" in config else path.name)
         return StudyView(name=name, path=path, description=summary.get("description", ""),
                          steps=steps, columns=columns, rows=rows, plots=plots, runs=runs,
-                         table_text=table.read_text() if table.is_file() else None)
+                         table_text=table.read_text() if table.is_file() else None,
+                         findings=results.findings if results else [], results=results.steps if results else None)
+
+
+def _figure(path: Path, name: str) -> Media:
+    """A PNG with its caption (the file name where it carries none: written by something else)."""
+    return Media(name, _data_uri(path, "image/png"), figure_caption(path) or name)
+
+
+def _video_captions(path: Path, summary: dict[str, Any]) -> dict[str, str]:
+    """Captions of a video step's episodes (file name -> "episode 0, return 812.3")."""
+    videos, returns = summary.get("videos"), summary.get("returns")
+    if not isinstance(videos, list) or not isinstance(returns, list) or len(videos) != len(returns):
+        return {}
+    return {Path(v).name: f"Episode {i} of the policy, filmed: return {fmt(r)}"
+            for i, (v, r) in enumerate(zip(videos, returns))}
 
 
 def _is_study(path: Path) -> bool:
@@ -207,15 +241,38 @@ def _check_path(path: Path) -> Path:
     return path
 
 
-def _comparison(runs: list[RunView]) -> tuple[list[RunView], list[str]]:
-    """Training runs to show side by side, and the keys to compare them on."""
+@dataclass
+class Comparison:
+    """Training runs side by side: rows of results (label, key), then rows of setup (budgets,
+    seeds, time), then every other number they share (in the full table, one click away)."""
+
+    runs: list[RunView]
+    results: list[tuple[str, str]]
+    setup: list[tuple[str, str]]
+    rest: list[str]
+
+    def cell(self, run: RunView, key: str) -> tuple[Any, str]:
+        """(value, text) of `key` in a run: its shown number where it has one, else its summary's."""
+        if key == "seed":
+            return run.seed, fmt(run.seed)
+        shown = next((n for n in run.numbers or [] if n.key == key), None)
+        return (shown.value, shown.text) if shown else (run.summary.get(key), fmt(run.summary.get(key)))
+
+
+def _comparison(runs: list[RunView]) -> Comparison | None:
+    """Training runs to show side by side, and what to compare them on."""
     trained = [r for r in runs if r.trained]
     if len(trained) < 2:
-        return [], []
+        return None
     shared = [k for k in trained[0].summary if all(_number(r.summary.get(k)) for r in trained)]
-    keys = [k for k in COMPARE_FIRST if k == "seed" or k in shared]
-    keys += [k for k in shared if k not in keys]
-    return trained, keys
+    if all(r.numbers is not None for r in trained):
+        numbers = {n.key: n for r in trained for n in r.numbers}  # in each run's order; union of what they show
+        results = [(n.label, k) for k, n in numbers.items() if not n.setup]
+        setup = [("seed", "seed")] + [(n.label, k) for k, n in numbers.items() if n.setup]
+    else:  # older folders: the keys readers scan first
+        results = [(k, k) for k in COMPARE_FIRST if k in shared and k not in ("timesteps", "wall_seconds")]
+        setup = [("seed", "seed")] + [(k, k) for k in ("timesteps", "wall_seconds") if k in shared]
+    return Comparison(trained, results, setup, [k for k in shared if k != "seed"])
 
 
 def _environments(runs: list[RunView]) -> list[tuple[dict, list[str]]]:
@@ -257,13 +314,13 @@ def build_report(paths: list[Path], out: Path | None = None) -> Path:
         else:
             runs.append(collector.run(p, p.name))
     all_runs = runs + [r for s in studies for r in s.runs]
-    compared, compare_keys = _comparison(all_runs)
+    comparison = _comparison(all_runs)
     env = jinja2.Environment(loader=jinja2.PackageLoader("motorlab.report", "templates"),
                              autoescape=jinja2.select_autoescape(), undefined=jinja2.StrictUndefined)
     html = env.get_template("report.html.j2").render(
         title=" · ".join(s.name for s in studies) or " · ".join(r.label for r in runs),
         created=datetime.datetime.now().strftime("%Y-%m-%d %H:%M"), studies=studies, runs=runs,
-        compared=compared, compare_keys=compare_keys, environments=_environments(all_runs),
+        comparison=comparison, environments=_environments(all_runs),
         motorlab_version=describe()["packages"]["motorlab"], fmt=fmt)
     atomic_write_text(out, html)
     return out

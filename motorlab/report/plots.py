@@ -48,16 +48,38 @@ def obs_labels(env_id: str, n: int) -> list[str]:
     return [f"obs[{i}]" for i in range(n)]
 
 
-def save_figure(fig, path: Path) -> Path:
+CAPTION = "Description"  # the PNG text chunk holding a figure's caption (reports show it under the figure)
+
+
+def save_figure(fig, path: Path, caption: str) -> Path | None:
+    """Write `fig` as PNG with its one-line caption inside the file, so a report of the folder
+    can say what the figure shows. A figure with no data in any panel is not written (and an
+    older one at `path` is removed): an empty chart says nothing."""
+    path = Path(path)
+    if not any(ax.has_data() for ax in fig.axes):
+        plt.close(fig)
+        path.unlink(missing_ok=True)
+        return None
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", bbox_inches="tight")
+    fig.savefig(buf, format="png", bbox_inches="tight", metadata={CAPTION: caption})
     plt.close(fig)
-    atomic_write_bytes(Path(path), buf.getvalue())
-    return Path(path)
+    atomic_write_bytes(path, buf.getvalue())
+    return path
+
+
+def figure_caption(path: Path) -> str | None:
+    """The caption `save_figure` stored in a PNG (None for PNGs written otherwise)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as image:
+            return getattr(image, "text", {}).get(CAPTION)
+    except OSError:
+        return None
 
 
 def learning_curve(run_dir: Path, path: Path, title: str = "", solve_return: float | None = None,
-                   steps_to_success: int | None = None) -> Path:
+                   steps_to_success: int | None = None) -> Path | None:
     """Training episode returns (and their running mean) and evaluation returns vs env steps."""
     rows = read_metrics(run_dir)
     ep = [(r["timesteps"], r["episode_return"]) for r in rows if np.isfinite(r.get("episode_return", np.nan))]
@@ -83,11 +105,14 @@ def learning_curve(run_dir: Path, path: Path, title: str = "", solve_return: flo
         ax.set_ylabel("episode return")
         ax.set_title(title or f"Learning curve: {Path(run_dir).name}")
         ax.legend(loc="best", fontsize=8)
-        return save_figure(fig, path)
+        caption = ("Return of each training episode (dots) and its running mean, and of the deterministic "
+                   "evaluations (mean and min), against environment steps"
+                   + (f"; solved at {steps_to_success:,} steps" if steps_to_success is not None else "") + ".")
+        return save_figure(fig, path, caption)
 
 
 def observation_trace(observations: np.ndarray, actions: np.ndarray, dt: float, labels: list[str],
-                      path: Path, title: str = "") -> Path:
+                      path: Path, title: str = "") -> Path | None:
     """Each observation element (and the action) against time for one episode; above
     MAX_TRACE_LINES elements (MyoSuite: hundreds), heatmaps of the standardized values."""
     observations = np.asarray(observations)
@@ -106,13 +131,15 @@ def observation_trace(observations: np.ndarray, actions: np.ndarray, dt: float, 
         axes[n].set_xlabel("time (s)")
         fig.suptitle(title or "Observation trace", fontsize=11)
         fig.align_ylabels(axes)
-        return save_figure(fig, path)
+        return save_figure(fig, path, "One evaluation episode of the policy: each observation element and the "
+                                      "action against time.")
 
 
 MAX_TRACE_LINES = 8
 
 
-def _trace_heatmaps(observations: np.ndarray, actions: np.ndarray, t: np.ndarray, path: Path, title: str) -> Path:
+def _trace_heatmaps(observations: np.ndarray, actions: np.ndarray, t: np.ndarray, path: Path, title: str
+                    ) -> Path | None:
     def standardize(x: np.ndarray) -> np.ndarray:
         x = x.reshape(len(x), -1).astype(np.float64)
         std = x.std(axis=0)
@@ -130,13 +157,18 @@ def _trace_heatmaps(observations: np.ndarray, actions: np.ndarray, t: np.ndarray
             fig.colorbar(image, ax=ax, label="standardized value")
         axes[-1, 0].set_xlabel("time (s)")
         fig.suptitle(title or "Observation trace", fontsize=11)
-        return save_figure(fig, path)
+        return save_figure(fig, path, "One evaluation episode of the policy: every observation and action element, "
+                                      "standardized over the episode, against time.")
 
 
 def comparison_bars(names: list[str], values: list[float | None], ylabel: str, path: Path, title: str,
-                    missing_label: str = "not reached", steps: bool = False) -> Path:
+                    caption: str, missing_label: str = "not reached", steps: bool = False) -> Path | None:
     """One bar per study step; steps without a value are marked, not drawn as zero.
-    `steps`: the values are environment steps (labelled 250k, 1.5M)."""
+    `steps`: the values are environment steps (labelled 250k, 1.5M). Nothing is drawn (and an
+    older chart at `path` is removed) when no step has a value."""
+    if all(v is None for v in values):
+        Path(path).unlink(missing_ok=True)
+        return None
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(max(5, 1.1 * len(names)), 4))
         xs = np.arange(len(names))
@@ -146,21 +178,17 @@ def comparison_bars(names: list[str], values: list[float | None], ylabel: str, p
             label = missing_label if v is None else (step_count(v) if steps else f"{v:,.0f}")
             ax.annotate(label, (x, b.get_height()),
                         ha="center", va="bottom", fontsize=8)
-        if all(v is None for v in values):  # nothing to scale: no invented negative axis, no ticks
-            ax.set_ylim(0, 1)
-            ax.set_yticks([])
-        else:
-            ax.set_ylim(bottom=min(0.0, *(v for v in values if v is not None)))
-            if steps:
-                steps_axis(ax.yaxis)
+        ax.set_ylim(bottom=min(0.0, *(v for v in values if v is not None)))
+        if steps:
+            steps_axis(ax.yaxis)
         ax.set_xticks(xs, names, rotation=25, ha="right", fontsize=8)
         ax.set_ylabel(ylabel)
         ax.set_title(title)
-        return save_figure(fig, path)
+        return save_figure(fig, path, caption)
 
 
 def grouped_bars(groups: list[str], series: dict[str, list[float | None]], ylabel: str, path: Path, title: str,
-                 percent: bool = False) -> Path:
+                 caption: str, percent: bool = False) -> Path | None:
     """Bars grouped by `groups` (e.g. envs), one colour per series (e.g. runs)."""
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(max(5, 1.6 * len(groups) * max(1, len(series)) / 2), 4))
@@ -179,10 +207,10 @@ def grouped_bars(groups: list[str], series: dict[str, list[float | None]], ylabe
             ax.yaxis.set_major_formatter(matplotlib.ticker.PercentFormatter(1.0))
         ax.set_title(title)
         ax.legend(fontsize=8)
-        return save_figure(fig, path)
+        return save_figure(fig, path, caption)
 
 
-def vaf_plot(vaf: np.ndarray, threshold: float | None, n_needed: int | None, path: Path, title: str) -> Path:
+def vaf_plot(vaf: np.ndarray, threshold: float | None, n_needed: int | None, path: Path, title: str) -> Path | None:
     """VAF against the number of synergies, with the threshold and the N that reaches it."""
     vaf = np.asarray(vaf)
     n = np.arange(1, len(vaf) + 1)
@@ -199,4 +227,5 @@ def vaf_plot(vaf: np.ndarray, threshold: float | None, n_needed: int | None, pat
         ax.set_ylim(min(0.0, float(vaf.min())), 1.02)
         ax.set_title(title)
         ax.legend(loc="lower right", fontsize=8)
-        return save_figure(fig, path)
+        return save_figure(fig, path, "Variance of the recorded activations accounted for by N synergies"
+                           + (f"; N = {n_needed} is the smallest reaching {threshold:.0%}." if n_needed else "."))

@@ -36,9 +36,9 @@ def plot_run(run_dir: Path) -> list[Path]:
     obs = result.observations[0]
     base_dim = obs.shape[1] // env_cfg.history
     obs = obs[:, -base_dim:]  # newest frame of the history
-    written.append(observation_trace(
+    written += [p for p in [observation_trace(
         obs, result.actions[0], result.dt, obs_labels(env_cfg.id, base_dim), plots / "observation_trace.png",
-        title=f"{env_cfg.id}{_env_tag(env_cfg.model_dump())}: return {result.returns[0]:.0f}"))
+        title=f"{env_cfg.id}{_env_tag(env_cfg.model_dump())}: return {result.returns[0]:.0f}")] if p is not None]
     return written
 
 

@@ -9,9 +9,10 @@ from typing import Any
 from pydantic import Field
 from rich.console import Console
 
+from motorlab.report.results import Metric, Number, show
 from motorlab.runs import require_run_dir
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Ref, Row, StepKind
+from motorlab.stepkind import Ref, StepKind
 
 # ---- video ------------------------------------------------------------------------------------
 
@@ -55,8 +56,16 @@ class VideoKind(StepKind[VideoSettings, VideoSummary]):
     def describe(self, settings: VideoSettings, copies: int = 1) -> str:
         return f"video of {settings.run}, {settings.episodes} episode{'s' * (settings.episodes > 1)}"
 
-    def row(self, settings: VideoSettings, h: dict[str, Any]) -> Row:
-        return Row(note=", ".join(f"{Path(v).parent.name}/{Path(v).name}" for v in h["videos"]))
+    def numbers(self, settings: VideoSettings, h: dict[str, Any]) -> list[Number]:
+        returns = h.get("returns") or []
+        numbers = [Number("videos", "episodes filmed", len(h["videos"]), show(len(h["videos"]), "count"))]
+        if returns:
+            mean = sum(returns) / len(returns)
+            numbers.append(Number("returns", "return (mean of the filmed episodes)", mean, show(mean, "return")))
+        return numbers
+
+    def notes(self, settings: VideoSettings, h: dict[str, Any]) -> str:
+        return ", ".join(f"{Path(v).parent.name}/{Path(v).name}" for v in h["videos"])
 
 
 VIDEO = VideoKind()
@@ -75,7 +84,7 @@ class CompareKind(StepKind[CompareSettings, Summary]):
     summary.json: "<group>.<key>" per group, rliable's IQMs and probabilities of improvement."""
 
     name = "compare"
-    note = "plots/learning_curves.png"
+    key_figures = ("plots/learning_curves.png",)
     refs = (Ref("groups", ("policy",)),)
 
     def run(self, settings: CompareSettings, out: Path | None = None, console: Console | None = None,
@@ -94,6 +103,42 @@ class CompareKind(StepKind[CompareSettings, Summary]):
 
     def headline(self, s: Summary) -> dict[str, Any]:
         return {k: v for k, v in s.keys().items() if "." in k}  # already "<group>.<key>"
+
+    def metric(self, key: str) -> Metric:
+        group, _, rest = key.partition(".")
+        if "_p_better_than[" in rest:  # "<metric>_p_better_than[<other>]"
+            metric, other = rest[:-1].split("_p_better_than[")
+            return Metric(key, f"P({group} > {other}) on {metric.replace('_', ' ')}", "percent")
+        labels = {"final_episode_return": ("final training return (running mean)", "return"),
+                  "final_episode_success": ("final training success (last 100)", "percent"),
+                  "final_return_iqm": ("evaluation return IQM", "return"),
+                  "success_rate_iqm": ("evaluation success IQM", "percent")}
+        if rest in labels:
+            return Metric(key, f"{group}: {labels[rest][0]}", labels[rest][1])
+        return super().metric(key)
+
+    def numbers(self, settings: CompareSettings, h: dict[str, Any]) -> list[Number]:
+        """Per group its final return and success (learning curves), rliable's IQMs with their 95%
+        CIs, and the probability that one group beats another."""
+        numbers = []
+        for key, value in h.items():
+            if value is None or key.endswith(("_ci_low", "_ci_high", ".seeds")):
+                continue
+            m = self.metric(key)
+            if m.label == key.replace("_", " "):
+                continue  # a key without a reader's label: in the full summary only
+            n = m.number(h)
+            low, high = h.get(f"{key}_ci_low"), h.get(f"{key}_ci_high")
+            if low is not None and high is not None:
+                n = Number(n.key, n.label, n.value, f"{n.text} [{m.text(low, {})}, {m.text(high, {})}]")
+            numbers.append(n)
+        return numbers
+
+    def default_findings(self, settings: CompareSettings, h: dict[str, Any]) -> list[str]:
+        return [k for k in h if "_p_better_than[" in k and h[k] is not None]
+
+    def notes(self, settings: CompareSettings, h: dict[str, Any]) -> str:
+        return "learning curves: plots/learning_curves.png"
 
 
 COMPARE = CompareKind()

@@ -19,7 +19,7 @@ def _label(metric: str) -> str:
     return f"{step}: {LABELS.get(base, base)}" if dot else LABELS.get(base, base)
 
 
-def interval_estimates(metrics: dict[str, dict[str, Any]], path: Path, title: str) -> Path:
+def interval_estimates(metrics: dict[str, dict[str, Any]], path: Path, title: str) -> Path | None:
     """One panel per metric: each setting's IQM (dot), 95% CI (bar) and single seeds (ticks)."""
     names = list(metrics)
     with plt.rc_context(STYLE):
@@ -43,10 +43,11 @@ def interval_estimates(metrics: dict[str, dict[str, Any]], path: Path, title: st
                 ax.set_xlim(-0.02, 1.02)
                 ax.xaxis.set_major_formatter(PercentFormatter(1.0))
         fig.suptitle(f"{title}: IQM (dot) with 95% bootstrap CI (bar); ticks are single seeds", fontsize=10)
-        return save_figure(fig, path)
+        return save_figure(fig, path, "Each setting's interquartile mean over seeds (dot) with its 95% bootstrap "
+                                      "confidence interval (bar); ticks are single seeds.")
 
 
-def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) -> Path:
+def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) -> Path | None:
     """P(setting A better than setting B) per metric, with its 95% CI; 0.5 is a coin flip."""
     rows = [(f"{_label(m)}: {p['a']} vs {p['b']}", p) for m, ps in pairs.items() for p in ps]
     with plt.rc_context(STYLE):
@@ -60,10 +61,11 @@ def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) 
         ax.set_xlim(-0.02, 1.02)
         ax.set_xlabel("probability that A is better than B (fewer steps for steps to success)")
         ax.set_title(f"{title}: probability of improvement", fontsize=10)
-        return save_figure(fig, path)
+        return save_figure(fig, path, "Probability that setting A beats setting B on a random pair of seeds, with "
+                                      "its 95% confidence interval; 0.5 is a coin flip.")
 
 
-def performance_profiles(profiles: dict[str, dict[str, Any]], path: Path, title: str) -> Path:
+def performance_profiles(profiles: dict[str, dict[str, Any]], path: Path, title: str) -> Path | None:
     """Fraction of runs scoring above tau, per setting, with the bootstrap band."""
     names = list(profiles)
     with plt.rc_context(STYLE):
@@ -78,6 +80,7 @@ def performance_profiles(profiles: dict[str, dict[str, Any]], path: Path, title:
             ax.set_ylim(-0.02, 1.02)
             ax.legend(fontsize=8)
         fig.suptitle(f"{title}: performance profiles", fontsize=10)
-        return save_figure(fig, path)
+        return save_figure(fig, path, "Fraction of each setting's runs scoring above a threshold τ, against τ, "
+                                      "with bootstrap bands.")
 
 

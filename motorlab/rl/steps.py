@@ -9,21 +9,11 @@ from typing import Any
 from rich.console import Console
 
 from motorlab.envs import describe_env, make_env
+from motorlab.report.results import Metric, Number, write_run_results
 from motorlab.rl.config import TrainConfig, resolve
 from motorlab.runs import last_timesteps
 from motorlab.settings import Summary
-from motorlab.stepkind import (
-    Artifact,
-    Ref,
-    Row,
-    Scores,
-    StepKind,
-    falls_note,
-    iqm_note,
-    number,
-    scored_cells,
-    seeds_headline,
-)
+from motorlab.stepkind import SCORED_METRICS, Artifact, Ref, Scores, StepKind, scored_numbers, seeds_headline
 
 
 class TrainSummary(Summary):
@@ -69,6 +59,12 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
     provides = Artifact("policy")
     scored = True
     trains = True
+    metrics = (*SCORED_METRICS[:4],
+               Metric("steps_to_success", "steps to success", "steps"),
+               Metric("train_success_rate_last100", "training success (last 100 episodes)", "percent"),
+               *SCORED_METRICS[4:],
+               Metric("timesteps", "trained for", "steps", setup=True),
+               Metric("wall_seconds", "training time", "s", setup=True))
 
     def validate(self, fields: dict[str, Any]) -> TrainConfig:
         return resolve(fields)  # the named preset under the given settings
@@ -79,7 +75,9 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
 
         if not progress:
             settings = settings.model_copy(update={"progress": False})
-        return TrainSummary.model_validate(train(settings, out, resume=resume))
+        summary = TrainSummary.model_validate(done := train(settings, out, resume=resume))
+        write_run_results(Path(done["run_dir"]), self.results(settings, summary))
+        return summary
 
     def check(self, settings: TrainConfig) -> None:
         make_env(settings.env).close()  # a bad id, delay or reward fails before any step runs
@@ -115,14 +113,18 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
                 "timesteps": sum(s.timesteps for s in summaries),
                 "wall_seconds": sum(s.wall_seconds for s in summaries)}
 
-    def row(self, settings: TrainConfig, h: dict[str, Any]) -> Row:
-        sts = h.get("steps_to_success")
-        rate = h.get("train_success_rate_last100")
-        return Row(*scored_cells(h), steps_to_success=(f"{sts:,.0f}" if sts is not None else
-                                                       "not solved" if settings.until_solved else "-"),
-                   seconds=number(h.get("wall_seconds"), "{:.1f}"),
-                   note="; ".join(x for x in (iqm_note(h), f"training success (last 100 episodes) {rate:.0%}"
-                                              if rate is not None else falls_note(h)) if x))
+    def numbers(self, settings: TrainConfig, h: dict[str, Any]) -> list[Number]:
+        numbers = scored_numbers(self.metrics, h, settings.env.id)
+        if h.get("seeds"):  # budgets of several seeds are their sums
+            numbers = [Number(n.key, f"{n.label} (all seeds)", n.value, n.text, n.setup)
+                       if n.key in ("timesteps", "wall_seconds") else n for n in numbers]
+        if settings.until_solved and h.get("steps_to_success") is None:  # asked to solve, and did not
+            numbers.insert(4, Number("steps_to_success", "steps to success", None, "not reached"))
+        return numbers
+
+    def default_findings(self, settings: TrainConfig, h: dict[str, Any]) -> list[str]:
+        return (["steps_to_success"] if settings.until_solved else []) + \
+            ["success_rate" if h.get("success_rate") is not None else "return_mean"]
 
     def figures(self, run_dir: Path) -> None:
         from motorlab.report.run import plot_run

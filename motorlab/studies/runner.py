@@ -1,9 +1,11 @@
 """`motorlab run RECIPE`: each step writes its own run folder inside the study folder.
 
     <study>/<step>/            one folder per step (steps run for several seeds: <step>/seed<k>/)
-    <study>/table.txt          the printed table
-    <study>/summary.json       "<step>.<key>" headline numbers
-    <study>/plots/*.png        returns and steps-to-success of every step
+    <study>/table.txt          the printed table: each step's numbers, labelled, in their units
+    <study>/results.json       the findings (the numbers the recipe is about, with seeds, IQM and
+                               CI) and each step's numbers as shown (motorlab.report.results)
+    <study>/summary.json       "<step>.<key>" headline numbers, for programs
+    <study>/plots/*.png        returns and steps-to-success of the steps that have them
     <study>/report.html        all of it in one self-contained page (motorlab report)
 
 Re-running a study into the same folder keeps steps that finished with the same
@@ -25,9 +27,17 @@ from typing import Any
 from rich.console import Console
 
 from motorlab.errors import MotorlabError
-from motorlab.recipes import Recipe, Step, refs_in
+from motorlab.recipes import FindingSpec, Recipe, Step, refs_in
 from motorlab.report.html import build_report
 from motorlab.report.plots import comparison_bars
+from motorlab.report.results import (
+    Finding,
+    StepResults,
+    StudyResults,
+    results_text,
+    write_run_results,
+    write_study_results,
+)
 from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import (
     atomic_write_text,
@@ -38,13 +48,23 @@ from motorlab.runs import (
     write_summary,
     write_toml,
 )
-from motorlab.settings import Settings
+from motorlab.settings import Settings, Summary
+from motorlab.stats import iqm_with_ci
 from motorlab.studies.schedule import Overlaps, run_overlapped
 from motorlab.sweeps import backends
 from motorlab.sweeps.trials import trial
 
 STEP_FILE = "recipe_step.toml"  # what the study asked of a step, for resuming
-COLUMNS = ["step", "what", "return (mean ± sd)", "min return", "success", "steps to success", "train s", "notes"]
+COLUMNS = ["step", "what", "results", "setup", "notes"]
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    """What one step gave: its headline (several seeds: aggregated) and each run's summary,
+    labelled by its folder ("seed1") where the step has several."""
+
+    headline: dict[str, Any]
+    runs: list[tuple[str, Summary]]
 
 
 @dataclass(frozen=True)
@@ -125,8 +145,8 @@ def _upstream(step: Step, outputs: _Outputs) -> dict[str, str]:
 
 
 def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, execution: Execution,
-              detached: bool = False, stop: threading.Event | None = None) -> dict[str, Any]:
-    """Run one step (or keep its finished runs); returns its headline numbers.
+              detached: bool = False, stop: threading.Event | None = None) -> _Outcome:
+    """Run one step (or keep its finished runs); returns what it gave.
 
     Args:
         detached: a training step runs as its own process even with one seed (it runs beside
@@ -154,7 +174,11 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
         for d, _ in runs:
             k.figures(d)
     outputs.dirs[step.name] = [d for d, _ in runs]
-    return k.aggregate([k.summary.model_validate(read_json(d / "summary.json")) for d, _ in runs])
+    summaries = [k.summary.model_validate(read_json(d / "summary.json")) for d, _ in runs]
+    for (d, settings), summary in zip(runs, summaries):  # kept runs too: their numbers as this version shows them
+        write_run_results(d, k.results(settings, summary))
+    labels = [d.name if len(runs) > 1 else step.name for d, _ in runs]
+    return _Outcome(k.aggregate(summaries), list(zip(labels, summaries)))
 
 
 def _run_processes(step: Step, todo: list[tuple[Path, Settings]], execution: Execution, console: Console,
@@ -258,13 +282,16 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
                                      "parallel_steps": parallel_steps,
                                      "wall_seconds": round(time.perf_counter() - t0, 2)}
     for name in (s.name for s in recipe.steps):
-        study_summary.update({f"{name}.{k}": v for k, v in results[name].items()})
-    _figures(recipe, results, study_dir)
-    rows = [_cells(s, results[s.name], sorted(overlaps.beside.get(s.name, ()))) for s in recipe.steps]
+        study_summary.update({f"{name}.{k}": v for k, v in results[name].headline.items()})
+    _figures(recipe, {name: r.headline for name, r in results.items()}, study_dir)
+    steps = [_step_results(s, results[s.name].headline, sorted(overlaps.beside.get(s.name, ())),
+                           outputs.dirs[s.name], study_dir) for s in recipe.steps]
+    rows = [[r.step, r.what, results_text(r.numbers), results_text(r.numbers, setup=True), r.note] for r in steps]
     atomic_write_text(study_dir / "table.txt", plain_table(COLUMNS, rows))
+    write_study_results(study_dir, StudyResults(_findings(recipe, results, console), steps))
     write_summary(study_dir, study_summary)
     console.print(rich_table(f"{recipe.name}: {recipe.description}" if recipe.description else recipe.name,
-                             COLUMNS, rows, left=("step", "what", "notes")))
+                             COLUMNS, rows, left=tuple(COLUMNS)))
     build_report([study_dir], study_dir / "report.html")
     study_summary["study_dir"] = str(study_dir)
     return study_summary
@@ -276,20 +303,58 @@ def _progress(step: Step, study_dir: Path) -> tuple[int, int]:
     return sum(d for d, _ in done), sum(t for _, t in done)
 
 
-def _cells(step: Step, headline: dict[str, Any], beside: list[str] = ()) -> list[str]:
-    row = step.kind.row(step.settings, headline)
+def _step_results(step: Step, headline: dict[str, Any], beside: list[str], run_dirs: list[Path],
+                  study_dir: Path) -> StepResults:
+    k = step.kind
+    note = k.notes(step.settings, headline)
     if beside:  # its wall time was shared with these steps
-        row = dataclasses.replace(row, note="; ".join(x for x in (row.note, f"ran beside {', '.join(beside)}") if x))
-    return [step.name, describe(step), *dataclasses.astuple(row)]
+        note = "; ".join(x for x in (note, f"ran beside {', '.join(beside)}") if x)
+    figures = [(d / f).relative_to(study_dir).as_posix() for d in run_dirs[:1] for f in k.key_figures
+               if (d / f).is_file()]  # several seeds: the first one's (the report has every seed's below)
+    return StepResults(step.name, k.name, describe(step), k.numbers(step.settings, headline), note, figures)
+
+
+def _findings(recipe: Recipe, results: dict[str, _Outcome], console: Console) -> list[Finding]:
+    """The numbers the recipe is about (its [[findings]], else each step's own), each with its
+    seeds and, where there are several, rliable's IQM and 95% bootstrap CI across them."""
+    by_name = {s.name: s for s in recipe.steps}
+    specs = recipe.findings or [FindingSpec(step=s.name, key=key) for s in recipe.steps
+                                for key in s.kind.default_findings(s.settings, results[s.name].headline)]
+    findings = []
+    for spec in specs:
+        step, outcome = by_name[spec.step], results[spec.step]
+        if spec.key not in outcome.headline:
+            console.print(f"[yellow]finding {spec.step}.{spec.key}: {spec.step} has no number {spec.key!r}; it has "
+                          f"{', '.join(outcome.headline)}[/yellow]")
+            continue
+        metric = step.kind.metric(spec.key)
+        value = outcome.headline[spec.key]
+        per_seed = step.kind.seed_values(outcome.runs, spec.key)
+        label = spec.label or f"{spec.step}: {metric.label}"
+        finding = Finding(label, spec.step, spec.key, metric.text(value, outcome.headline) if value is not None
+                          else "not reached", value)
+        if len(per_seed) > 1:
+            seeds, values = [s for s, _ in per_seed], [v for _, v in per_seed]
+            shown = [metric.text(v, {}) if v is not None else "not reached" for v in values]
+            iqm = ci = None
+            if all(isinstance(v, (int, float)) for v in values):
+                point, low, high = iqm_with_ci(values)
+                iqm, ci = metric.text(point, {}), f"[{metric.text(low, {})}, {metric.text(high, {})}]"
+            finding = dataclasses.replace(finding, seeds=seeds, values=shown, iqm=iqm, ci=ci)
+        findings.append(finding)
+    return findings
 
 
 def _figures(recipe: Recipe, results: dict[str, dict[str, Any]], study_dir: Path) -> None:
+    """The study's charts, each only where it has something to show: a bar chart whose bars
+    are all missing says nothing (e.g. steps to success where no step aims to solve)."""
     scored = [s.name for s in recipe.steps if s.kind.scored]
-    if scored:
-        comparison_bars(scored, [results[n].get("return_mean") for n in scored], "evaluation return (mean)",
-                        study_dir / "plots" / "returns.png", f"{recipe.name}: return of each step")
-    trained = [s.name for s in recipe.steps if s.kind.trains]
-    if trained:
-        comparison_bars(trained, [results[n].get("steps_to_success") for n in trained], "environment steps",
-                        study_dir / "plots" / "steps_to_success.png", f"{recipe.name}: steps until consistently solved",
-                        steps=True)
+    comparison_bars(scored, [results[n].get("return_mean") for n in scored], "evaluation return (mean)",
+                    study_dir / "plots" / "returns.png", f"{recipe.name}: return of each step",
+                    caption="Mean evaluation return of each step that trains or evaluates a policy "
+                            "(several seeds: the mean over seeds).")
+    solving = [s.name for s in recipe.steps if s.kind.trains and getattr(s.settings, "until_solved", False)]
+    comparison_bars(solving, [results[n].get("steps_to_success") for n in solving], "environment steps",
+                    study_dir / "plots" / "steps_to_success.png", f"{recipe.name}: steps until consistently solved",
+                    steps=True, caption="Environment steps each training needed until its evaluations were "
+                                        "consistently solved (grey: not within its budget).")

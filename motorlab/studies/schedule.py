@@ -23,7 +23,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from motorlab.recipes import Step
 
-RunStep = Callable[[Step, bool, threading.Event], dict[str, Any]]  # (step, in the background, stop) -> headline
+RunStep = Callable[[Step, bool, threading.Event], Any]  # (step, in the background, stop) -> what it found
 ProgressOf = Callable[[Step], tuple[int, int]]  # (done, total) of a training step
 
 
@@ -31,7 +31,7 @@ ProgressOf = Callable[[Step], tuple[int, int]]  # (done, total) of a training st
 class _Job:
     step: Step
     thread: threading.Thread | None = None
-    result: dict[str, Any] | None = None
+    result: Any = None
     error: BaseException | None = None
     t0: float = field(default_factory=time.perf_counter)
 
@@ -54,7 +54,7 @@ class Overlaps:
 
 def run_overlapped(steps: list[Step], run: RunStep, limit: int, console: Console, progress_of: ProgressOf,
                    describe: Callable[[Step], str], finish: Callable[[Step], Any] = lambda step: None
-                   ) -> tuple[dict[str, dict[str, Any]], Overlaps]:
+                   ) -> tuple[dict[str, Any], Overlaps]:
     """Run `steps` (in recipe order where they are ready), train steps in the background.
 
     `finish(step)` runs in this thread once a background step is done: work that must not run
@@ -67,7 +67,7 @@ def run_overlapped(steps: list[Step], run: RunStep, limit: int, console: Console
         Whatever a step raised (the first failure); Ctrl-C. Either way the background
         trainings are stopped first, as Ctrl-C would stop them, so they can resume.
     """
-    results: dict[str, dict[str, Any]] = {}
+    results: dict[str, Any] = {}
     overlaps = Overlaps()
     pending = list(steps)
     background: list[_Job] = []

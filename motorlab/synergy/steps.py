@@ -11,8 +11,9 @@ from pydantic import Field
 from rich.console import Console
 
 from motorlab.errors import MotorlabError
+from motorlab.report.results import Metric, Number
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Artifact, Ref, Row, StepKind
+from motorlab.stepkind import Artifact, Ref, StepKind
 from motorlab.synergy.collect import ACTIVATIONS, collect, load_activations, save_activations
 from motorlab.synergy.sar import fit_sar, save_sar, smallest_n, vaf_curve
 
@@ -57,8 +58,15 @@ class CollectKind(StepKind[CollectSettings, CollectSummary]):
 
     name = "collect"
     what = "collect {episodes} episodes from {run} (≥ {percentile:g}th pct.)"
-    note = "kept {episodes_kept} episodes, {samples:,} samples x {n_muscles} muscles"
-    headline_keys = ("samples", "n_muscles", "episodes_kept", "threshold", "kept_success_rate")
+    headline_keys = ("samples", "n_muscles", "episodes_kept", "episodes_requested", "episodes_tried", "threshold",
+                     "kept_return_mean", "kept_success_rate")
+    metrics = (Metric("episodes_kept", "episodes kept", "count", of="episodes_requested"),
+               Metric("samples", "samples", "count"),
+               Metric("n_muscles", "muscles", "count"),
+               Metric("threshold", "return threshold", "return"),
+               Metric("kept_return_mean", "kept episodes' return", "return"),
+               Metric("kept_success_rate", "kept episodes' success", "percent"),
+               Metric("episodes_tried", "episodes run", "count", setup=True))
     command = "synergies collect"
     refs = (Ref("run", ("policy",)),)
     provides = Artifact("activations", ACTIVATIONS)
@@ -111,7 +119,9 @@ class VafKind(StepKind[VafSettings, VafSummary]):
 
     name = "vaf"
     what = "VAF of {activations} ({method})"
+    key_figures = ("vaf.png",)
     headline_keys = ("n_for_threshold", "threshold", "n_muscles")
+    metrics = (Metric("n_muscles", "muscles", "count"),)
     command = "synergies vaf"
     refs = (Ref("activations", ("activations",)),)
 
@@ -132,10 +142,13 @@ class VafKind(StepKind[VafSettings, VafSummary]):
                              threshold=settings.threshold, n_for_threshold=n_needed, vaf=[float(v) for v in curve])
         return self.finish(run_dir, settings, summary)
 
-    def row(self, settings: VafSettings, h: dict[str, Any]) -> Row:
+    def numbers(self, settings: VafSettings, h: dict[str, Any]) -> list[Number]:
         n = h["n_for_threshold"]
-        return Row(note=f"N = {n} reaches VAF {h['threshold']:.0%}" if n else
-                   f"no N reaches VAF {h['threshold']:.0%}")
+        label = f"synergies for VAF ≥ {h['threshold']:.0%}"
+        return [Number("n_for_threshold", label, n, f"{n}" if n else "none reaches it"), *super().numbers(settings, h)]
+
+    def metric(self, key: str) -> Metric:
+        return Metric(key, "synergies for the VAF threshold", "count") if key == "n_for_threshold" else super().metric(key)
 
 
 VAF = VafKind()
@@ -167,8 +180,11 @@ class FitKind(StepKind[FitSettings, FitSummary]):
     """Fit a Synergistic Action Representation; writes sar.npz (plain arrays + JSON metadata, no pickle)."""
 
     name = "fit"
-    note = "{n_synergies} synergies, VAF {vaf:.1%}"
     headline_keys = ("n_synergies", "n_muscles", "vaf")
+    metrics = (Metric("n_synergies", "synergies", "count"),
+               Metric("vaf", "VAF", "percent"),
+               Metric("n_muscles", "muscles", "count"))
+    findings = ("n_synergies", "vaf")
     command = "synergies fit"
     refs = (Ref("activations", ("activations",)),)
     provides = Artifact("sar", SAR_FILE)

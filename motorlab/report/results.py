@@ -1,0 +1,208 @@
+"""What a run or a study found, as people read it: labelled numbers with units, and a study's findings.
+
+A step kind names its headline numbers as `Metric`s (summary key, label, unit). A finished run
+gets `results.json` beside its summary.json: those numbers formatted (`Number`). A study's
+`results.json` holds its findings (the few numbers the recipe is about, with seeds, IQM and CI)
+and each step's numbers. `table.txt` and `report.html` show these; summary.json keeps every
+number for programs.
+
+These files are written by the code that knows the kinds (motorlab.stepkind, the studies
+runner) and read by the report, which knows no kind: a report of old folders without them
+falls back to their summary.json.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from motorlab.runs import atomic_write_text
+
+RESULTS = "results.json"
+
+Form = Literal["number", "return", "percent", "steps", "count", "mm", "ms", "s", "text"]
+
+
+def show(value: Any, form: Form = "number") -> str:
+    """A value as a reader expects it: 20% (not 0.2), 12,288 steps, 4.2 mm, 3.1 ms."""
+    if value is None:
+        return "–"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if form == "text" or isinstance(value, str):
+        return str(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    match form:
+        case "percent":
+            return f"{value:.0%}" if value in (0, 1) or abs(value - round(value, 2)) < 5e-4 else f"{value:.1%}"
+        case "steps":
+            return f"{value / 1e6:.3g}M steps" if abs(value) >= 1e6 else f"{value:,.0f} steps"
+        case "count":
+            return f"{value:,.0f}"
+        case "return":
+            return f"{value:,.1f}"
+        case "mm":
+            return f"{value:,.1f} mm"
+        case "ms":
+            return f"{value:,.2f} ms" if abs(value) < 10 else f"{value:,.0f} ms"
+        case "s":
+            return f"{value:,.1f} s"
+    if isinstance(value, int):
+        return f"{value:,}"
+    return f"{value:,.4g}" if abs(value) >= 1e-3 or value == 0 else f"{value:.2e}"
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One headline number of a step kind.
+
+    Attributes:
+        key: its key in the step's headline (and "<step>.<key>" in a study's summary.json).
+        label: what a reader calls it ("success", "final distance").
+        form: how it is shown (unit and format, see `show`).
+        scale: multiplies the value before it is shown (metres -> mm: 1000).
+        spread: the key of its ± (standard deviation), shown after it.
+        of: the key of the total it counts out of ("falls 2/10").
+        setup: a budget or setting (seeds, env steps, seconds), not a result: reports show it apart.
+    """
+
+    key: str
+    label: str
+    form: Form = "number"
+    scale: float = 1.0
+    spread: str | None = None
+    of: str | None = None
+    setup: bool = False
+
+    def text(self, value: Any, values: dict[str, Any]) -> str:
+        scaled = value * self.scale if self.scale != 1 and _numeric(value) else value
+        out = show(scaled, self.form)
+        if self.spread and _numeric(values.get(self.spread)):  # "12.3 ± 2.0 mm": the unit once, at the end
+            number, _, unit = out.partition(" ")
+            spread = show(values[self.spread] * self.scale, self.form).partition(" ")[0]
+            out = f"{number} ± {spread}" + (f" {unit}" if unit else "")
+        if self.of and values.get(self.of) is not None:
+            out = f"{out}/{show(values[self.of], 'count')}"
+        return out
+
+    def number(self, values: dict[str, Any], label: str | None = None) -> Number | None:
+        """The number as shown, from a headline (None where the headline has no value for it)."""
+        value = values.get(self.key)
+        if value is None:
+            return None
+        return Number(self.key, label or self.label, value, self.text(value, values), self.setup)
+
+
+def _numeric(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+@dataclass(frozen=True)
+class Number:
+    """A headline number as shown: `text` is `value` in its unit and format."""
+
+    key: str
+    label: str
+    value: Any
+    text: str
+    setup: bool = False
+
+    @property
+    def numeric(self) -> bool:
+        return _numeric(self.value)
+
+
+@dataclass(frozen=True)
+class RunResults:
+    """results.json of a run folder: the kind that wrote it and its headline numbers."""
+
+    kind: str
+    numbers: list[Number]
+
+
+@dataclass(frozen=True)
+class StepResults:
+    """One step of a study: what it did and its numbers (several seeds: aggregated)."""
+
+    step: str
+    kind: str
+    what: str
+    numbers: list[Number]
+    note: str = ""
+    figures: list[str] = field(default_factory=list)  # its key figures, relative to the study folder
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One number a study is about: the value (a single run's, or the mean over seeds) and, with
+    several seeds, each seed's value and rliable's IQM with its 95% bootstrap CI."""
+
+    label: str
+    step: str
+    key: str
+    text: str
+    value: Any
+    seeds: list[str] = field(default_factory=list)
+    values: list[Any] = field(default_factory=list)
+    iqm: str | None = None
+    ci: str | None = None
+
+    @property
+    def spread_text(self) -> str:
+        """The seeds' values, e.g. "seed0 80%, seed1 60%"."""
+        return ", ".join(f"{s} {v}" for s, v in zip(self.seeds, self.values))
+
+
+@dataclass(frozen=True)
+class StudyResults:
+    """results.json of a study folder."""
+
+    findings: list[Finding]
+    steps: list[StepResults]
+
+
+def _numbers(rows: list[dict[str, Any]]) -> list[Number]:
+    return [Number(**r) for r in rows]
+
+
+def write_run_results(run_dir: Path, results: RunResults) -> None:
+    atomic_write_text(Path(run_dir) / RESULTS, json.dumps(asdict(results), indent=1, default=str) + "\n")
+
+
+def write_study_results(study_dir: Path, results: StudyResults) -> None:
+    atomic_write_text(Path(study_dir) / RESULTS, json.dumps(asdict(results), indent=1, default=str) + "\n")
+
+
+def _load(path: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def read_run_results(run_dir: Path) -> RunResults | None:
+    """A run's results.json (None where it has none: older folders, or one that does not parse)."""
+    data = _load(Path(run_dir) / RESULTS)
+    try:
+        return RunResults(data["kind"], _numbers(data["numbers"])) if data else None
+    except (KeyError, TypeError):
+        return None
+
+
+def read_study_results(study_dir: Path) -> StudyResults | None:
+    data = _load(Path(study_dir) / RESULTS)
+    try:
+        return StudyResults([Finding(**f) for f in data["findings"]],
+                            [StepResults(**{**s, "numbers": _numbers(s["numbers"])}) for s in data["steps"]]
+                            ) if data else None
+    except (KeyError, TypeError):
+        return None
+
+
+def results_text(numbers: list[Number], setup: bool = False) -> str:
+    """Numbers on one line, as table.txt shows them: "return 950.0 ± 12.3, success 80%"."""
+    return ", ".join(f"{n.label} {n.text}" for n in numbers if n.setup == setup)
