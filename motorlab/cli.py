@@ -43,6 +43,7 @@ from motorlab.runs import is_complete, read_text_file  # noqa: E402
 from motorlab.settings import Settings, help_text  # noqa: E402
 from motorlab.stepkind import StepKind  # noqa: E402
 from motorlab.synergy.steps import COLLECT, FIT, VAF  # noqa: E402
+from motorlab.user_modules import import_modules  # noqa: E402
 
 app = typer.Typer(
     name="motorlab",
@@ -50,7 +51,10 @@ app = typer.Typer(
         "Learn motor control of simulated bodies in MuJoCo.\n\n"
         "Each command is one step; it writes a run folder (--out, default runs/<step>-<time>) with "
         "config.toml, summary.json, metrics.csv, tensorboard/ and plots/.\n\n"
-        "Start here:  motorlab run pendulum   (the robust-pendulum study, a few minutes)"
+        "Start here:  motorlab run pendulum   (the robust-pendulum study, a few minutes)\n\n"
+        "Your own env: any command takes Gymnasium's MODULE:ID form (motorlab train mypkg.envs:MyArm-v0), "
+        "or --import MODULE (repeatable, anywhere on the line) for a module that registers several ids; "
+        "run folders record the modules, so later commands on them import them again."
     ),
     no_args_is_help=True,
     add_completion=False,
@@ -657,6 +661,7 @@ def main() -> None:
     caught here too, instead of in Click's standalone mode, which prints them in a box under
     the usage text: every mistake reads the same, `error: ...` on one line, exit status 2."""
     try:
+        import_modules(_take_imports(sys.argv), "given with --import")
         code = app(standalone_mode=False, prog_name="motorlab")
     except typer.TyperException as e:  # Click's exceptions (typer vendors Click; this is their public base)
         if type(e).__name__ == "NoArgsIsHelpError":
@@ -672,6 +677,30 @@ def main() -> None:
     if code == 130:  # typer turns Ctrl-C into exit code 130
         _interrupted()
     sys.exit(code if isinstance(code, int) else 0)
+
+
+def _take_imports(argv: list[str]) -> list[str]:
+    """Remove every `--import MODULE` (or `--import=MODULE`) from argv, wherever it stands, and return the
+    modules: `--import` works the same before or after any command (see the app's help)."""
+    modules, rest, i = [], [argv[0]], 1
+    while i < len(argv):
+        a = argv[i]
+        if a == "--":
+            rest += argv[i:]
+            break
+        if a == "--import":
+            if i + 1 == len(argv):
+                raise MotorlabError("--import needs a module name, e.g. --import mypkg.envs.")
+            modules.append(argv[i + 1])
+            i += 2
+            continue
+        if a.startswith("--import="):
+            modules.append(a.split("=", 1)[1])
+        else:
+            rest.append(a)
+        i += 1
+    argv[:] = rest
+    return modules
 
 
 def _error(message: str, code: int = 2) -> None:

@@ -2,6 +2,7 @@
 
     name = "pendulum"
     description = "..."
+    imports = ["mypkg.envs"]   # optional: your modules that register env ids (or env = "mypkg.envs:MyArm-v0")
     parallel_steps = 2         # optional: training steps that need nothing from each other run at once,
                                # each its own process, at most 2 (default 1: one step after another)
 
@@ -48,6 +49,7 @@ from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.kinds import DEFAULT_KIND, KINDS, kind, providers
 from motorlab.settings import Settings
 from motorlab.stepkind import StepKind
+from motorlab.user_modules import import_modules
 
 SEEDS = "seeds"  # a training step's field: run it once per seed
 
@@ -95,6 +97,7 @@ class _RecipeFile(BaseModel):
     description: str = ""
     seeds: int | list[int] | None = None  # every training step that sets none: seeds 0..N-1 (or this list)
     parallel_steps: int = Field(1, ge=1)  # training steps that need nothing from each other, run at once
+    imports: list[str] = Field(default_factory=list)  # the user's modules that register its envs
     defaults: dict[str, Any] = Field(default_factory=dict)
     steps: list[dict[str, Any]] = Field(min_length=1)
     findings: list[FindingSpec] = Field(default_factory=list)  # default: each step's own (see StepKind.findings)
@@ -223,6 +226,7 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
         raw = _RecipeFile.model_validate(data)
     except ValidationError as e:
         raise MotorlabError(_explain(e, source, set(_RecipeFile.model_fields))) from None
+    import_modules(raw.imports, f"{source}: imports")  # before the steps are checked: they register the envs
     all_fields = set().union(*(fields_of(k) for k in KINDS.values()))
     unknown_defaults = [k for k in raw.defaults if k not in all_fields]
     if unknown_defaults:

@@ -24,6 +24,7 @@ import tomli_w
 
 from motorlab.environment import describe
 from motorlab.errors import MotorlabError
+from motorlab.user_modules import imported_names, remember
 
 SUMMARY = "summary.json"
 CONFIG = "config.toml"
@@ -127,9 +128,20 @@ def _config_toml(config: dict[str, Any]) -> str:
 
 
 def write_config(run_dir: Path, config: dict[str, Any]) -> None:
-    """Resolved settings as config.toml, and what they ran on as environment.json."""
+    """Resolved settings as config.toml, and what they ran on as environment.json (with the
+    user's modules that registered its envs: a fresh process reading the folder imports them)."""
     write_toml(Path(run_dir) / CONFIG, config)
-    write_json(Path(run_dir) / ENVIRONMENT, describe())
+    write_json(Path(run_dir) / ENVIRONMENT, {**describe(), "imports": imported_names()})
+
+
+def recall_imports(run_dir: Path) -> None:
+    """Pass on the user modules a run folder's environment.json recorded: the next env built
+    (here or in a worker) imports them, as the run did."""
+    try:
+        recorded = json.loads((Path(run_dir) / ENVIRONMENT).read_text()).get("imports") or []
+    except (OSError, ValueError, AttributeError):
+        return  # older folders, or none: their envs need no module of the user's
+    remember(recorded if isinstance(recorded, list) else [])
 
 
 def finished_with(run_dir: Path, config: dict[str, Any], filename: str = CONFIG) -> bool:
@@ -194,6 +206,7 @@ def require_run_dir(path: Path) -> Path:
         raise MotorlabError(
             f"{path} has no {SUMMARY}: the run did not finish (or this is not a run folder); re-run it."
         )
+    recall_imports(path)
     return path
 
 

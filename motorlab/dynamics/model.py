@@ -20,7 +20,7 @@ from torch.nn import functional as F
 
 from motorlab.dynamics.transitions import check_meta
 from motorlab.errors import MotorlabError
-from motorlab.runs import atomic_write_bytes, read_json, write_json
+from motorlab.runs import atomic_write_bytes, read_json, recall_imports, write_json
 
 MODEL_JSON = "model.json"
 MODEL_WEIGHTS = "model.safetensors"
@@ -272,6 +272,7 @@ def load_model(path: Path, env_id: str | None = None, state_layout: str | None =
     if not (folder / MODEL_JSON).is_file():
         raise MotorlabError(f"{folder / MODEL_JSON} is missing; pass a folder written by `motorlab dynamics fit`.")
     meta = read_json(folder / MODEL_JSON)
+    recall_imports(folder)  # a model of a user's env: its module, for the env the model is checked or planned on
     try:
         if meta.get("format") != FORMAT:
             raise KeyError("format")

@@ -23,6 +23,14 @@ from motorlab.envs.wrappers import DelayOn, LowPassDelay, NumericalGuard, Reward
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.extras import missing
 from motorlab.settings import Settings
+from motorlab.user_modules import (
+    import_inherited,
+    import_modules,
+    registered_by,
+    remember_home,
+    split_env_id,
+    user_env_ids,
+)
 
 __all__ = ["EnvConfig", "EnvSettings", "ENV_KEYS", "make_env", "check_env_id", "max_return", "env_dt", "LowPassDelay", "RewardShaping",
            "delay_alpha", "register_myosuite"]
@@ -128,11 +136,24 @@ def register_myosuite() -> bool:
 def check_env_id(env_id: str) -> None:
     """Raise a clear error for an env id Gymnasium does not know, with close matches.
 
-    MyoSuite ids (`myo...`) are registered on first use; without MyoSuite installed
-    they get a message saying how to install it.
+    A "module:EnvId" id imports the module first (Gymnasium's convention: the import registers
+    the id), as do the modules given with --import or a recipe's `imports`. MyoSuite ids
+    (`myo...`) are registered on first use; without MyoSuite installed they get a message
+    saying how to install it.
     """
+    import_inherited()
+    module, name = split_env_id(env_id)
+    if module is not None:
+        import_modules([module], f"for env {env_id}")
+        if name not in gym.registry:
+            ids = registered_by(module)
+            raise MotorlabError(f"module {module!r} registers no env {name!r}; it registers "
+                                f"{', '.join(ids) if ids else 'no env at all'}.")
+        return
     if is_upkie(env_id):
         register_upkie()  # clear message when upkie or pybullet is missing
+    if env_id in gym.registry:
+        remember_home(gym.registry[env_id])
     if env_id not in gym.registry:
         installed = register_myosuite()
         if env_id in gym.registry:
@@ -141,8 +162,34 @@ def check_env_id(env_id: str) -> None:
             raise missing(f"{env_id} needs MyoSuite", "myosuite")
         raise MotorlabError(
             f"unknown env id {env_id!r}{did_you_mean(env_id, gym.registry.keys())}; "
-            "`python -c \"import gymnasium; gymnasium.pprint_registry()\"` lists the ids."
+            "`python -c \"import gymnasium; gymnasium.pprint_registry()\"` lists the ids; an env of your own: "
+            "give MODULE:ID (e.g. mypkg.envs:MyArm-v0) or --import MODULE."
         )
+
+
+_checked: set[str] = set()  # user env ids Gymnasium's checker passed in this process
+
+
+def check_user_env(env: gym.Env, env_id: str) -> None:
+    """Gymnasium's env checker, once per process, on an env a user's module registered: spaces,
+    reset and step signatures, observations inside their space, seeding. A rejected env stops
+    here with the checker's message instead of deep inside training.
+
+    Raises:
+        MotorlabError: the checker's first complaint.
+    """
+    if env_id in _checked:
+        return
+    from gymnasium.utils.env_checker import check_env
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # its advice (float32, bounds) is not an error
+            check_env(env.unwrapped, skip_render_check=True)
+    except Exception as e:  # the checker asserts, and the env's own code may raise anything
+        message = " ".join(str(e).split()) or type(e).__name__
+        raise MotorlabError(f"{env_id}: Gymnasium's env checker rejects it: {message}") from None
+    _checked.add(env_id)
 
 
 def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None, **kwargs: Any) -> gym.Env:
@@ -157,15 +204,20 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
         MotorlabError: unknown id, bad delay, unknown reward.
     """
     check_env_id(cfg.id)
+    name = split_env_id(cfg.id)[1]
     if is_upkie(cfg.id):
         env = make_upkie(cfg.id, render_mode, **{**cfg.kwargs, **kwargs})
     else:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # -v4 deprecation notices are noise here
             try:
-                env = gym.make(cfg.id, render_mode=render_mode, **cfg.kwargs, **kwargs)
+                # render_mode only when asked: a user's env need not take the argument
+                rendering = {"render_mode": render_mode} if render_mode is not None else {}
+                env = gym.make(name, **rendering, **cfg.kwargs, **kwargs)
             except TypeError as e:  # an env argument it does not take
                 raise MotorlabError(f"{cfg.id} does not take these settings: {e}.") from None
+        if name in user_env_ids():
+            check_user_env(env, cfg.id)
     env = NumericalGuard(env)
     if shaped and cfg.reward and cfg.reward != "task":
         env = RewardShaping(env, resolve_reward(cfg.reward), name=cfg.reward)
@@ -206,7 +258,7 @@ def max_return(env_id: str) -> float | None:
     otherwise the env's registered reward threshold, else None.
     """
     check_env_id(env_id)
-    spec = gym.spec(env_id)
+    spec = gym.spec(split_env_id(env_id)[1])
     if env_id.startswith(_ALIVE_REWARD_PREFIXES) and spec.max_episode_steps:
         return float(spec.max_episode_steps)
     return float(spec.reward_threshold) if spec.reward_threshold is not None else None

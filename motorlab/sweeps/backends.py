@@ -22,6 +22,7 @@ from typing import Any, Callable
 
 from motorlab.errors import MotorlabError
 from motorlab.sweeps.trials import launch_argv, mark_finished, mark_started
+from motorlab.user_modules import ENV_VAR, imported_names
 
 OnDone = Callable[[dict[str, Any], int, float], None]  # (trial, exit status, seconds)
 
@@ -171,11 +172,16 @@ def run_ray(trials: list[dict[str, Any]], address: str | None, max_parallel: int
         raise MotorlabError("the ray backend needs Ray Tune, which is not installed: pip install 'motorlab[ray]' "
                             "(or: pip install 'ray[tune]==2.60.0')") from None
 
+    # the user's env modules (--import, MODULE:ID, a recipe's imports) reach the workers' trial processes,
+    # on this machine and on a cluster's other nodes (where the modules must be installed too)
+    modules = imported_names()
+    runtime_env = {"env_vars": {ENV_VAR: ",".join(modules)}} if modules else None
     try:
         if address:
-            ray.init(address=address, logging_level="ERROR", log_to_driver=False)
+            ray.init(address=address, logging_level="ERROR", log_to_driver=False, runtime_env=runtime_env)
         else:
-            ray.init(num_cpus=os.cpu_count(), include_dashboard=False, logging_level="ERROR", log_to_driver=False)
+            ray.init(num_cpus=os.cpu_count(), include_dashboard=False, logging_level="ERROR", log_to_driver=False,
+                     runtime_env=runtime_env)
     except (ConnectionError, RuntimeError, ValueError) as e:
         raise MotorlabError(f"cannot reach a Ray cluster at {address}: {str(e).splitlines()[0]} "
                             "Start one with `ray start --head` or check --address (HOST:PORT).") from None
