@@ -16,7 +16,7 @@ from motorlab.kinds import KINDS
 PACKAGE = Path(motorlab.__file__).parent
 CLI, STUDIES, KIND_REGISTRY, STEP_KINDS, DOMAIN, GROUND = 5, 4, 3, 2, 1, 0
 GROUND_FLOOR = {"motorlab.runs", "motorlab.errors", "motorlab.faults", "motorlab.environment", "motorlab.extras",
-                "motorlab.settings", "motorlab"}
+                "motorlab.settings", "motorlab.user_modules", "motorlab"}
 
 
 def layer(module: str) -> int:
