@@ -61,7 +61,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     rich_markup_mode="rich",
 )
-synergies = typer.Typer(help="Muscle synergies: collect activations, VAF, fit or import a SAR.",
+synergies = typer.Typer(help="Synergies of muscles or motor commands: collect, VAF, fit, import or export a SAR.",
                         no_args_is_help=True, rich_markup_mode="rich")
 app.add_typer(synergies, name="synergies")
 dynamics = typer.Typer(help="Forward models: collect transitions, fit a model, check it against the simulator.",
@@ -431,20 +431,49 @@ def synergies_fit(s, settings) -> None:
     stdout.print(f"{s.n_synergies} synergies ({s.method}) for {s.n_muscles} muscles, VAF {s.vaf:.1%} -> {s.sar}")
 
 
-@synergies.command("import-sklearn", epilog="Example:\n\n  motorlab synergies import-sklearn "
-                                            "published/manipulation --trust --out sar-hand.npz")
+@synergies.command("import-sklearn", help=(
+    "Convert a published scikit-learn SAR (joblib pickles) to sar.npz, checked against sklearn's own inverse chain."
+    "\n\nWhitening, the scaler's range and MyoSuite 3.0's scaler margin are kept exactly: the sar.npz decodes "
+    "every synergy vector as pca.inverse_transform(ica.inverse_transform(scaler.inverse_transform(z))) does. "
+    "Nothing is unpickled without --trust."), epilog=(
+    "Examples:\n\n  motorlab synergies import-sklearn published/manipulation --trust --out sar-hand.npz\n\n"
+    "  motorlab synergies import-sklearn my_synergy_model --trust --out sar.npz  # MyoSuite 3.0"))
 def synergies_import(
-    folder: Annotated[Path, typer.Argument(help="Folder with pca.pkl, ica.pkl, normalizer.pkl (joblib).")],
+    folder: Annotated[Path, typer.Argument(help="A MyoSuite 2.x tutorial SAR (pca.pkl, ica.pkl, normalizer.pkl) or a "
+                                                "MyoSuite 3.0 SynergyModel folder (pca.pkl, ica.pkl, scaler.pkl, "
+                                                "metadata.npz); the layout is detected.")],
     out: Annotated[Path, typer.Option("--out", help="The sar.npz to write.")],
     trust: Annotated[bool, typer.Option("--trust", help="Allow unpickling these files (they can run code).")] = False,
 ):
-    """Convert a published scikit-learn SAR (joblib pickles) to sar.npz, checked against sklearn's own inverse chain."""
+    """Convert a published scikit-learn SAR (either MyoSuite layout) to sar.npz."""
     from motorlab.synergy.sklearn_import import import_sklearn
 
     sar = import_sklearn(folder, trust=trust, out=out)
     err_max = sar.metadata.get("import_check_max_abs_error")
     stdout.print(f"{sar.n_synergies} synergies x {sar.n_muscles} muscles -> {out}"
                  + (f" (decode matches scikit-learn, max abs error {err_max:.1e})" if err_max is not None else ""))
+
+
+@synergies.command("export-sklearn", help=(
+    "Write a SAR as a MyoSuite 3.0 SynergyModel folder, for MyoSuite's load_synergy_model."
+    "\n\nThe folder holds fitted scikit-learn PCA, FastICA and MinMaxScaler (joblib) whose inverse chain equals "
+    "motorlab's decode; it is checked on random synergy vectors before the folder appears. The scaler keeps the "
+    "SAR's synergy range (-1 to 1 for `synergies fit`, 0 to 1 in MyoSuite's own fits)."
+    "\n\npca-ica, pca and imported SARs export; nmf SARs cannot (NMF is not a PCA -> ICA chain). "
+    "Needs MyoSuite: pip install 'motorlab\\[myosuite]'."), epilog=(
+    "Example:\n\n  motorlab synergies export-sklearn runs/fit/sar.npz --out sar-myosuite\n\n"
+    "  then in MyoSuite (sar_extraction): load_synergy_model('sar-myosuite')"))
+def synergies_export(
+    sar: Annotated[Path, typer.Argument(help="The sar.npz to export (from `synergies fit` or `import-sklearn`).")],
+    out: Annotated[Path, typer.Option("--out", help="New folder for pca.pkl, ica.pkl, scaler.pkl, metadata.npz "
+                                                    "(it must not exist, or be empty).")],
+):
+    """Write a SAR as a MyoSuite 3.0 SynergyModel folder (joblib pickles), checked against motorlab's decode."""
+    from motorlab.synergy.sklearn_export import export_sklearn
+
+    result = export_sklearn(sar, out)
+    stdout.print(f"{result.n_synergies} synergies x {result.n_muscles} muscles -> {out} (MyoSuite's chain matches "
+                 f"motorlab's decode, max abs error {result.max_abs_error:.1e})")
 
 
 # ---- dynamics and MPC -------------------------------------------------------------------------

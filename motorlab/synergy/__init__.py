@@ -1,4 +1,4 @@
-"""Muscle synergies: collect activations, measure VAF, fit or import a SAR, act in synergy space.
+"""Muscle synergies: collect activations, measure VAF, fit, import or export a SAR, act in synergy space.
 
     from motorlab.synergy import collect, load_sar, fit_sar, SynergyActionWrapper
 """
@@ -13,6 +13,7 @@ _LAZY = {
     "SAR": "motorlab.synergy.sar", "fit_sar": "motorlab.synergy.sar", "load_sar": "motorlab.synergy.sar",
     "save_sar": "motorlab.synergy.sar", "vaf_curve": "motorlab.synergy.sar",
     "import_sklearn": "motorlab.synergy.sklearn_import",
+    "export_sklearn": "motorlab.synergy.sklearn_export",
     "SynergyActionWrapper": "motorlab.synergy.wrapper",
 }
 __all__ = ["collect", *_LAZY]
