@@ -51,6 +51,7 @@ bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/sar_decode.py
 	$(VENV)/bin/python benchmarks/sar_study.py
 	$(VENV)/bin/python benchmarks/sar_study_overlap.py
+	$(VENV)/bin/python benchmarks/sar_robot.py
 	$(VENV)/bin/python benchmarks/dynamics_collect.py
 	$(VENV)/bin/python benchmarks/dynamics_fit.py
 	$(VENV)/bin/python benchmarks/mpc.py

@@ -405,8 +405,9 @@ def compare(
 @kind_command(COLLECT, "run", flags={"deterministic": ("--deterministic/--stochastic",)},
               epilog="Example:\n\n  motorlab synergies collect runs/play --episodes 1000 --percentile 80 --preview 100")
 def synergies_collect(s, settings) -> None:
+    what = {"act": "muscle activations", "ctrl": "actuator controls", "action": "action elements"}[s.signal]
     stdout.print(f"kept {s.episodes_kept} episodes (return >= {s.threshold:.3g}), {s.samples:,} samples "
-                 f"x {s.n_muscles} muscles -> {s.run_dir}/activations.npz")
+                 f"x {s.n_signals} {what} ({s.signal}) -> {s.run_dir}/activations.npz")
     _warn_faults(s)
 
 

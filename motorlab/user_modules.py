@@ -78,22 +78,15 @@ def remember(names: list[str]) -> None:
             _pass_on(name)
 
 
-# Packages whose envs motorlab registers itself: their ids need no module of the user's.
-_OWN = ("gymnasium", "myosuite", "upkie", "motorlab", "mujoco")
+# A module the user imported themselves (in Python, before calling motorlab) is not passed on:
+# it may be importable only there (a script's folder, a test file). Name it with MODULE:ID or
+# import_modules([...]) for child processes and run folders to know it.
 
 
 def _home(spec) -> str:
     """The module an env spec's entry point lives in."""
     entry = spec.entry_point
     return entry.partition(":")[0] if isinstance(entry, str) else getattr(entry, "__module__", "")
-
-
-def remember_home(spec) -> None:
-    """Pass on the user's module an env lives in, when the user imported it themselves (the
-    Python API: `import mypkg.envs` then motorlab.train): its run folders record it too."""
-    home = _home(spec)
-    if home and home.split(".")[0] not in _OWN and home != "__main__":
-        remember([home])
 
 
 def registered_by(module: str) -> list[str]:

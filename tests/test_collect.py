@@ -168,9 +168,20 @@ def test_no_episode_reaching_the_threshold_is_an_error(hand_play_run, tmp_path, 
 # ---- user mistakes ---------------------------------------------------------------------
 
 def test_env_without_muscles(ppo_run, tmp_path):
-    with pytest.raises(MotorlabError, match=r"data\.act"):
-        collect(ppo_run, episodes=2, preview=2, workers=1, out=tmp_path / "out", progress=False)
+    # muscle activations asked for by name; `auto` records the pendulum's controls instead
+    # (tests/test_synergy_signals.py)
+    with pytest.raises(MotorlabError, match=r"data\.act.*--signal ctrl"):
+        collect(ppo_run, episodes=2, preview=2, workers=1, signal="act", out=tmp_path / "out", progress=False)
     assert not (tmp_path / "out").exists()
+
+
+def test_hand_activations_say_they_are_muscle_activations(hand_activations):
+    d = load(hand_activations)
+    assert str(d["signal"]) == "act" and json.loads(str(d["metadata"]))["signal"] == "act"
+    np.testing.assert_array_equal(d["low"], np.zeros(HAND_MUSCLES))
+    np.testing.assert_array_equal(d["high"], np.ones(HAND_MUSCLES))
+    s = read_summary(hand_activations.parent)
+    assert s["signal"] == "act" and s["n_signals"] == s["n_muscles"] == HAND_MUSCLES
 
 
 @pytest.mark.parametrize("kwargs, fragment", [

@@ -71,6 +71,22 @@ def test_import_flag_and_folders_that_remember_it(tmp_path):
     assert read_summary(tmp_path / "transitions")["transitions"] == 8 * 100
 
 
+def test_synergies_of_the_arms_motor_commands_and_sar_training(arm_run, tmp_path):
+    """Collect (from the folder, fresh processes), fit and train in the synergy space of a body
+    without muscles: the signal is the actuator commands."""
+    assert_ok(run_cli("synergies", "collect", arm_run, "--episodes", "6", "--preview", "4", "--workers", "2",
+                      "--out", tmp_path / "commands"))
+    collected = read_summary(tmp_path / "commands")
+    assert collected["signal"] == "ctrl" and collected["n_signals"] == 3 and collected["samples"] == 600
+    assert_ok(run_cli("synergies", "fit", tmp_path / "commands", "--n-synergies", "2", "--out", tmp_path / "sar"))
+    assert_ok(run_cli("train", "ArmReachHeavy-v0", "--import", "userpkg.arm", "--sar", tmp_path / "sar" / "sar.npz",
+                      *TINY_PPO, "--out", tmp_path / "sar-rl", "--no-progress"))
+    trained = read_summary(tmp_path / "sar-rl")
+    assert trained["timesteps"] == 256 and trained["eval_episode_length_mean"] == 100
+    policy = json.loads((tmp_path / "sar-rl" / "policy.json").read_text())
+    assert policy["action_space"]["shape"] == [2]  # the policy acts in the 2 synergies of the arm's 3 motors
+
+
 def test_errors_name_the_module_and_what_went_wrong(tmp_path):
     out = tmp_path / "x"
     assert_one_line_error(run_cli("train", "nopkg.envs:Arm-v0", "--out", out),

@@ -27,7 +27,6 @@ from motorlab.user_modules import (
     import_inherited,
     import_modules,
     registered_by,
-    remember_home,
     split_env_id,
     user_env_ids,
 )
@@ -152,8 +151,6 @@ def check_env_id(env_id: str) -> None:
         return
     if is_upkie(env_id):
         register_upkie()  # clear message when upkie or pybullet is missing
-    if env_id in gym.registry:
-        remember_home(gym.registry[env_id])
     if env_id not in gym.registry:
         installed = register_myosuite()
         if env_id in gym.registry:

@@ -1,10 +1,11 @@
-"""`motorlab synergies collect`: muscle activations from a trained policy's good episodes.
+"""`motorlab synergies collect`: the motor commands of a trained policy's good episodes.
 
 Preview episodes set a return threshold at the P-th percentile; then episodes are
-run until N of them reach it, and their per-step muscle activations (MuJoCo's
-`data.act`, read after each step from the unwrapped env) are kept. Episodes run
-in a process pool, each from its own seed, so the result does not depend on the
-number of workers.
+run until N of them reach it, and one motor signal per step is kept, read after
+each step from the unwrapped env (see `SIGNALS`): muscle activations (MuJoCo's
+`data.act`), the actuator controls MuJoCo applied (`data.ctrl`, clamped to the
+ctrlrange as the actuators get it), or the env's action. Episodes run in a process
+pool, each from its own seed, so the result does not depend on the number of workers.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from rich.progress import Progress
 
@@ -29,6 +31,10 @@ from motorlab.runs import atomic_write_npz, require_run_dir
 
 ACTIVATIONS = "activations.npz"
 
+# What `collect --signal` records; "auto" is the first of act, ctrl, action the env has.
+SIGNALS = ("auto", "act", "ctrl", "action")
+SIGNAL_NAMES = {"act": "muscle activations", "ctrl": "actuator controls", "action": "actions"}
+
 
 @dataclass
 class Episode:
@@ -36,19 +42,93 @@ class Episode:
     ret: float
     length: int
     solved: bool
-    activations: np.ndarray  # (length, n_muscles)
+    activations: np.ndarray  # (length, n_signals): the recorded signal after each step
     fault: str | None = None  # the numerical fault that ended it; such episodes are never kept
+
+
+def mujoco_of(env) -> tuple[Any, Any] | None:
+    """(model, data) of a MuJoCo env (Gymnasium's `model`/`data`, MyoSuite's too), else None."""
+    base = env.unwrapped
+    model = getattr(base, "mj_model", None) or getattr(base, "model", None)
+    data = getattr(base, "mj_data", None) or getattr(base, "data", None)
+    if model is None or data is None or not hasattr(data, "ctrl") or not hasattr(model, "nu"):
+        return None
+    return model, data
+
+
+def _env_name(env) -> str:
+    return env.spec.id if env.spec else type(env.unwrapped).__name__
 
 
 def muscle_activations(env) -> np.ndarray:
     """The current muscle activations of a MuJoCo env (data.act)."""
-    base = env.unwrapped
-    data = getattr(base, "mj_data", None) or getattr(base, "data", None)
-    act = getattr(data, "act", None)
+    found = mujoco_of(env)
+    act = getattr(found[1], "act", None) if found else None
     if act is None or act.size == 0:
-        spec = env.spec.id if env.spec else type(base).__name__
-        raise MotorlabError(f"{spec} has no muscle activations (MuJoCo data.act is empty); synergies need a muscle model.")
+        raise MotorlabError(f"{_env_name(env)} has no muscle activations (MuJoCo data.act is empty); "
+                            "record its actuator controls or actions instead: --signal ctrl or --signal action.")
     return np.array(act, dtype=np.float32)
+
+
+def resolve_signal(env, signal: str = "auto") -> str:
+    """The signal `collect` records on `env`: `signal` itself, checked, or for "auto" MuJoCo's
+    data.act where the model has activation states (muscles), else data.ctrl where it has
+    actuators, else the env's action.
+
+    Raises:
+        MotorlabError: an unknown signal, or one the env does not have.
+    """
+    if signal not in SIGNALS:
+        raise MotorlabError(f"unknown --signal {signal!r}; choose one of {', '.join(SIGNALS)}.")
+    found = mujoco_of(env)
+    has_act = found is not None and found[0].na > 0
+    has_ctrl = found is not None and found[0].nu > 0
+    if signal == "auto":
+        return "act" if has_act else "ctrl" if has_ctrl else "action"
+    if signal == "act" and not has_act:
+        muscle_activations(env)  # its message names the env and the other signals
+    if signal == "ctrl" and not has_ctrl:
+        raise MotorlabError(f"{_env_name(env)} has no MuJoCo actuators (data.ctrl); use --signal action.")
+    if signal == "action" and not isinstance(env.action_space, gym.spaces.Box):
+        raise MotorlabError(f"{_env_name(env)} has a {type(env.action_space).__name__} action space; "
+                            "synergies need a Box of continuous actions.")
+    return signal
+
+
+def signal_bounds(env, signal: str) -> tuple[np.ndarray, np.ndarray]:
+    """Per-element (low, high) of a resolved signal: [0, 1] for muscles' act (an activation
+    state of another kind: its actrange if limited, else unbounded), the actuator ctrlrange
+    for ctrl (unbounded where not ctrllimited), the action space for action."""
+    if signal == "action":
+        space = env.action_space
+        return space.low.astype(np.float64).ravel(), space.high.astype(np.float64).ravel()
+    model, _ = mujoco_of(env)
+    if signal == "ctrl":
+        limited = model.actuator_ctrllimited.astype(bool)
+        rng = model.actuator_ctrlrange
+        return np.where(limited, rng[:, 0], -np.inf), np.where(limited, rng[:, 1], np.inf)
+    import mujoco  # MuJoCo envs only reach here
+
+    low, high = np.full(model.na, -np.inf), np.full(model.na, np.inf)
+    for i in range(model.nu):
+        first, count = model.actuator_actadr[i], model.actuator_actnum[i]
+        if first < 0:
+            continue  # a stateless actuator (motor, position servo)
+        if model.actuator_dyntype[i] == mujoco.mjtDyn.mjDYN_MUSCLE:
+            low[first:first + count], high[first:first + count] = 0.0, 1.0
+        elif model.actuator_actlimited[i]:
+            low[first:first + count], high[first:first + count] = model.actuator_actrange[i]
+    return low, high
+
+
+def read_signal(env, signal: str, action: np.ndarray, bounds: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The signal after a step: data.act, data.ctrl or `action`, as float32; ctrl and action
+    clipped to their bounds, as MuJoCo's ctrlrange clamp and the action space bound them
+    (what the actuators got, not what the policy asked for)."""
+    if signal == "act":
+        return muscle_activations(env)
+    value = mujoco_of(env)[1].ctrl if signal == "ctrl" else np.asarray(action).ravel()
+    return np.clip(value, *bounds).astype(np.float32)
 
 
 # ---- one worker: its own env and policy, loaded once --------------------------------
@@ -56,7 +136,7 @@ def muscle_activations(env) -> np.ndarray:
 _worker: dict[str, Any] = {}
 
 
-def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool) -> None:
+def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool, signal: str = "act") -> None:
     import torch  # heavy: the worker processes load it, not every command that reads these settings
 
     torch.set_num_threads(1)
@@ -66,6 +146,8 @@ def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool) -> None:
     if hasattr(policy, "deterministic"):
         policy.deterministic = deterministic
     _worker["policy"] = policy
+    _worker["signal"] = signal
+    _worker["bounds"] = signal_bounds(_worker["env"], signal)
 
     _worker["target"] = max_return(cfg.id)
     _worker["success"] = success_mode(cfg)
@@ -79,10 +161,12 @@ def _run_episode(seed: int) -> Episode:
     obs, _ = env.reset(seed=seed)
     policy.reset(1)
     outcome = EpisodeSuccess(1, _worker["target"], _worker["success"])
+    signal, bounds = _worker["signal"], _worker["bounds"]
     acts, ret, done = [], 0.0, False
     while not done:
-        obs, reward, terminated, truncated, info = env.step(policy.act(obs[None])[0])
-        acts.append(muscle_activations(env))
+        action = policy.act(obs[None])[0]
+        obs, reward, terminated, truncated, info = env.step(action)
+        acts.append(read_signal(env, signal, action, bounds))
         outcome.step(0, info)
         ret += float(reward)
         done = terminated or truncated
@@ -112,16 +196,19 @@ class Collection:
     threshold: float
     tried: int
     fault_log: list[str]  # faulted episodes neither set the threshold nor are kept: their activations diverged
+    signal: str = "act"  # what `activations` holds: act, ctrl or action
+    low: np.ndarray | None = None  # the signal's per-element bounds
+    high: np.ndarray | None = None
 
     def activations(self) -> np.ndarray:
-        """Every kept step's muscle activations, (samples, n_muscles)."""
+        """Every kept step's signal (muscle activations, controls or actions), (samples, n_signals)."""
         return np.concatenate([e.activations for e in self.kept])
 
 
 def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int = 50, seed: int = 0,
             deterministic: bool = False, workers: int | None = None, max_episodes: int | None = None,
-            progress: bool = True) -> Collection:
-    """Muscle activations of `episodes` episodes at or above the preview's percentile.
+            progress: bool = True, signal: str = "auto") -> Collection:
+    """A motor signal of `episodes` episodes at or above the preview's percentile.
 
     Args:
         run_dir: a finished training run (its policy and env are used).
@@ -131,18 +218,25 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
         deterministic: act with the policy's mean action instead of sampling.
         workers: processes (default: all cores).
         max_episodes: give up after this many episodes past the preview (default 20 N).
+        signal: what to record (`SIGNALS`): act, ctrl, action, or auto (see `resolve_signal`).
+
+    Returns:
+        The kept episodes, the resolved signal and its bounds.
 
     Raises:
-        MotorlabError: an env without muscles, or no episode reaching the threshold.
+        MotorlabError: a signal the env does not have, or no episode reaching the threshold.
     """
     run_dir = require_run_dir(Path(run_dir))
     cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
     probe = make_env(cfg)
-    muscle_activations(probe)  # fail early for an env without muscles
-    probe.close()
+    try:
+        signal = resolve_signal(probe, signal)  # fail early for a signal the env does not have
+        low, high = signal_bounds(probe, signal)
+    finally:
+        probe.close()
     workers = workers or os.cpu_count() or 1
     max_episodes = max_episodes or 20 * episodes
-    init_args = (str(run_dir), cfg.model_dump(), deterministic)
+    init_args = (str(run_dir), cfg.model_dump(), deterministic, signal)
 
     kept: list[Episode] = []
     fault_log: list[str] = []
@@ -174,22 +268,32 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
     if not kept:
         raise MotorlabError(f"no episode in {tried} reached the threshold {threshold:.3g}; "
                             "lower --percentile or train the policy longer.")
-    return Collection(cfg.id, run_dir, kept, np.array(preview_returns), threshold, tried, fault_log)
+    return Collection(cfg.id, run_dir, kept, np.array(preview_returns), threshold, tried, fault_log, signal, low, high)
 
 
 def save_activations(path: Path, c: Collection, meta: dict[str, Any]) -> None:
-    """activations.npz: `activations` (S, n_muscles), `episode` (S,) index into the kept episodes,
-    `returns` (N,), `seeds` (N,), `solved` (N,), `threshold`, `preview_returns` (M,) and
-    `metadata` (JSON string). Plain arrays: loading it needs no pickle."""
+    """activations.npz: `activations` (S, n_signals), `episode` (S,) index into the kept episodes,
+    `returns` (N,), `seeds` (N,), `solved` (N,), `threshold`, `preview_returns` (M,), `signal`
+    (act, ctrl or action), `low` and `high` (n_signals,: its bounds, +-inf where unbounded) and
+    `metadata` (JSON string, with `signal` too). Plain arrays: loading it needs no pickle."""
+    n = c.kept[0].activations.shape[1]
+    low = np.full(n, -np.inf) if c.low is None else c.low
+    high = np.full(n, np.inf) if c.high is None else c.high
     atomic_write_npz(path, activations=c.activations(),
                      episode=np.concatenate([np.full(e.length, i) for i, e in enumerate(c.kept)]),
                      returns=np.array([e.ret for e in c.kept]), seeds=np.array([e.seed for e in c.kept]),
                      solved=np.array([e.solved for e in c.kept]), threshold=np.array(c.threshold),
-                     preview_returns=c.preview_returns, metadata=np.array(json.dumps(meta)))
+                     preview_returns=c.preview_returns, signal=np.array(c.signal),
+                     low=np.asarray(low, dtype=np.float64), high=np.asarray(high, dtype=np.float64),
+                     metadata=np.array(json.dumps({**meta, "signal": c.signal})))
 
 
 def load_activations(path: Path) -> tuple[np.ndarray, dict]:
-    """Activations (n_samples, n_muscles) and metadata from activations.npz (no pickle).
+    """The recorded signal (n_samples, n_signals) and metadata from activations.npz (no pickle).
+
+    The metadata always holds `signal` (files written before signals existed hold muscle
+    activations: "act") and `low`/`high`, the signal's per-element bounds as float arrays
+    ([0, 1] for those older files).
 
     Raises:
         MotorlabError: missing, not an npz, no `activations` array, wrong shape, NaN/Inf.
@@ -209,6 +313,9 @@ def load_activations(path: Path) -> tuple[np.ndarray, dict]:
                 raise MotorlabError(f"{path} has no 'activations' array; it holds {', '.join(data.files) or 'nothing'}.")
             acts = np.asarray(data["activations"], dtype=np.float64)
             meta = json.loads(str(data["metadata"])) if "metadata" in data.files else {}
+            bounds = {k: np.asarray(data[k], dtype=np.float64).ravel() for k in ("low", "high") if k in data.files}
+            if "signal" in data.files:
+                meta["signal"] = str(data["signal"])
     except MotorlabError:
         raise
     except (OSError, ValueError, zipfile.BadZipFile, EOFError, json.JSONDecodeError) as e:
@@ -217,4 +324,10 @@ def load_activations(path: Path) -> tuple[np.ndarray, dict]:
         raise MotorlabError(f"{path}: activations must be (samples, muscles) with at least 2 samples; got {acts.shape}.")
     if not np.all(np.isfinite(acts)):
         raise MotorlabError(f"{path}: activations contain NaN or Inf; collect them again.")
+    meta.setdefault("signal", "act")  # written before signals existed: muscle activations
+    n = acts.shape[1]
+    default = (np.zeros(n), np.ones(n)) if meta["signal"] == "act" else (np.full(n, -np.inf), np.full(n, np.inf))
+    for key, fallback in zip(("low", "high"), default, strict=True):
+        value = bounds.get(key)
+        meta[key] = value if value is not None and value.shape == (n,) else fallback
     return acts, meta

@@ -1,7 +1,10 @@
 """Synergistic Action Representation (SAR): fit, VAF, save/load, decode.
 
 Muscle activations recorded from good rollouts, shape (n_samples, n_muscles)
-with values in [0, 1], are reduced to N synergies (Berg et al. 2023, MyoSuite):
+with values in [0, 1], are reduced to N synergies (Berg et al. 2023, MyoSuite).
+The same works for any motor signal in a box (a robot's actuator controls, an
+env's actions): "muscles" below stands for the signal's elements, and the SAR's
+metadata records which signal it decodes to and its bounds (`signal_of`).
 
 - ``pca-ica``: PCA (N components) -> FastICA -> MinMaxScaler to [-1, 1]
 - ``pca``: PCA (N components) -> MinMaxScaler to [-1, 1]
@@ -372,7 +375,7 @@ def _check_nmf_input(x: np.ndarray) -> None:
     if x.min() < 0:
         raise MotorlabError(
             f"method 'nmf' needs non-negative activations; the smallest value is {x.min():.4g}. "
-            "Use method 'pca-ica' or clip the activations to [0, 1]."
+            "Use method 'pca-ica' (any signal, e.g. a robot's controls in [-1, 1]) or clip the activations to [0, 1]."
         )
     if not np.any(x):
         raise MotorlabError("activations are all zero; record rollouts where muscles are active.")
@@ -458,8 +461,10 @@ def fit_sar(
     method: str = "pca-ica",
     seed: int = 0,
     source_env: str | None = None,
+    signal: str | None = None,
+    bounds: tuple[Any, Any] | None = None,
 ) -> SAR:
-    """Fit a synergy model to recorded muscle activations.
+    """Fit a synergy model to recorded muscle activations (or another motor signal).
 
     Args:
         activations: (n_samples, n_muscles) array, values normally in [0, 1].
@@ -469,6 +474,9 @@ def fit_sar(
         method: "pca-ica" (PCA -> FastICA -> MinMaxScaler), "pca" or "nmf".
         seed: random_state of FastICA / NMF.
         source_env: env id the activations came from (metadata only).
+        signal: what the activations are ("act", "ctrl", "action"; metadata, read by
+            `SynergyActionWrapper`); None for muscle activations of unknown origin.
+        bounds: the signal's per-element (low, high), +-inf where unbounded (metadata).
 
     Returns:
         The fitted `SAR`; metadata["vaf"] is the VAF the chosen N achieves.
@@ -528,6 +536,7 @@ def fit_sar(
         "scaler_feature_range": [-1.0, 1.0],
         "created": utc_now(),
         "versions": library_versions(),
+        **_signal_metadata(signal, bounds, m),
     }
     scaler = MinMaxScaler(feature_range=(-1, 1))
     arrays: dict[str, np.ndarray] = {}
@@ -579,6 +588,31 @@ def fit_sar(
     arrays = {k: np.asarray(v, dtype=np.float64) for k, v in arrays.items()}
     weight, bias = affine_from_arrays(method, arrays, meta)
     return SAR(method=method, arrays=arrays, weight=weight, bias=bias, metadata=meta)
+
+
+def _signal_metadata(signal: str | None, bounds: tuple[Any, Any] | None, m: int) -> dict[str, Any]:
+    """metadata keys `signal`, `signal_low`, `signal_high` (JSON: None where unbounded)."""
+    meta: dict[str, Any] = {} if signal is None else {"signal": str(signal)}
+    if bounds is not None:
+        low, high = (np.broadcast_to(np.asarray(b, dtype=np.float64), (m,)) for b in bounds)
+        meta["signal_low"] = [float(v) if np.isfinite(v) else None for v in low]
+        meta["signal_high"] = [float(v) if np.isfinite(v) else None for v in high]
+    return meta
+
+
+def signal_of(sar: SAR) -> tuple[str, np.ndarray | None, np.ndarray | None]:
+    """What a SAR decodes to: ("act" | "ctrl" | "action", low, high). SARs fitted before signals
+    existed, and imported ones, decode to muscle activations ("act"); bounds are None where
+    the metadata has none, +-inf where an element is unbounded."""
+    meta = sar.metadata
+
+    def bound(key: str, inf: float) -> np.ndarray | None:
+        values = meta.get(key)
+        if not isinstance(values, list) or len(values) != sar.n_muscles:
+            return None
+        return np.array([inf if v is None else float(v) for v in values])
+
+    return str(meta.get("signal") or "act"), bound("signal_low", -np.inf), bound("signal_high", np.inf)
 
 
 # ------------------------------------------------------------------ save / load

@@ -1,5 +1,6 @@
-"""The synergy step kinds: `collect` muscle activations from a policy's good episodes, measure
-the `vaf` of N synergies, `fit` a Synergistic Action Representation (sar.npz)."""
+"""The synergy step kinds: `collect` muscle activations (or a robot's actuator controls, or an
+env's actions) from a policy's good episodes, measure the `vaf` of N synergies, `fit` a
+Synergistic Action Representation (sar.npz)."""
 
 from __future__ import annotations
 
@@ -33,12 +34,19 @@ class CollectSettings(Settings):
     max_episodes: int | None = Field(None, gt=0, description="Give up after this many episodes past the preview "
                                      "(default: 20 x episodes)")
     seed: int = Field(0, ge=0, description="Random seed (episode seeds and sampled actions)")
+    signal: Literal["auto", "act", "ctrl", "action"] = Field(
+        "auto", description="What to record: act (MuJoCo's muscle activations, data.act, in [0, 1]), ctrl (the "
+        "actuator controls MuJoCo applied, data.ctrl clamped to its ctrlrange: a robot's motor commands), action "
+        "(the env's action, for an env without MuJoCo), or auto (act where the model has activation states, "
+        "else ctrl, else action)")
 
 
 class CollectSummary(Summary):
     env_id: str
     samples: int
-    n_muscles: int
+    n_muscles: int  # the size of the recorded signal, whatever it is (kept under its first name)
+    signal: str = "act"
+    n_signals: int = 0
     episodes_kept: int
     episodes_requested: int
     episodes_tried: int
@@ -50,7 +58,8 @@ class CollectSummary(Summary):
 
 
 class CollectKind(StepKind[CollectSettings, CollectSummary]):
-    """Record muscle activations (MuJoCo data.act) of a policy's good episodes to activations.npz.
+    """Record muscle activations (MuJoCo data.act), actuator controls (data.ctrl) or actions of a
+    policy's good episodes to activations.npz (--signal; auto picks the first the env has).
 
     Preview episodes set a return threshold at the P-th percentile; then episodes run until N
     of them reach it. Episodes run in a process pool, each from its own seed, so the result does
@@ -58,7 +67,7 @@ class CollectKind(StepKind[CollectSettings, CollectSummary]):
 
     name = "collect"
     what = "collect {episodes} episodes from {run} (≥ {percentile:g}th pct.)"
-    headline_keys = ("samples", "n_muscles", "episodes_kept", "episodes_requested", "episodes_tried", "threshold",
+    headline_keys = ("signal", "samples", "n_muscles", "episodes_kept", "episodes_requested", "episodes_tried", "threshold",
                      "kept_return_mean", "kept_success_rate")
     metrics = (Metric("episodes_kept", "episodes kept", "count", of="episodes_requested"),
                Metric("samples", "samples", "count"),
@@ -75,20 +84,31 @@ class CollectKind(StepKind[CollectSettings, CollectSummary]):
             progress: bool = True) -> CollectSummary:
         s = settings
         c = collect(Path(s.run), s.episodes, s.percentile, s.preview, s.seed, s.deterministic, s.workers,
-                    s.max_episodes, progress)
+                    s.max_episodes, progress, s.signal)
         run_dir = self.start(out)
         acts = c.activations()
         meta = {"source_run": str(c.source_run.resolve()), "env_id": c.env_id, "percentile": s.percentile,
                 "preview": s.preview, "deterministic": s.deterministic, "seed": s.seed,
-                "episodes_requested": s.episodes, "episodes_tried": c.tried}
+                "episodes_requested": s.episodes, "episodes_tried": c.tried, "signal_requested": s.signal}
         save_activations(run_dir / ACTIVATIONS, c, meta)
         summary = CollectSummary(
-            env_id=c.env_id, samples=len(acts), n_muscles=acts.shape[1], episodes_kept=len(c.kept),
+            env_id=c.env_id, samples=len(acts), n_muscles=acts.shape[1], signal=c.signal, n_signals=acts.shape[1],
+            episodes_kept=len(c.kept),
             episodes_requested=s.episodes, episodes_tried=c.tried, threshold=c.threshold,
             preview_return_mean=float(c.preview_returns.mean()),
             kept_return_mean=float(np.mean([e.ret for e in c.kept])),
             kept_success_rate=float(np.mean([e.solved for e in c.kept])), numerical_faults=len(c.fault_log))
         return self.finish(run_dir, settings, summary, c.fault_log)
+
+    def numbers(self, settings: CollectSettings, h: dict[str, Any]) -> list[Number]:
+        return [_size_label(n, h.get("signal")) for n in super().numbers(settings, h)]
+
+
+def _size_label(n: Number, signal: str | None) -> Number:
+    """The signal's size as readers name it: muscles, actuators or action dimensions."""
+    if n.key != "n_muscles" or signal in (None, "act"):
+        return n
+    return Number(n.key, "actuators" if signal == "ctrl" else "action dimensions", n.value, n.text, n.setup)
 
 
 COLLECT = CollectKind()
@@ -112,6 +132,7 @@ class VafSummary(Summary):
     threshold: float
     n_for_threshold: int | None
     vaf: list[float]
+    signal: str = "act"
 
 
 class VafKind(StepKind[VafSettings, VafSummary]):
@@ -120,7 +141,7 @@ class VafKind(StepKind[VafSettings, VafSummary]):
     name = "vaf"
     what = "VAF of {activations} ({method})"
     key_figures = ("vaf.png",)
-    headline_keys = ("n_for_threshold", "threshold", "n_muscles")
+    headline_keys = ("n_for_threshold", "threshold", "n_muscles", "signal")
     metrics = (Metric("n_muscles", "muscles", "count"),)
     command = "synergies vaf"
     refs = (Ref("activations", ("activations",)),)
@@ -136,16 +157,19 @@ class VafKind(StepKind[VafSettings, VafSummary]):
         except MotorlabError:
             n_needed = None  # reported as null; the curve is still worth having
         run_dir = self.start(out)
+        what = {"act": "activations", "ctrl": "actuator controls", "action": "actions"}.get(meta["signal"], "signals")
         vaf_plot(curve, settings.threshold, n_needed, run_dir / "vaf.png",
-                 f"VAF of {meta.get('env_id', 'recorded')} activations ({settings.method})")
+                 f"VAF of {meta.get('env_id', 'recorded')} {what} ({settings.method})")
         summary = VafSummary(method=settings.method, n_muscles=acts.shape[1], samples=acts.shape[0],
-                             threshold=settings.threshold, n_for_threshold=n_needed, vaf=[float(v) for v in curve])
+                             threshold=settings.threshold, n_for_threshold=n_needed, vaf=[float(v) for v in curve],
+                             signal=meta["signal"])
         return self.finish(run_dir, settings, summary)
 
     def numbers(self, settings: VafSettings, h: dict[str, Any]) -> list[Number]:
         n = h["n_for_threshold"]
         label = f"synergies for VAF ≥ {h['threshold']:.0%}"
-        return [Number("n_for_threshold", label, n, f"{n}" if n else "none reaches it"), *super().numbers(settings, h)]
+        return [Number("n_for_threshold", label, n, f"{n}" if n else "none reaches it"),
+                *(_size_label(x, h.get("signal")) for x in super().numbers(settings, h))]
 
     def metric(self, key: str) -> Metric:
         return Metric(key, "synergies for the VAF threshold", "count") if key == "n_for_threshold" else super().metric(key)
@@ -170,17 +194,18 @@ class FitSummary(Summary):
     sar: str
     method: str
     n_synergies: int
-    n_muscles: int
+    n_muscles: int  # the size of the signal it decodes to
     vaf: float | None
     source_env: str | None
     samples: int
+    signal: str = "act"
 
 
 class FitKind(StepKind[FitSettings, FitSummary]):
     """Fit a Synergistic Action Representation; writes sar.npz (plain arrays + JSON metadata, no pickle)."""
 
     name = "fit"
-    headline_keys = ("n_synergies", "n_muscles", "vaf")
+    headline_keys = ("n_synergies", "n_muscles", "vaf", "signal")
     metrics = (Metric("n_synergies", "synergies", "count"),
                Metric("vaf", "VAF", "percent"),
                Metric("n_muscles", "muscles", "count"))
@@ -193,13 +218,17 @@ class FitKind(StepKind[FitSettings, FitSummary]):
             progress: bool = True) -> FitSummary:
         acts, meta = load_activations(Path(settings.activations))
         sar = fit_sar(acts, n_synergies=settings.n_synergies, vaf=settings.vaf, method=settings.method,
-                      seed=settings.seed, source_env=meta.get("env_id"))
+                      seed=settings.seed, source_env=meta.get("env_id"), signal=meta["signal"],
+                      bounds=(meta["low"], meta["high"]))
         run_dir = self.start(out)
         save_sar(sar, run_dir / SAR_FILE)
         summary = FitSummary(sar=str(run_dir / SAR_FILE), method=settings.method, n_synergies=sar.n_synergies,
                              n_muscles=sar.n_muscles, vaf=sar.metadata.get("vaf"), source_env=meta.get("env_id"),
-                             samples=acts.shape[0])
+                             samples=acts.shape[0], signal=meta["signal"])
         return self.finish(run_dir, settings, summary)
+
+    def numbers(self, settings: FitSettings, h: dict[str, Any]) -> list[Number]:
+        return [_size_label(n, h.get("signal")) for n in super().numbers(settings, h)]
 
     def describe(self, settings: FitSettings, copies: int = 1) -> str:
         return (f"fit {settings.method} to {settings.activations}"

@@ -1,0 +1,117 @@
+"""SAR beyond muscles: SAR-RL vs RL-E2E at equal env steps on a robot, over 3 seeds.
+
+Runs the bundled `sar-ant` study (motorlab/recipes/sar-ant.toml; its comments say why this pair
+of tasks): SAC plays Ant-v5 running forward (60k env steps), `collect --signal auto` records the
+8 actuator controls MuJoCo applied (data.ctrl) of its good episodes (mean actions), `fit` keeps the synergies
+explaining 80% of their variance, then on Ant running backward (forward_reward_weight = -1)
+SAR-RL (synergies only, phi = 1) trains 60k env steps and RL-E2E 120k (= play + SAR-RL), seeds
+0, 1, 2 each; both arms' policies are then evaluated zero-shot from starts three times as
+perturbed (reset_noise_scale = 0.3). 600k env steps in all, SAC with [64, 64] nets and one
+gradient step per 4 env steps, two trainings at once: ~20 min on this 2-core machine shared
+with other work (measured at --scale 8: 75k env steps in 188 s, so ~23 min projected at full
+scale; the target is <= 30 min).
+
+Reported: each arm's final evaluation return (mean of 5 deterministic episodes) per seed, with
+rliable's IQM and 95% stratified-bootstrap CI, the zero-shot returns likewise, and the ratio
+SAR-RL / RL-E2E of the IQMs, whichever way it goes. Ant has no success flag: returns it is.
+
+Usage:  .venv/bin/python benchmarks/sar_robot.py [--scale K]
+        (or SAR_ROBOT_SCALE=K): every budget divided by K (play, SAR-RL, RL-E2E env steps, SAC
+        warm-up, evaluation interval, collected episodes) to try it in minutes; the JSON says
+        which scale ran. Prints one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+RECIPE = "sar-ant"
+SEEDS = 3
+# Budget fields of the recipe divided by --scale, each with the smallest value it may take.
+SCALED = {"timesteps": 500, "learning_starts": 200, "eval_every": 1000, "episodes": 3, "preview": 3}
+
+
+def scaled_recipe(scale: int, folder: Path) -> Path:
+    """The bundled recipe with its budgets divided by `scale` (unchanged for 1), written to `folder`."""
+    from motorlab.recipes import find_recipe
+
+    text = find_recipe(RECIPE).read_text()
+    for key, floor in SCALED.items():
+        text = re.sub(rf"\b{key} = (\d+)", lambda m, k=key, f=floor: f"{k} = {max(f, int(m.group(1)) // scale)}", text)
+    path = folder / f"{RECIPE}.toml"
+    path.write_text(text)
+    return path
+
+
+def seed_values(study: Path, step: str, key: str) -> list[float]:
+    """`key` of each seed's summary.json of `step` (seed0, seed1, ...)."""
+    runs = sorted((study / step).glob("seed*/summary.json"))
+    return [float(json.loads(p.read_text())[key]) for p in runs]
+
+
+def arm(values: list[float]) -> dict:
+    """Per-seed values with their IQM and 95% CI (rliable, stratified bootstrap)."""
+    from motorlab.stats import iqm_with_ci
+
+    iqm, low, high = iqm_with_ci(values)
+    return {"per_seed": [round(v, 2) for v in values], "iqm": round(iqm, 2), "ci95": [round(low, 2), round(high, 2)]}
+
+
+def ratio(a: dict, b: dict) -> float | None:
+    return round(a["iqm"] / b["iqm"], 3) if b["iqm"] else None
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--scale", type=int, default=int(os.environ.get("SAR_ROBOT_SCALE", "1")),
+                        help="divide every budget by this (default 1: the bundled study)")
+    parser.add_argument("--keep", type=Path, default=None, help="write the study here instead of a temporary folder")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        recipe = scaled_recipe(max(1, args.scale), Path(tmp))
+        study = args.keep or Path(tmp) / "study"
+        started = time.perf_counter()
+        proc = subprocess.run([sys.executable, "-m", "motorlab", "run", str(recipe), "--out", str(study)],
+                              capture_output=True, text=True)
+        wall = time.perf_counter() - started
+        if proc.returncode != 0:
+            raise SystemExit(f"the study failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}")
+        from motorlab.recipes import load_recipe
+
+        steps = {s.name: s.settings for s in load_recipe(recipe).steps}
+        collect = json.loads((study / "collect" / "summary.json").read_text())
+        fit = json.loads((study / "fit" / "summary.json").read_text())
+        sar = arm(seed_values(study, "sar-rl", "eval_return_mean"))
+        e2e = arm(seed_values(study, "rl-e2e", "eval_return_mean"))
+        zs_sar = arm(seed_values(study, "zeroshot-sar-rl", "return_mean"))
+        zs_e2e = arm(seed_values(study, "zeroshot-rl-e2e", "return_mean"))
+    play, sar_steps, e2e_steps = (steps[k].timesteps for k in ("play", "sar-rl", "rl-e2e"))
+    out = {
+        "benchmark": "sar_robot", "recipe": RECIPE, "scale": args.scale, "seeds": SEEDS,
+        "play_task": "Ant-v5 (forward)", "task": "Ant-v5, forward_reward_weight = -1 (backward)",
+        "zero_shot_variant": "the backward task with reset_noise_scale = 0.3",
+        "budgets_env_steps": {"play": play, "sar_rl_per_seed": sar_steps, "rl_e2e_per_seed": e2e_steps,
+                              "sar_rl_total_per_seed_with_play": play + sar_steps,
+                              "study_total": play + SEEDS * (sar_steps + e2e_steps)},
+        "sac": "sar-sac preset, nets [64, 64], 1 gradient step per 4 env steps, 1 torch thread, 2 trainings at once",
+        "signal": collect["signal"], "motors": collect["n_muscles"], "synergies": fit["n_synergies"],
+        "vaf": round(fit["vaf"], 3),
+        "metric": "final evaluation return (5 deterministic episodes; zero-shot: the evaluate step's episodes)",
+        "sar_rl": sar, "rl_e2e": e2e, "ratio_sar_over_e2e_iqm": ratio(sar, e2e),
+        "zero_shot": {"sar_rl": zs_sar, "rl_e2e": zs_e2e, "ratio_sar_over_e2e_iqm": ratio(zs_sar, zs_e2e)},
+        "wall_seconds": round(wall, 1), "cpus": os.cpu_count(),
+        "target": "full scale in <= 1800 s on this 2-core machine",
+    }
+    print(json.dumps(out, indent=2))
+
+
+if __name__ == "__main__":
+    main()
