@@ -7,13 +7,18 @@ explaining 80% of their variance, then on Ant running backward (forward_reward_w
 SAR-RL (synergies only, phi = 1) trains 60k env steps and RL-E2E 120k (= play + SAR-RL), seeds
 0, 1, 2 each; both arms' policies are then evaluated zero-shot from starts three times as
 perturbed (reset_noise_scale = 0.3). 600k env steps in all, SAC with [64, 64] nets and one
-gradient step per 4 env steps, two trainings at once: ~20 min on this 2-core machine shared
-with other work (measured at --scale 8: 75k env steps in 188 s, so ~23 min projected at full
-scale; the target is <= 30 min).
+gradient step per 4 env steps, two trainings at once: 15 min on this 2-core machine (913 s
+measured at full scale; the target is <= 30 min).
 
 Reported: each arm's final evaluation return (mean of 5 deterministic episodes) per seed, with
-rliable's IQM and 95% stratified-bootstrap CI, the zero-shot returns likewise, and the ratio
-SAR-RL / RL-E2E of the IQMs, whichever way it goes. Ant has no success flag: returns it is.
+rliable's IQM and 95% stratified-bootstrap CI, the zero-shot returns likewise, and SAR-RL against
+RL-E2E: the difference of the IQMs and their ratio (where both are positive), whichever way it
+goes. Ant has no success flag: returns it is.
+
+Measured at full scale (2026-11-25, this 2-core machine): 913 s. 5 synergies (VAF 80.5%) of
+the 8 motor commands. Running backward, both arms still fail at these budgets: SAR-RL IQM -45
+[-111, -11], RL-E2E -8 [-16, -1]; zero-shot -54 vs -58. At 1/8 scale an earlier run went the
+other way (691 vs 469): early in learning the result turns on falls, not on gait.
 
 Usage:  .venv/bin/python benchmarks/sar_robot.py [--scale K]
         (or SAR_ROBOT_SCALE=K): every budget divided by K (play, SAR-RL, RL-E2E env steps, SAC
@@ -66,7 +71,15 @@ def arm(values: list[float]) -> dict:
 
 
 def ratio(a: dict, b: dict) -> float | None:
-    return round(a["iqm"] / b["iqm"], 3) if b["iqm"] else None
+    """SAR-RL's IQM over RL-E2E's; None unless both are positive (a ratio of negative returns
+    reads backwards: -45 / -8 = 5.8 for the worse arm). The difference is reported beside it."""
+    return round(a["iqm"] / b["iqm"], 3) if a["iqm"] > 0 and b["iqm"] > 0 else None
+
+
+def compared(a: dict, b: dict) -> dict:
+    """How SAR-RL (a) stands against RL-E2E (b): ratio, difference, and which IQM is higher."""
+    return {"ratio_sar_over_e2e_iqm": ratio(a, b), "difference_sar_minus_e2e_iqm": round(a["iqm"] - b["iqm"], 2),
+            "higher_iqm": "sar_rl" if a["iqm"] > b["iqm"] else "rl_e2e" if b["iqm"] > a["iqm"] else "tie"}
 
 
 def main() -> None:
@@ -105,8 +118,8 @@ def main() -> None:
         "signal": collect["signal"], "motors": collect["n_muscles"], "synergies": fit["n_synergies"],
         "vaf": round(fit["vaf"], 3),
         "metric": "final evaluation return (5 deterministic episodes; zero-shot: the evaluate step's episodes)",
-        "sar_rl": sar, "rl_e2e": e2e, "ratio_sar_over_e2e_iqm": ratio(sar, e2e),
-        "zero_shot": {"sar_rl": zs_sar, "rl_e2e": zs_e2e, "ratio_sar_over_e2e_iqm": ratio(zs_sar, zs_e2e)},
+        "sar_rl": sar, "rl_e2e": e2e, **compared(sar, e2e),
+        "zero_shot": {"sar_rl": zs_sar, "rl_e2e": zs_e2e, **compared(zs_sar, zs_e2e)},
         "wall_seconds": round(wall, 1), "cpus": os.cpu_count(),
         "target": "full scale in <= 1800 s on this 2-core machine",
     }

@@ -14,12 +14,16 @@ ENV_ID = "InvertedPendulum-v5"
 TINY_PPO = ["--algo", "ppo", "--timesteps", "256", "--set", "n_steps=128", "--set", "batch_size=64"]
 
 
-def run_cli(*args: str | os.PathLike, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
-    """`python -m motorlab ARGS` in a fresh process, as a user would run it."""
+USER_PACKAGES = str(Path(__file__).parent)  # tests/userpkg: a user's own env package (test_user_env.py)
+
+
+def run_cli(*args: str | os.PathLike, cwd: Path | None = None, timeout: float = 300,
+            env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """`python -m motorlab ARGS` in a fresh process, as a user would run it (`env`: variables to add)."""
     return subprocess.run(
         [sys.executable, "-m", "motorlab", *map(str, args)],
         capture_output=True, text=True, cwd=cwd, timeout=timeout,
-        env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
+        env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **(env or {})},
     )
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import typer
 
-from helpers import ENV_ID, TINY_PPO, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli
+from helpers import ENV_ID, TINY_PPO, USER_PACKAGES, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli
 from motorlab.cli import app
 from motorlab.errors import MotorlabError
 from motorlab.stats import aggregate, trial_scores
@@ -80,7 +80,11 @@ def test_local_sweep_aggregates_with_rliable(local_sweep):
 
 
 def _ray_head(port: int) -> None:
-    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+    # the cluster can import the user's env package (as if installed on its nodes), but is never
+    # told to: only motorlab's runtime_env passes the modules on (test_ray_workers_import_the_users_env_module)
+    env = {k: v for k, v in os.environ.items() if k != "MOTORLAB_IMPORTS"}
+    env.update(RAY_USAGE_STATS_ENABLED="0", PYTHONPATH=os.pathsep.join(
+        p for p in (USER_PACKAGES, os.environ.get("PYTHONPATH")) if p))
     ray = str(Path(sys.executable).with_name("ray"))
     subprocess.run([ray, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", "--num-cpus=2",
                     "--include-dashboard=false", "--disable-usage-stats"], check=True, capture_output=True,
@@ -101,6 +105,12 @@ def test_ray_backend_gives_the_same_folders_and_aggregate(local_sweep, tmp_path)
         proc = run_cli("sweep", TINY, "--seeds", "2", *GRID, "--backend", "ray", "--address", f"127.0.0.1:{port}",
                        "--out", out)
         assert_ok(proc)
+        # a user's env registered by their module, named with --import only: the workers' trial
+        # processes learn the module from the sweep (one Ray cluster for both: starting two is slow)
+        user = run_cli("--import", "userpkg.arm", "sweep", "train ArmReachHeavy-v0 " + " ".join(TINY_PPO),
+                       "--seeds", "1", "--backend", "ray", "--address", f"127.0.0.1:{port}",
+                       "--out", tmp_path / "user", env={"PYTHONPATH": USER_PACKAGES})
+        assert_ok(user)
     finally:
         subprocess.run([str(Path(sys.executable).with_name("ray")), "stop", "--force"], capture_output=True,
                        timeout=120)
@@ -109,6 +119,8 @@ def test_ray_backend_gives_the_same_folders_and_aggregate(local_sweep, tmp_path)
     ray_summary, local_summary = read_summary(out), read_summary(local_sweep)
     keys = [k for k in local_summary if k.startswith("lr=")]
     assert keys and {k: ray_summary[k] for k in keys} == pytest.approx({k: local_summary[k] for k in keys})
+    trained = [json.loads(p.read_text()) for p in (tmp_path / "user").rglob("summary.json")]
+    assert [(s["env_id"], s["timesteps"]) for s in trained if "algo" in s] == [("ArmReachHeavy-v0", 256)]
 
 
 def test_interrupted_sweep_resumes_without_rerunning_finished_trials(tmp_path):

@@ -7,16 +7,13 @@ from __future__ import annotations
 
 import json
 import os
-import socket
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from helpers import TINY_PPO, assert_ok, assert_one_line_error, read_summary, run_cli
+from helpers import TINY_PPO, USER_PACKAGES, assert_ok, assert_one_line_error, read_summary, run_cli
 
-USER_PATH = str(Path(__file__).parent)  # where the user's package lives (they would pip install -e it)
+USER_PATH = USER_PACKAGES  # where the user's package lives (they would pip install -e it)
 ARM = "userpkg.arm:ArmReach-v0"
 
 
@@ -156,30 +153,11 @@ def _without_imports(path: Path) -> Path:
     return bare
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def test_sweeps_on_a_pool_and_on_a_ray_cluster(tmp_path):
+def test_sweep_of_a_users_env(tmp_path):
+    """On a pool of processes here; on a Ray cluster: tests/test_sweep.py, beside the other Ray sweep."""
     command = f"train {ARM} " + " ".join(TINY_PPO)
     assert_ok(run_cli("sweep", command, "--seeds", "2", "--out", tmp_path / "local"))
     assert sorted(s["seed"] for s in _trained(tmp_path / "local")) == [0, 1]
-    # a cluster started on its own: its workers learn the module only from motorlab (--import)
-    port = _free_port()
-    ray = str(Path(sys.executable).with_name("ray"))
-    subprocess.run([ray, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", "--num-cpus=2",
-                    "--include-dashboard=false", "--disable-usage-stats"], check=True, capture_output=True,
-                   env={k: v for k, v in os.environ.items() if k != "MOTORLAB_IMPORTS"})
-    try:
-        proc = run_cli("--import", "userpkg.arm", "sweep", "train ArmReachHeavy-v0 " + " ".join(TINY_PPO),
-                       "--seeds", "1", "--backend", "ray", "--address", f"127.0.0.1:{port}",
-                       "--out", tmp_path / "ray", timeout=600)
-    finally:
-        subprocess.run([ray, "stop", "--force"], capture_output=True, timeout=120)
-    assert_ok(proc)
-    assert [(s["env_id"], s["timesteps"]) for s in _trained(tmp_path / "ray")] == [("ArmReachHeavy-v0", 256)]
 
 
 def _trained(folder: Path) -> list[dict]:
