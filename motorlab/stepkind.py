@@ -268,16 +268,7 @@ SCORED_METRICS = (
 
 
 def scored_numbers(metrics: tuple[Metric, ...], h: dict[str, Any], env_id: str) -> list[Number]:
-    """Numbers of an evaluated policy: the IQM with its CI where there are seeds, and episodes
+    """Numbers of an evaluated policy (the IQM with its CI where there are seeds), with episodes
     that ended early called falls only where the env defines a fall."""
-    out = []
-    for m in metrics:
-        if m.key == "falls":
-            m = Metric(m.key, early_end_label(env_id), m.form, of=m.of)
-        n = m.number(h)
-        if n is not None and m.key == "return_iqm" and h.get("return_iqm_ci_low") is not None:
-            n = Number(n.key, n.label, n.value, f"{n.text} [{h['return_iqm_ci_low']:,.1f}, "
-                       f"{h['return_iqm_ci_high']:,.1f}]")
-        if n is not None:
-            out.append(n)
-    return out
+    relabelled = (Metric(m.key, early_end_label(env_id), m.form, of=m.of) if m.key == "falls" else m for m in metrics)
+    return [n for m in relabelled if (n := m.number(h)) is not None]

@@ -89,12 +89,21 @@ class Metric:
             out = f"{out}/{show(values[self.of], 'count')}"
         return out
 
+    def interval(self, low: Any, high: Any) -> str:
+        """A confidence interval in this metric's unit and format: "[28.5, 32.0]"."""
+        return f"[{self.text(low, {})}, {self.text(high, {})}]"
+
     def number(self, values: dict[str, Any], label: str | None = None) -> Number | None:
-        """The number as shown, from a headline (None where the headline has no value for it)."""
+        """The number as shown, from a headline (None where the headline has no value for it); an
+        IQM's 95% CI follows it where the headline holds "<key>_ci_low" and "<key>_ci_high"."""
         value = values.get(self.key)
         if value is None:
             return None
-        return Number(self.key, label or self.label, value, self.text(value, values), self.setup)
+        text = self.text(value, values)
+        low, high = values.get(f"{self.key}_ci_low"), values.get(f"{self.key}_ci_high")
+        if low is not None and high is not None:
+            text = f"{text} {self.interval(low, high)}"
+        return Number(self.key, label or self.label, value, text, self.setup)
 
 
 def _numeric(v: Any) -> bool:

@@ -127,11 +127,7 @@ class CompareKind(StepKind[CompareSettings, Summary]):
             m = self.metric(key)
             if m.label == key.replace("_", " "):
                 continue  # a key without a reader's label: in the full summary only
-            n = m.number(h)
-            low, high = h.get(f"{key}_ci_low"), h.get(f"{key}_ci_high")
-            if low is not None and high is not None:
-                n = Number(n.key, n.label, n.value, f"{n.text} [{m.text(low, {})}, {m.text(high, {})}]")
-            numbers.append(n)
+            numbers.append(m.number(h))  # with its CI where the group has one
         return numbers
 
     def default_findings(self, settings: CompareSettings, h: dict[str, Any]) -> list[str]:

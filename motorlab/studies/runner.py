@@ -175,8 +175,9 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
             k.figures(d)
     outputs.dirs[step.name] = [d for d, _ in runs]
     summaries = [k.summary.model_validate(read_json(d / "summary.json")) for d, _ in runs]
-    for (d, settings), summary in zip(runs, summaries):  # kept runs too: their numbers as this version shows them
-        write_run_results(d, k.results(settings, summary))
+    for (d, settings), summary in zip(runs, summaries):
+        if d in kept:  # runs made now wrote theirs; kept ones get their numbers as this version shows them
+            write_run_results(d, k.results(settings, summary))
     labels = [d.name if len(runs) > 1 else step.name for d, _ in runs]
     return _Outcome(k.aggregate(summaries), list(zip(labels, summaries)))
 
@@ -339,7 +340,7 @@ def _findings(recipe: Recipe, results: dict[str, _Outcome], console: Console) ->
             iqm = ci = None
             if all(isinstance(v, (int, float)) for v in values):
                 point, low, high = iqm_with_ci(values)
-                iqm, ci = metric.text(point, {}), f"[{metric.text(low, {})}, {metric.text(high, {})}]"
+                iqm, ci = metric.text(point, {}), metric.interval(low, high)
             finding = dataclasses.replace(finding, seeds=seeds, values=shown, iqm=iqm, ci=ci)
         findings.append(finding)
     return findings
