@@ -25,7 +25,7 @@ from rich.console import Console  # noqa: E402
 from rich.markup import escape  # noqa: E402
 from rich.table import Table  # noqa: E402
 
-from motorlab.control.steps import MPC  # noqa: E402
+from motorlab.control.steps import MBRL, MPC  # noqa: E402
 from motorlab.dynamics.steps import (  # noqa: E402
     DYNAMICS_CHECK,
     DYNAMICS_COLLECT,
@@ -506,17 +506,34 @@ def dynamics_check(s, settings) -> None:
     stdout.print("open-loop error: " + ", ".join(
         [f"{k.removeprefix('tip_error_mean_')} {v * 1000:.1f} mm" for k, v in tip.items()]
         or [f"{k.removeprefix('state_nrmse_')} {v:.3f}" for k, v in keys.items() if k.startswith("state_nrmse_h")]))
-    stdout.print(f"written: {s.run_dir}/plots/error_vs_horizon.png, traces.png")
+    stdout.print(f"worst entry: {s.worst_dimension} ({s.worst_dimension_nrmse:.3f} after {s.worst_dimension_horizon} "
+                 f"steps); written: {s.run_dir}/error_by_dimension.csv, plots/error_vs_horizon.png, "
+                 "error_by_dimension.png, traces.png")
 
 
 @kind_command(MPC, "env", epilog="Examples:\n\n  motorlab mpc Reacher-v5 --model runs/reacher-model --episodes 50\n\n"
                                  "  motorlab mpc Reacher-v5 --model runs/reacher-model --optimizer evotorch --horizon 4 "
                                  "--population 250 --iterations 20 --episodes 5")
 def mpc(s, settings) -> None:
-    stdout.print(f"return {s.return_mean:.2f} ± {s.return_std:.2f}, final distance "
-                 f"{s.final_distance_mean * 1000:.1f} mm (mean), planning {s.plan_ms_median:.2f} ms/step "
-                 f"(median) over {s.episodes} episodes -> {s.run_dir}")
+    distance = f", final distance {s.final_distance_mean * 1000:.1f} mm (mean)" if s.final_distance_mean is not None else ""
+    spread = f", ensemble disagreement {s.disagreement_mean:.3f}" if s.disagreement_mean is not None else ""
+    stdout.print(f"return {s.return_mean:.2f} ± {s.return_std:.2f}{distance}, planning {s.plan_ms_median:.2f} ms/step "
+                 f"(median){spread} over {s.episodes} episodes ({s.reward_source} reward) -> {s.run_dir}")
     _warn_faults(s)
+
+
+@kind_command(MBRL, "env", epilog="Examples:\n\n  motorlab mbrl InvertedPendulum-v5 --rounds 5 --out runs/ip-mbrl\n\n"
+                                  "  motorlab mbrl Pusher-v5 --rounds 20 --probabilistic --propagation ts --particles 20 "
+                                  "--out runs/pusher-pets\n\n"
+                                  "  motorlab mbrl mypkg.envs:MyArm-v0 --reward mypkg.rewards:reach --rounds 10\n\n"
+                                  "  motorlab mbrl Pusher-v5 --rounds 20 --out runs/pusher-pets --resume   # after a kill")
+def mbrl(s, settings) -> None:
+    """The model-based loop (PETS): collect with the planner, refit the ensemble on all data, evaluate; round by round."""
+    final = f"return {s.final_return_mean:.2f}" if s.final_return_mean is not None else "no evaluation"
+    resumed = (f" ({s.resumed_rounds} round{'s were' if s.resumed_rounds > 1 else ' was'} done before)"
+               if s.resumed_rounds else "")
+    stdout.print(f"{final} after {s.rounds} rounds, {s.env_steps:,} env steps{resumed}; planning "
+                 f"{s.plan_ms_median or float('nan'):.1f} ms/step -> {s.run_dir}/curve.csv, plots/learning_curve.png")
 
 
 # ---- studies, sweeps, reports ------------------------------------------------------------------

@@ -3,7 +3,7 @@ line here; the CLI's sweeps, recipes and studies find it through this registry."
 
 from __future__ import annotations
 
-from motorlab.control.steps import MPC
+from motorlab.control.steps import MBRL, MPC
 from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
@@ -25,6 +25,7 @@ KINDS: dict[str, StepKind] = {k.name: k for k in (
     DYNAMICS_FIT,
     DYNAMICS_CHECK,
     MPC,
+    MBRL,
 )}
 DEFAULT_KIND = TRAIN.name  # a recipe step that names no kind
 

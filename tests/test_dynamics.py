@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from motorlab.control.mpc import CEMPlanner, EvoTorchCEM, model_scorer
+from motorlab.control.mpc import CEMPlanner, EvoTorchCEM, MPPIPlanner, model_scorer
 from motorlab.dynamics.collect import collect_transitions
 from motorlab.dynamics.model import ForwardModel, Normalizer, load_model
 from motorlab.dynamics.rewards import reacher_v5
@@ -135,7 +135,7 @@ def point_reward(s, a, s2, goal):
     return -torch.linalg.vector_norm(s2[..., :2] - goal, dim=-1) - 0.01 * a.square().sum(-1)
 
 
-@pytest.mark.parametrize("planner_class, iterations", [(CEMPlanner, 4), (EvoTorchCEM, 10)])
+@pytest.mark.parametrize("planner_class, iterations", [(CEMPlanner, 4), (MPPIPlanner, 4), (EvoTorchCEM, 10)])
 def test_cem_reaches_the_target_of_a_known_linear_system(planner_class, iterations):
     system = PointMass()
     planner = planner_class(model_scorer(system, point_reward), -np.ones(2), np.ones(2), horizon=15,

@@ -18,8 +18,8 @@ import torch
 from rich.progress import Progress
 
 from motorlab.control.mpc import MPCPolicy, make_planner, model_scorer
-from motorlab.dynamics.model import load_model
-from motorlab.dynamics.rewards import reward_for
+from motorlab.dynamics.model import ForwardModel, device_for, load_model
+from motorlab.dynamics.rewards import resolve_task
 from motorlab.dynamics.state import layout_for, xy_columns
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
@@ -27,20 +27,33 @@ from motorlab.faults import fault_line, fault_of
 from motorlab.report.video import filming, record_episode, write_mp4
 
 
-def build_policy(env, env_id: str, model_path: Path, optimizer: str = "cem", seed: int = 0, threads: int | None = 1,
-                 **settings) -> MPCPolicy:
-    """An MPC policy for `env` on the model in `model_path` (checked against the env and its layout);
-    `settings` are the planner's (horizon, population, iterations, elites)."""
-    model = load_model(model_path, env_id=env_id)
+def build_policy(env, env_id: str, model: Path | ForwardModel, optimizer: str = "cem", seed: int = 0,
+                 threads: int | None = 1, reward: str = "auto", termination: str = "auto", propagation: str = "mean",
+                 particles: int = 1, device: str = "cpu", **settings) -> MPCPolicy:
+    """An MPC policy for `env` on a forward model (or the model folder holding one), checked against the
+    env and its layout. `reward` and `termination` say what it scores (motorlab.dynamics.rewards.resolve_task);
+    `settings` are the optimizer's (horizon, population, iterations, elites or temperature)."""
+    where = model if isinstance(model, ForwardModel) else Path(model)
+    if not isinstance(model, ForwardModel):
+        model = load_model(model, env_id=env_id)
     layout = layout_for(env_id, env.observation_space.shape[0], model.meta.get("state_layout", "observation"))
     if model.state_size != layout.size or model.action_size != env.action_space.shape[0]:
-        raise MotorlabError(f"{model_path} predicts {model.state_size} state entries from {model.action_size} "
+        raise MotorlabError(f"{where} predicts {model.state_size} state entries from {model.action_size} "
                             f"actions; {env_id} has {layout.size} and {env.action_space.shape[0]}. Refit the model.")
-    if threads:
+    task = resolve_task(env_id, layout.name, layout.size, model.action_size, len(layout.goal_labels), reward,
+                        termination, frozenset(model.heads))
+    dev = device_for(device)
+    if threads and dev.type == "cpu":
         torch.set_num_threads(threads)  # small batches: more threads cost more than they give
-    score = model_scorer(model, reward_for(env_id, layout.name))
-    planner = make_planner(optimizer, score, env.action_space.low, env.action_space.high, seed=seed, **settings)
-    return MPCPolicy(planner, layout)
+    model = model.to(dev)
+    # the particles' own noise (probabilistic members), apart from the optimizer's samples
+    score = model_scorer(model, task, propagation=propagation, particles=particles,
+                         generator=torch.Generator(dev).manual_seed(seed + 7919))
+    planner = make_planner(optimizer, score, env.action_space.low, env.action_space.high, seed=seed, device=dev,
+                           **settings)
+    policy = MPCPolicy(planner, layout, model, dev)
+    policy.task = task
+    return policy
 
 
 def _distance(layout, obs: np.ndarray) -> float:
@@ -51,28 +64,43 @@ def _distance(layout, obs: np.ndarray) -> float:
     return float(np.linalg.norm(layout.state(obs)[xy] - layout.goal(obs)))
 
 
+class EpisodePath(NamedTuple):
+    """One episode as it happened: observations (T+1, obs), actions (T, A), rewards, terminated, truncated (T,)."""
+
+    observations: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+
+
 class MPCEpisodes(NamedTuple):
     returns: np.ndarray  # (episodes,)
     distances: np.ndarray  # (episodes, steps + 1), fingertip-to-target, padded with each episode's last
     call_ms: np.ndarray  # planning time of each call (all parallel envs at once)
     per_env_ms: np.ndarray  # the same per env
     fault_log: list[str]  # one line per episode ended by a numerical fault
+    paths: list[EpisodePath] | None = None  # each episode's transitions, when recorded
 
 
 def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, parallel: int,
-                 progress: bool = True) -> MPCEpisodes:
-    """Episodes of `policy`, `parallel` at a time: returns, per-step distances, planning times."""
+                 progress: bool = True, seeds: list[int] | None = None, record: bool = False) -> MPCEpisodes:
+    """Episodes of `policy`, `parallel` at a time: returns, per-step distances, planning times, and
+    with `record` each episode's transitions. Episode i resets with `seeds[i]` (default seed + i)."""
+    seeds = list(seeds) if seeds is not None else [seed + i for i in range(episodes)]
     envs = [make_env(EnvConfig(id=env_id), shaped=False) for _ in range(parallel)]
-    returns, distances, call_ms, per_env_ms, fault_log = [], [], [], [], []
+    returns, distances, call_ms, per_env_ms, fault_log, paths = [], [], [], [], [], []
     with Progress(disable=not progress) as bar:
         task = bar.add_task(f"MPC on {env_id}", total=episodes)
         for first in range(0, episodes, parallel):
             group = envs[:min(parallel, episodes - first)]
-            obs = np.stack([e.reset(seed=seed + first + i)[0] for i, e in enumerate(group)])
+            obs = np.stack([e.reset(seed=seeds[first + i])[0] for i, e in enumerate(group)])
+            first_obs = obs.copy()
             policy.reset(len(group))
             live = np.ones(len(group), dtype=bool)
             ret = np.zeros(len(group))
             dist = [[_distance(policy.layout, o)] for o in obs]
+            steps: list[list[tuple]] = [[] for _ in group]  # (obs, action, reward, terminated, truncated)
             while live.any():
                 start = time.perf_counter()
                 actions = policy.act(obs)
@@ -81,13 +109,20 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
                 per_env_ms.append(ms / len(group))
                 for i in np.flatnonzero(live):
                     o, r, terminated, truncated, info = group[i].step(actions[i])
+                    if record:
+                        steps[i].append((o, np.array(actions[i]), r, terminated, truncated))
                     obs[i] = o
                     ret[i] += r
                     dist[i].append(_distance(policy.layout, o))
                     live[i] = not (terminated or truncated)
                     fault = fault_of(info)
                     if fault:
-                        fault_log.append(fault_line(seed + first + i, len(dist[i]) - 1, fault))
+                        fault_log.append(fault_line(seeds[first + i], len(dist[i]) - 1, fault))
+            for i, rows in enumerate(steps if record else ()):
+                o, a, r, te, tr = zip(*rows)
+                paths.append(EpisodePath(np.array([first_obs[i], *o], dtype=np.float64), np.array(a, dtype=np.float64),
+                                         np.array(r, dtype=np.float64), np.array(te, dtype=bool),
+                                         np.array(tr, dtype=bool)))
             returns.extend(ret)
             distances.extend(dist)
             bar.advance(task, len(group))
@@ -95,7 +130,8 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
         e.close()
     length = max(len(d) for d in distances)
     padded = np.array([d + [d[-1]] * (length - len(d)) for d in distances])
-    return MPCEpisodes(np.array(returns), padded, np.array(call_ms), np.array(per_env_ms), fault_log)
+    return MPCEpisodes(np.array(returns), padded, np.array(call_ms), np.array(per_env_ms), fault_log,
+                       paths if record else None)
 
 
 def record_video(env_id: str, policy: MPCPolicy, path: Path, seed: int) -> Path:

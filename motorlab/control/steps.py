@@ -4,40 +4,70 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import Field
 from rich.console import Console
 
+from motorlab.dynamics.steps import ModelSettings
 from motorlab.envs import EnvConfig, check_env_id, make_env
+from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric
 from motorlab.runs import MetricsWriter, atomic_write_npz
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Ref, StepKind
-
-PLAN = ("horizon", "population", "iterations", "elites")
+from motorlab.stepkind import Artifact, Ref, StepKind
 
 
-class MpcSettings(Settings):
+class PlannerSettings(Settings):
+    """What MPC plans with: the reward and termination it scores, the optimizer and its budget, how
+    the model's uncertainty enters. `mpc` and the `mbrl` loop share these."""
+
     # Tuned on Reacher-v5 (benchmarks/mpc.py): ~4 ms per control step on one core, return ~-3.6.
     # The horizon matters most (10 steps: ~-4.6); population x iterations buys precision at ~0.6 us per row.
-    env: str = Field(description="Env id the model was fit on, e.g. Reacher-v5")
+    reward: str = Field("auto", description="What the planner maximizes: builtin (motorlab's torch reward for "
+                        "Reacher, Pusher, InvertedPendulum, ...), MODULE:FUNCTION (your torch function (obs, action, "
+                        "next_obs) -> reward), learned (the model's reward head: fit with --learn-reward), auto "
+                        "(builtin where there is one, else learned where the model has the head)")
+    termination: str = Field("auto", description="When a planned episode ends (rewards after it count nothing): "
+                             "builtin, MODULE:FUNCTION (obs, action, next_obs) -> bool, learned (--learn-termination), "
+                             "none, auto (the builtin reward's termination, else the learned head, else none)")
+    horizon: int = Field(15, gt=0, description="Planning horizon in control steps")
+    population: int = Field(100, gt=0, description="Action sequences per iteration")
+    iterations: int = Field(5, gt=0, description="Optimizer iterations per control step")
+    elites: int = Field(10, gt=0, description="Best sequences CEM refits its Gaussian to")
+    optimizer: Literal["cem", "mppi", "evotorch"] = Field(
+        "cem", description="cem (batched CEM with iCEM's kept elites), mppi (return-weighted average of all "
+        "samples), evotorch (EvoTorch's CEM, one env at a time)")
+    temperature: float = Field(0.5, gt=0, description="MPPI: weights exp(standardized return / temperature); "
+                               "smaller is greedier")
+    propagation: Literal["mean", "ts"] = Field(
+        "mean", description="How candidates roll through an ensemble: mean (the members' mean prediction) or ts "
+        "(trajectory sampling TS-inf: each particle keeps one member and, probabilistic, samples its next state)")
+    particles: int = Field(1, gt=0, description="Rollouts per candidate, their returns averaged (ts: a multiple of "
+                           "the ensemble's members)")
+    device: str = Field("auto", description="Where the planner runs: auto (a GPU where torch sees one, else the "
+                        "CPU), cpu, cuda, cuda:N")
+
+    def plan(self) -> dict[str, Any]:
+        """The optimizer's settings."""
+        keys = ("horizon", "population", "iterations") + (("temperature",) if self.optimizer == "mppi" else
+                                                          ("elites",))
+        return {k: getattr(self, k) for k in keys}
+
+    def scoring(self) -> dict[str, Any]:
+        """How candidates are scored (build_policy's keyword arguments besides the optimizer's)."""
+        return dict(reward=self.reward, termination=self.termination, propagation=self.propagation,
+                    particles=self.particles, device=self.device)
+
+
+class MpcSettings(PlannerSettings):
+    env: str = Field(description="Env id the model was fit on, e.g. Reacher-v5, or MODULE:EnvId")
     model: str = Field(description="A model folder from `motorlab dynamics fit`")
     episodes: int = Field(50, gt=0, description="Episodes to control")
-    horizon: int = Field(15, gt=0, description="Planning horizon in control steps")
-    population: int = Field(100, gt=0, description="Action sequences per CEM iteration")
-    iterations: int = Field(5, gt=0, description="CEM iterations per control step")
-    elites: int = Field(10, gt=0, description="Best sequences the Gaussian is refit to")
-    optimizer: Literal["cem", "evotorch"] = Field("cem", description="cem (motorlab's, batched) or evotorch "
-                                                  "(EvoTorch's CEM)")
     parallel: int = Field(1, gt=0, description="Episodes run side by side, planned in one batched call")
     video: bool = Field(False, description="Also render the first episode to videos/episode_0.mp4")
     seed: int = Field(0, ge=0, description="Random seed (env resets and the planner)")
-
-    def plan(self) -> dict[str, int]:
-        """The planner's settings."""
-        return {k: getattr(self, k) for k in PLAN}
 
 
 class MpcSummary(Summary):
@@ -46,16 +76,23 @@ class MpcSummary(Summary):
     return_mean: float
     return_std: float
     return_min: float
-    final_distance_mean: float
-    final_distance_median: float
+    final_distance_mean: float | None  # Reacher's fingertip-to-target distance, where the state has one
+    final_distance_median: float | None
     plan_ms_median: float
     plan_call_ms_median: float
+    disagreement_mean: float | None  # the ensemble's, on the actions taken (None for one member)
     parallel: int
     optimizer: str
+    reward_source: str
+    termination_source: str
+    propagation: str
+    particles: int
+    device: str
     horizon: int
     population: int
     iterations: int
-    elites: int
+    elites: int | None = None
+    temperature: float | None = None
     wall_seconds: float
     numerical_faults: int  # and "video", the first episode's MP4, when one was asked for
 
@@ -90,14 +127,14 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
 
         s = settings
         env = make_env(EnvConfig(id=s.env), shaped=False)
-        policy = build_policy(env, s.env, Path(s.model), s.optimizer, s.seed, **s.plan())
+        policy = build_policy(env, s.env, Path(s.model), s.optimizer, s.seed, **s.scoring(), **s.plan())
         dt = float(getattr(env.unwrapped, "dt", 0.0)) or None
         env.close()
         parallel = min(s.parallel, s.episodes)
         run_dir = self.start(out)
         start = time.perf_counter()
-        returns, distances, call_ms, per_env_ms, fault_log = run_episodes(s.env, policy, s.episodes, s.seed,
-                                                                           parallel, progress)
+        returns, distances, call_ms, per_env_ms, fault_log, _ = run_episodes(s.env, policy, s.episodes, s.seed,
+                                                                              parallel, progress)
         wall = time.perf_counter() - start
         final = distances[:, -1]
         metrics = MetricsWriter(run_dir / "metrics.csv", ["episode", "return", "final_distance"])
@@ -111,13 +148,136 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
                                dt=dt)
         video = {"video": str(record_video(s.env, policy, run_dir / "videos" / "episode_0.mp4", s.seed))
                  } if s.video else {}
+        has_distance = bool(np.isfinite(final).all())
         summary = MpcSummary(env_id=s.env, episodes=s.episodes, return_mean=float(returns.mean()),
                              return_std=float(returns.std()), return_min=float(returns.min()),
-                             final_distance_mean=float(final.mean()), final_distance_median=float(np.median(final)),
+                             final_distance_mean=float(final.mean()) if has_distance else None,
+                             final_distance_median=float(np.median(final)) if has_distance else None,
                              plan_ms_median=float(np.median(per_env_ms)), plan_call_ms_median=float(np.median(call_ms)),
-                             parallel=parallel, optimizer=s.optimizer, **s.plan(), wall_seconds=wall,
-                             numerical_faults=len(fault_log), **video)
+                             disagreement_mean=policy.disagreement_mean(), parallel=parallel, optimizer=s.optimizer,
+                             reward_source=policy.task.reward_source, termination_source=policy.task.termination_source,
+                             propagation=s.propagation, particles=s.particles, device=str(policy.device), **s.plan(),
+                             wall_seconds=wall, numerical_faults=len(fault_log), **video)
         return self.finish(run_dir, settings, summary, fault_log)
 
 
 MPC = MpcKind()
+
+
+# ---- mbrl ---------------------------------------------------------------------------------------
+
+
+class MbrlSettings(PlannerSettings, ModelSettings):
+    env: str = Field(description="Gymnasium env id, e.g. Pusher-v5, or MODULE:EnvId for your own")
+    rounds: int = Field(10, gt=0, description="Rounds of collect -> refit -> evaluate (round 1 collects with random "
+                        "actions)")
+    episodes_per_round: int = Field(1, gt=0, description="Episodes collected each round")
+    eval_episodes: int = Field(3, ge=0, description="MPC episodes evaluating each round's model (fixed reset seeds; "
+                               "not added to the data)")
+    ensemble: int = Field(5, gt=0, description="Members K, trained together as one batched net")
+    epochs: int = Field(25, gt=0, description="Passes over all data so far, each round (warm-started)")
+    parallel: int = Field(1, gt=0, description="Episodes run side by side, planned in one batched call")
+    state: Literal["auto", "reacher", "observation"] = Field(
+        "auto", description="State layout: auto (Reacher: the arm's 8-number state; else the observation)")
+    seed: int = Field(0, ge=0, description="Random seed (resets, random actions, fitting, the planner)")
+    resume: bool = Field(False, description="Continue the loop in --out after an interruption: finished rounds are "
+                         "kept, the cut one is redone from its last finished phase")
+
+    def loop_plan(self) -> Any:
+        from motorlab.control.mbrl import LoopPlan, layout_name
+
+        fit = self.fit_args()
+        holdout_every = round(1 / self.valid_fraction) if self.valid_fraction > 0 else 0
+        return LoopPlan(env_id=self.env, rounds=self.rounds, episodes_per_round=self.episodes_per_round,
+                        eval_episodes=self.eval_episodes, seed=self.seed, parallel=self.parallel,
+                        holdout_every=holdout_every, state=layout_name(self.env, self.state), fit=fit,
+                        optimizer=self.optimizer, plan=self.plan(), scoring=self.scoring())
+
+
+class MbrlSummary(Summary):
+    env_id: str
+    rounds: int
+    env_steps: int  # collected in all rounds
+    episodes: int
+    final_return_mean: float | None  # MPC on the last round's model
+    final_return_std: float | None
+    best_return_mean: float | None
+    valid_mse: float | None  # the last model's, on all held-out episodes
+    valid_mse_first: float | None  # on round 1's held-out episodes
+    plan_ms_median: float | None  # per env per control step, over every round's evaluation
+    disagreement_mean: float | None
+    reward_source: str
+    termination_source: str
+    members: int
+    probabilistic: bool
+    propagation: str
+    optimizer: str
+    resumed_rounds: int  # rounds found finished when the run started (with --resume)
+    wall_seconds: float
+
+
+class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
+    """The model-based loop (PETS): collect with the current planner, refit the ensemble on all data,
+    evaluate; curve.csv, plots/learning_curve.png, rounds/NN/ (transitions, model, round.json), model/."""
+
+    name = "mbrl"
+    what = "model-based loop on {env}: {rounds} rounds x {episodes_per_round} episodes, {ensemble} members"
+    headline_keys = ("final_return_mean", "final_return_std", "best_return_mean", "env_steps", "valid_mse",
+                     "valid_mse_first", "plan_ms_median", "rounds", "wall_seconds")
+    metrics = (Metric("final_return_mean", "return after the last round", "return", spread="final_return_std"),
+               Metric("best_return_mean", "best round's return", "return"),
+               Metric("env_steps", "env steps collected", "steps"),
+               Metric("valid_mse", "held-out MSE"),
+               Metric("plan_ms_median", "planning time per step", "ms"),
+               Metric("rounds", "rounds", "count", setup=True),
+               Metric("wall_seconds", "wall time", "s", setup=True))
+    findings = ("final_return_mean", "env_steps", "plan_ms_median")
+    key_figures = ("plots/learning_curve.png",)
+    provides = Artifact("model", "model")
+
+    def check(self, settings: MbrlSettings) -> None:
+        check_env_id(settings.env)
+
+    def run(self, settings: MbrlSettings, out: Path | None = None, console: Console | None = None,
+            progress: bool = True) -> MbrlSummary:
+        import shutil
+
+        from motorlab.control.mbrl import ROUND_JSON, check_resumable, run_loop
+        from motorlab.report.dynamics_plots import mbrl_curve
+
+        s = settings
+        if s.resume and out is None:
+            raise MotorlabError("--resume continues the loop in a folder: pass it with --out DIR.")
+        plan = s.loop_plan()
+        if out is not None:  # before the folder is touched: a finished loop is not spoiled by a mistake
+            check_resumable(Path(out), plan, s.resume)
+        run_dir = self.start(out)
+        done_before = len(list(run_dir.glob(f"rounds/*/{ROUND_JSON}")))
+        start = time.perf_counter()
+        result = run_loop(plan, run_dir, progress, s.resume)
+        records, task = result.records, result.task
+        final = run_dir / "model"
+        staging = run_dir / "model.tmp"
+        shutil.rmtree(staging, ignore_errors=True)
+        shutil.copytree(run_dir / "rounds" / f"{len(records) - 1:02d}" / "model", staging)
+        shutil.rmtree(final, ignore_errors=True)
+        staging.rename(final)
+        rows = [r.__dict__ for r in records]
+        mbrl_curve(rows, run_dir / "plots" / "learning_curve.png",
+                   f"{s.env}: model-based loop ({s.ensemble} members, {s.optimizer})")
+        evals = [r.eval_return_mean for r in records if r.eval_return_mean is not None]
+        plan_ms = [r.plan_ms_median for r in records if r.plan_ms_median is not None]
+        last = records[-1]
+        summary = MbrlSummary(
+            env_id=s.env, rounds=len(records), env_steps=last.env_steps, episodes=last.episodes,
+            final_return_mean=last.eval_return_mean, final_return_std=last.eval_return_std,
+            best_return_mean=max(evals) if evals else None, valid_mse=last.valid_mse,
+            valid_mse_first=last.valid_mse_first, plan_ms_median=float(np.median(plan_ms)) if plan_ms else None,
+            disagreement_mean=last.disagreement_mean, reward_source=task.reward_source,
+            termination_source=task.termination_source, members=s.ensemble, probabilistic=s.probabilistic,
+            propagation=s.propagation, optimizer=s.optimizer, resumed_rounds=done_before,
+            wall_seconds=time.perf_counter() - start)
+        return self.finish(run_dir, settings, summary)
+
+
+MBRL = MbrlKind()

@@ -20,21 +20,45 @@ def open_loop(model: ForwardModel, episodes: int, seed: int = 0, steps: int | No
     """Simulator and model states (E, T+1, S) under the same random actions (E, T, A), and goals (E, G).
 
     The simulator side is `collect_transitions` on Gymnasium's env (episode k from seed + k), so the
-    check sees exactly what `dynamics collect --simulator gymnasium` would record.
+    check sees exactly what `dynamics collect --simulator gymnasium` would record. Episodes that
+    end early (an env's termination) keep their own length: the steps after an episode's end are
+    NaN in "true" and "model", and "live" (E, T+1) says which steps exist.
     """
     data = collect_transitions(model.meta["env_id"], episodes, workers=1, seed=seed,
                                state=model.meta["state_layout"], simulator="gymnasium", progress=False)
     rows = [np.flatnonzero(data.episode == e) for e in range(episodes)]
-    # an episode may terminate early: compare the common length
-    horizon = min(min(len(r) for r in rows), steps or np.inf)
-    rows = np.stack([r[:horizon] for r in rows])  # (E, T)
-    true = np.concatenate([data.states[rows[:, :1]], data.next_states[rows]], axis=1)
-    actions = data.actions[rows]
+    horizon = int(min(max(len(r) for r in rows), steps or np.inf))
+    lengths = np.array([min(len(r), horizon) for r in rows])
+    padded = np.stack([np.pad(r[:horizon], (0, horizon - min(len(r), horizon)), mode="edge") for r in rows])
+    live = np.arange(horizon + 1)[None, :] <= lengths[:, None]  # (E, T+1)
+    true = np.concatenate([data.states[padded[:, :1]], data.next_states[padded]], axis=1)
+    actions = data.actions[padded]
     s = torch.as_tensor(true[:, 0], dtype=torch.float32)
     predicted = [s]
     with torch.no_grad():
         for t in range(horizon):
             s = model.predict(s, torch.as_tensor(actions[:, t], dtype=torch.float32))
             predicted.append(s)
-    return {"true": true, "model": torch.stack(predicted, 1).numpy().astype(np.float64), "actions": actions,
-            "goals": data.goals[rows[:, 0]]}
+    model_states = torch.stack(predicted, 1).numpy().astype(np.float64)
+    true[~live], model_states[~live] = np.nan, np.nan
+    return {"true": true, "model": model_states, "actions": actions, "goals": data.goals[padded[:, 0]], "live": live}
+
+
+def state_labels(env_id: str, labels: list[str], size: int) -> list[str]:
+    """Names of the state's entries: the env's own observation labels where motorlab knows them
+    (the observation layout), else the layout's."""
+    from motorlab.report.plots import OBS_LABELS
+
+    known = next((v for k, v in OBS_LABELS.items() if env_id.split(":")[-1].startswith(k)), None)
+    if known is not None and len(known) == size and all(x.startswith("obs[") for x in labels):
+        return list(known)
+    return labels if len(labels) == size else [f"state[{i}]" for i in range(size)]
+
+
+def write_error_table(path, by_dim: np.ndarray, labels: list[str]) -> None:
+    """error_by_dimension.csv: one row per step ahead, one column per state entry (normalized RMSE)."""
+    from motorlab.runs import atomic_write_text
+
+    rows = ["steps_ahead," + ",".join(f'"{x}"' for x in labels)]
+    rows += [f"{h}," + ",".join(f"{v:.6g}" for v in row) for h, row in enumerate(by_dim)]
+    atomic_write_text(path, "\n".join(rows) + "\n")

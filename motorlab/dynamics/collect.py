@@ -48,7 +48,7 @@ def _is_reacher(env: gym.Env) -> bool:
     return True
 
 
-def _episode_arrays(obs, actions, rewards, terminated, truncated, layout: StateLayout, episode_ids):
+def episode_arrays(obs, actions, rewards, terminated, truncated, layout: StateLayout, episode_ids):
     """Transitions from per-episode observation sequences (T+1 rows each)."""
     states = [layout.state(o[:-1]) for o in obs]
     return dict(
@@ -156,7 +156,7 @@ def _collect_pool(env_cfg: EnvConfig, policy_dir: str | None, episodes: int, see
         if workers > 1:
             pool.terminate()
     faults = [fault_line(s, len(r[1]) + 1, r[-1]) for s, r in zip(seeds, results) if r[-1]]
-    return _episode_arrays(*zip(*(r[:-1] for r in results)), layout=layout, episode_ids=range(episodes)), faults
+    return episode_arrays(*zip(*(r[:-1] for r in results)), layout=layout, episode_ids=range(episodes)), faults
 
 
 def collect_transitions(env_id: str, episodes: int, policy: str = "random", workers: int | None = None,

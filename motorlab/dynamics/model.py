@@ -5,6 +5,15 @@ The network is the reference notebook's MLP (10 -> 64 Tanh LayerNorm -> 64 Tanh 
 stacked weights and run as batched matmuls (`torch.baddbmm`), so an ensemble costs one
 pass, not K. Saved as `model.safetensors` (weights, normalizer statistics) + `model.json`
 (architecture, state layout, env id, metrics): no pickle.
+
+Two options make it the model of PETS (Chua et al. 2018) and of mbrl-lib:
+- `probabilistic`: each member predicts a Gaussian (mean and log-variance of the normalized
+  delta), trained by Gaussian NLL; the log-variance is kept between learned bounds
+  (`max_logvar`, `min_logvar`, soft-clamped as in PETS) so it cannot run away off the data.
+- `heads`: "reward" (the step's reward, fitted with the dynamics, for envs without a torch
+  reward) and "termination" (a classifier's logit: did the step end the episode).
+Output columns per member: [delta (S), reward (1)] means, then their log-variances when
+probabilistic, then the termination logit.
 """
 
 from __future__ import annotations
@@ -110,46 +119,151 @@ def stepwise_rollout(predict):
     return rollout
 
 
+HEADS = ("reward", "termination")
+
+
+def device_for(name: str = "auto") -> torch.device:
+    """The torch device NAME ("auto": the GPU where torch sees one, else the CPU).
+
+    Raises:
+        MotorlabError: a device torch does not have here.
+    """
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        device = torch.device(name)
+    except RuntimeError:
+        raise MotorlabError(f"--device {name!r} is not a torch device; use auto, cpu or cuda[:N].") from None
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise MotorlabError(f"--device {name}: torch sees no CUDA GPU here (this torch build: "
+                            f"{torch.__version__}); use --device auto or cpu.")
+    return device
+
+
 class ForwardModel(nn.Module):
     """next_state = state + delta_norm.inverse(net([state_norm(s), action_norm(a)]))."""
 
     def __init__(self, state_size: int, action_size: int, hidden: tuple[int, ...] = (64, 64), members: int = 1,
-                 meta: dict[str, Any] | None = None):
+                 meta: dict[str, Any] | None = None, probabilistic: bool = False, heads: tuple[str, ...] = ()):
         super().__init__()
+        unknown = set(heads) - set(HEADS)
+        if unknown:
+            raise MotorlabError(f"unknown model heads {sorted(unknown)}; choose from {', '.join(HEADS)}.")
         self.state_size, self.action_size, self.hidden = state_size, action_size, tuple(hidden)
+        self.probabilistic = bool(probabilistic)
+        self.heads = tuple(h for h in HEADS if h in heads)
         self.state_norm = Normalizer(state_size)
         self.action_norm = Normalizer(action_size)
         self.delta_norm = Normalizer(state_size)
-        self.net = EnsembleMLP(state_size + action_size, state_size, self.hidden, members)
+        self.reward_norm = Normalizer(1)
+        self.gaussian = state_size + (1 if "reward" in self.heads else 0)  # the columns with a mean (and variance)
+        n_out = self.gaussian * (2 if self.probabilistic else 1) + (1 if "termination" in self.heads else 0)
+        self.net = EnsembleMLP(state_size + action_size, n_out, self.hidden, members)
+        if self.probabilistic:  # PETS' learned bounds on the log-variance (normalized units), per member
+            self.max_logvar = nn.Parameter(torch.full((members, 1, self.gaussian), 0.5))
+            self.min_logvar = nn.Parameter(torch.full((members, 1, self.gaussian), -10.0))
         self.meta = dict(meta or {})
 
     @property
     def members(self) -> int:
         return self.net.members
 
-    def fit_normalizers(self, states, actions, next_states) -> None:
+    @property
+    def plain(self) -> bool:
+        """Deterministic state-only members: the planning fast paths apply."""
+        return not self.probabilistic and not self.heads
+
+    def fit_normalizers(self, states, actions, next_states, rewards=None) -> None:
         self.state_norm.fit(states)
         self.action_norm.fit(actions)
         self.delta_norm.fit(np.asarray(next_states) - np.asarray(states))
+        if rewards is not None:
+            self.reward_norm.fit(np.asarray(rewards).reshape(-1, 1))
+
+    def bounded_logvar(self, raw: torch.Tensor) -> torch.Tensor:
+        """PETS' soft clamp of raw log-variances (K, B, G) between the learned bounds."""
+        logvar = self.max_logvar - F.softplus(self.max_logvar - raw)
+        return self.min_logvar + F.softplus(logvar - self.min_logvar)
+
+    def split(self, out: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+        """A member's raw output (..., n_out) as (mean (..., G), log-variance (..., G) or None,
+        termination logit (...,) or None), in normalized units."""
+        g = self.gaussian
+        mean = out[..., :g]
+        logvar = self.bounded_logvar(out[..., g:2 * g]) if self.probabilistic else None
+        logit = out[..., -1] if "termination" in self.heads else None
+        return mean, logvar, logit
 
     def inputs(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         return torch.cat([self.state_norm(states), self.action_norm(actions)], dim=-1)
 
     @torch.no_grad()
-    def training_pairs(self, states, actions, next_states) -> tuple[torch.Tensor, torch.Tensor]:
-        """The net's inputs and targets (the normalized state delta) as float32 tensors, from arrays."""
+    def training_pairs(self, states, actions, next_states, rewards=None) -> tuple[torch.Tensor, torch.Tensor]:
+        """The net's inputs and Gaussian targets (the normalized state delta, and the normalized reward
+        with a reward head) as float32 tensors, from arrays."""
         s, a, s2 = (torch.as_tensor(v, dtype=torch.float32) for v in (states, actions, next_states))
-        return self.inputs(s, a), self.delta_norm(s2 - s)
+        y = self.delta_norm(s2 - s)
+        if "reward" in self.heads:
+            y = torch.cat([y, self.reward_norm(torch.as_tensor(rewards, dtype=torch.float32).reshape(-1, 1))], -1)
+        return self.inputs(s, a), y
 
     def forward(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        """Normalized deltas (K, B, S) for (B, S) states and (B, A) actions."""
+        """Raw outputs (K, B, n_out) for (B, S) states and (B, A) actions."""
         return self.net(self.inputs(states, actions))
 
     def predict(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """Next states (..., S) for states (..., S) and actions (..., A), by the members' mean delta."""
-        delta = self.net(self.inputs(states.reshape(-1, self.state_size), actions.reshape(-1, self.action_size)))
+        out = self.net(self.inputs(states.reshape(-1, self.state_size), actions.reshape(-1, self.action_size)))
+        delta = out[..., :self.state_size]
         delta = delta[0] if self.members == 1 else delta.mean(0)
         return states + self.delta_norm.inverse(delta).reshape(states.shape)
+
+    @torch.no_grad()
+    def disagreement(self, states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """The members' disagreement on the next state, (B,): the std across members of their mean
+        predictions, in units of each entry's typical change (normalized delta), averaged over
+        entries. NaN for one member."""
+        if self.members == 1:
+            return torch.full(states.shape[:1], float("nan"))
+        delta = self.net(self.inputs(states, actions))[..., :self.state_size]
+        return delta.std(0).mean(-1)
+
+    def step_fn(self, propagation: str = "mean", generator: torch.Generator | None = None):
+        """One planning step for N rows: (states (N, S), actions (N, A)) -> (next states (N, S), reward
+        (N,) or None, termination (N,) bool or None), the heads' outputs where the model has them.
+
+        propagation:
+            "mean": every row goes through all members; their mean predictions are averaged.
+            "ts": trajectory sampling TS-inf (PETS): row i always uses member i % K, and a
+                probabilistic member's next state is drawn from its Gaussian (the reward head
+                gives its mean). N must be a multiple of K.
+        """
+        k, n_s = self.members, self.state_size
+        if propagation not in ("mean", "ts"):
+            raise MotorlabError(f"--propagation {propagation!r}: choose mean or ts.")
+
+        @torch.no_grad()
+        def step(states: torch.Tensor, actions: torch.Tensor):
+            x = self.inputs(states, actions)
+            n = x.shape[0]
+            if propagation == "mean":
+                out = self.net(x)  # (K, N, out)
+                mean, _, logit = self.split(out)
+                mean = mean.mean(0)
+                logit = None if logit is None else logit.mean(0)
+            else:
+                out = self.net(x.reshape(n // k, k, -1).transpose(0, 1))  # (K, N/K, out): row i -> member i % K
+                mean, logvar, logit = self.split(out)
+                if logvar is not None:
+                    noise = torch.randn(mean[..., :n_s].shape, generator=generator, device=mean.device)
+                    mean = torch.cat([mean[..., :n_s] + (0.5 * logvar[..., :n_s]).exp() * noise, mean[..., n_s:]], -1)
+                mean = mean.transpose(0, 1).reshape(n, -1)
+                logit = None if logit is None else logit.transpose(0, 1).reshape(n)
+            next_states = states + self.delta_norm.inverse(mean[..., :n_s])
+            reward = self.reward_norm.inverse(mean[..., n_s:n_s + 1])[..., 0] if "reward" in self.heads else None
+            return next_states, reward, None if logit is None else logit > 0
+
+        return step
 
     @torch.no_grad()
     def _planning_layers(self) -> tuple[list[torch.Tensor], list[torch.Tensor], list[tuple[torch.Tensor, torch.Tensor]]]:
@@ -171,7 +285,10 @@ class ForwardModel(nn.Module):
     def fast_predict(self):
         """predict() for planning: the normalizers folded into the first and last layers, the input
         concatenation split into two matmuls, no autograd. ~Half the torch calls per step, which is
-        what a small-batch planner pays for (per-call overhead, not FLOPs, dominates on a CPU)."""
+        what a small-batch planner pays for (per-call overhead, not FLOPs, dominates on a CPU).
+        Deterministic state-only models (`plain`) only."""
+        if not self.plain:
+            raise MotorlabError("fast_predict covers deterministic models without heads; use step_fn.")
         ws, bs, lns = self._planning_layers()
         if self.members == 1:
             first_s, first_a, first_b, rest, norms = self._single_member(ws, bs, lns)
@@ -194,7 +311,9 @@ class ForwardModel(nn.Module):
     def fast_rollout(self):
         """Open-loop paths for planning: states (N, S) under action sequences (N, H, A) -> (N, H+1, S),
         fast_predict applied H times. With one member, the first layer's action part of all H steps
-        is one matmul up front, so each step is one matmul per layer."""
+        is one matmul up front, so each step is one matmul per layer. Deterministic state-only models."""
+        if not self.plain:
+            raise MotorlabError("fast_rollout covers deterministic models without heads; use step_fn.")
         if self.members != 1:
             return stepwise_rollout(self.fast_predict())
         first_s, first_a, first_b, rest, norms = self._single_member(*self._planning_layers())
@@ -223,13 +342,16 @@ class ForwardModel(nn.Module):
         from safetensors.torch import save
 
         folder = Path(folder)
-        tensors = {k: v.detach().contiguous() for k, v in self.state_dict().items()}
+        tensors = {k: v.detach().cpu().contiguous() for k, v in self.state_dict().items()}
         atomic_write_bytes(folder / MODEL_WEIGHTS, save(tensors))
         write_json(folder / MODEL_JSON, {
             "format": FORMAT, "architecture": {
                 "state_size": self.state_size, "action_size": self.action_size, "hidden": list(self.hidden),
                 "members": self.members, "activation": "tanh", "layer_norm": True,
-                "output": "normalized state delta"},
+                "probabilistic": self.probabilistic, "heads": list(self.heads),
+                "output": "normalized state delta" + (", reward" if "reward" in self.heads else "")
+                          + (" (Gaussian: mean, log-variance)" if self.probabilistic else "")
+                          + (", termination logit" if "termination" in self.heads else "")},
             **self.meta, "metrics": metrics or {}})
 
 
@@ -247,7 +369,7 @@ def _check_weight_shapes(folder: Path, sizes: tuple) -> None:
         raise MotorlabError(f"{folder / MODEL_WEIGHTS} is damaged ({str(e).splitlines()[0]}); "
                             "re-run `motorlab dynamics fit`.") from None
     with torch.device("meta"):
-        expected = {k: tuple(v.shape) for k, v in ForwardModel(*sizes).state_dict().items()}
+        expected = {k: tuple(v.shape) for k, v in ForwardModel(*sizes[:4], **sizes[4]).state_dict().items()}
     if stored != expected:
         wrong = sorted(k for k in expected.keys() | stored.keys() if stored.get(k) != expected.get(k))
         raise MotorlabError(f"{folder / MODEL_JSON}'s architecture does not match {MODEL_WEIGHTS} "
@@ -281,14 +403,19 @@ def load_model(path: Path, env_id: str | None = None, state_layout: str | None =
                  int(arch["members"]))
         if min(sizes[0], sizes[1], sizes[3], *sizes[2]) < 1:
             raise ValueError("architecture: sizes must be positive")
+        # models written before probabilistic members and heads existed have neither
+        options = {"probabilistic": bool(arch.get("probabilistic", False)), "heads": tuple(arch.get("heads", ()))}
+        if not set(options["heads"]) <= set(HEADS):
+            raise ValueError(f"architecture: heads {list(options['heads'])}")
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise MotorlabError(f"{folder / MODEL_JSON} is not a motorlab forward model (bad or missing {e}); "
                             "re-run `motorlab dynamics fit`.") from None
     check_meta(meta, sizes[0], str(folder / MODEL_JSON), "re-run `motorlab dynamics fit`.")
     if not isinstance(meta.get("metrics", {}), dict):
         raise MotorlabError(f"{folder / MODEL_JSON}: metrics should be an object; re-run `motorlab dynamics fit`.")
-    _check_weight_shapes(folder, sizes)  # before allocating: a damaged model.json must not ask for terabytes
-    model = ForwardModel(*sizes, meta={k: v for k, v in meta.items() if k not in ("format", "architecture", "metrics")})
+    _check_weight_shapes(folder, (*sizes, options))  # before allocating: a damaged model.json must not ask for terabytes
+    model = ForwardModel(*sizes, meta={k: v for k, v in meta.items() if k not in ("format", "architecture", "metrics")},
+                         **options)
     try:
         model.load_state_dict(load_file(folder / MODEL_WEIGHTS))
     except FileNotFoundError:

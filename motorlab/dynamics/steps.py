@@ -93,17 +93,24 @@ DYNAMICS_COLLECT = DynamicsCollectKind()
 # ---- dynamics-fit -----------------------------------------------------------------------------
 
 
-class DynamicsFitSettings(Settings):
-    transitions: str = Field(description="transitions.npz (or its folder) from `dynamics collect`")
+class ModelSettings(Settings):
+    """How a forward model is built and trained: `dynamics fit` and the `mbrl` loop share these."""
+
     epochs: int = Field(50, gt=0, description="Passes over the training data (the most, with --patience)")
     hidden: list[int] = Field(default_factory=lambda: [64, 64], min_length=1,
                               description="Hidden layer widths (Tanh + LayerNorm each)")
     ensemble: int = Field(1, gt=0, description="Members K, trained together as one batched net")
+    probabilistic: bool = Field(False, description="Gaussian members trained by negative log-likelihood, with "
+                                "learned bounds on their variance (PETS), instead of deterministic ones")
+    learn_reward: bool = Field(False, description="Also fit a reward head, for planning with --reward learned")
+    learn_termination: bool = Field(False, description="Also fit a termination classifier, for planning with "
+                                    "--termination learned")
     lr: float = Field(2e-3, gt=0, description="Adam's learning rate, cosine-decayed to 0")
     batch_size: int = Field(2000, gt=0, description="Rows per gradient step")
     valid_fraction: float = Field(0.1, ge=0, lt=1, description="Share of episodes held out for valid_mse")
     patience: int | None = Field(None, gt=0, description="Early stopping: epochs without a better valid_mse")
-    seed: int = Field(0, ge=0, description="Random seed (initialization, batch order, validation split)")
+    device: str = Field("auto", description="Where the model trains (and plans): auto (a GPU where torch sees "
+                        "one, else the CPU), cpu, cuda, cuda:N")
 
     @model_validator(mode="after")
     def _usable(self):
@@ -113,6 +120,20 @@ class DynamicsFitSettings(Settings):
         check_settings(self.epochs, tuple(self.hidden), self.ensemble, self.lr, self.batch_size, self.valid_fraction,
                        self.patience)
         return self
+
+    def heads(self) -> tuple[str, ...]:
+        return tuple(h for h, on in (("reward", self.learn_reward), ("termination", self.learn_termination)) if on)
+
+    def fit_args(self) -> dict[str, Any]:
+        """fit_model's keyword arguments for these settings."""
+        return dict(epochs=self.epochs, hidden=tuple(self.hidden), ensemble=self.ensemble, lr=self.lr,
+                    batch_size=self.batch_size, valid_fraction=self.valid_fraction, patience=self.patience,
+                    probabilistic=self.probabilistic, heads=self.heads(), device=self.device, checked=True)
+
+
+class DynamicsFitSettings(ModelSettings):
+    transitions: str = Field(description="transitions.npz (or its folder) from `dynamics collect`")
+    seed: int = Field(0, ge=0, description="Random seed (initialization, batch order, validation split)")
 
 
 class DynamicsFitSummary(Summary):
@@ -129,6 +150,11 @@ class DynamicsFitSummary(Summary):
     transitions: int
     members: int
     hidden: list[int]
+    probabilistic: bool = False
+    heads: list[str] = []
+    valid_nll: float | None = None
+    valid_reward_mse: float | None = None
+    valid_termination_accuracy: float | None = None
 
 
 class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
@@ -154,14 +180,14 @@ class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
         start = time.perf_counter()
         data = load_transitions(Path(s.transitions))
         run_dir = self.start(out)
-        model, result = fit_model(data, s.epochs, tuple(s.hidden), s.ensemble, s.lr, s.batch_size, s.valid_fraction,
-                                  s.patience, s.seed, run_dir=run_dir, progress=progress, checked=True)
+        model, result = fit_model(data, seed=s.seed, run_dir=run_dir, progress=progress, **s.fit_args())
         history = result.pop("history")
         loss_curve(history, run_dir / "plots" / "loss.png",
                    f"{data.env_id}: forward model ({model.members}x{list(s.hidden)})")
         summary = DynamicsFitSummary(env_id=data.env_id, state_layout=data.meta.get("state_layout"), **result,
                                      wall_seconds=time.perf_counter() - start, transitions=len(data),
-                                     members=model.members, hidden=list(s.hidden))
+                                     members=model.members, hidden=list(s.hidden), probabilistic=s.probabilistic,
+                                     heads=list(model.heads))
         model.save(run_dir, metrics={k: v for k, v in summary.keys().items() if k not in ("env_id", "state_layout")})
         return self.finish(run_dir, settings, summary)
 
@@ -186,6 +212,9 @@ class DynamicsCheckSummary(Summary):
     env_id: str
     episodes: int
     horizon: int
+    worst_dimension: str  # the state entry the model predicts worst, at worst_dimension_horizon steps ahead
+    worst_dimension_nrmse: float
+    worst_dimension_horizon: int
 
 
 class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
@@ -193,39 +222,56 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
 
     name = "dynamics-check"
     what = "check {model} open loop, {episodes} episodes"
-    key_figures = ("plots/tip_error.png", "plots/traces.png")
+    key_figures = ("plots/tip_error.png", "plots/error_by_dimension.png", "plots/traces.png")
     refs = (Ref("model", ("model",)),)
 
     def run(self, settings: DynamicsCheckSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> DynamicsCheckSummary:
-        from motorlab.dynamics.check import REPORT_STEPS, open_loop
+        from motorlab.dynamics.check import REPORT_STEPS, open_loop, state_labels, write_error_table
         from motorlab.dynamics.model import load_model
-        from motorlab.report.dynamics_plots import error_vs_horizon, xy_traces
+        from motorlab.report.dynamics_plots import error_by_dimension, error_vs_horizon, xy_traces
 
         model = load_model(Path(settings.model))
         r = open_loop(model, settings.episodes, settings.seed, settings.steps)
         run_dir = self.start(out)
         env_id = model.meta["env_id"]
-        labels = list(model.meta.get("state_labels") or [])
+        labels = state_labels(env_id, list(model.meta.get("state_labels") or []), model.state_size)
         scale = model.state_norm.std.numpy()  # state errors in units of each entry's spread in the data
-        diff = r["model"] - r["true"]
-        nrmse = np.sqrt(((diff / scale) ** 2).mean(-1))  # (E, T+1)
+        diff = r["model"] - r["true"]  # NaN after an episode's end
         last = diff.shape[1] - 1
-        keys: dict[str, float] = {}
-        xy = xy_columns(labels)
+        ends = r["live"].sum(1) - 1  # each episode's last step
+        episodes = np.arange(len(diff))
+
+        def at(errors: np.ndarray, h: int) -> float:  # mean over the episodes still going at step h
+            return float(np.nanmean(errors[:, h]))
+
+        nrmse = np.sqrt(((diff / scale) ** 2).mean(-1))  # (E, T+1)
+        reported = [h for h in REPORT_STEPS if h <= last and r["live"][:, h].any()]
+        keys: dict[str, Any] = {}
+        xy = xy_columns(model.meta.get("state_labels") or [])
         if xy:
             tip = np.linalg.norm(diff[..., xy], axis=-1)
-            keys.update({f"tip_error_mean_h{h}": float(tip[:, h].mean()) for h in REPORT_STEPS if h <= last})
-            keys["tip_error_mean_final"] = float(tip[:, -1].mean())
+            keys.update({f"tip_error_mean_h{h}": at(tip, h) for h in reported})
+            keys["tip_error_mean_final"] = float(tip[episodes, ends].mean())
             error_vs_horizon(np.arange(last + 1), {"fingertip": tip * 1000}, run_dir / "plots" / "tip_error.png",
                              f"{env_id}: open-loop fingertip error", "fingertip error (mm)")
-        keys.update({f"state_nrmse_h{h}": float(nrmse[:, h].mean()) for h in REPORT_STEPS if h <= last})
-        keys["state_nrmse_final"] = float(nrmse[:, -1].mean())
+        keys.update({f"state_nrmse_h{h}": at(nrmse, h) for h in reported})
+        keys["state_nrmse_final"] = float(nrmse[episodes, ends].mean())
         error_vs_horizon(np.arange(last + 1), {"state (normalized RMSE)": nrmse},
                          run_dir / "plots" / "error_vs_horizon.png", f"{env_id}: model vs simulator, open loop",
                          "normalized RMSE")
-        cols = xy or [0, 1]
-        names = tuple(labels[c] if labels else f"state[{c}]" for c in cols)
+        # each entry of the state (the observation's own dimensions, by default) on its own
+        with np.errstate(invalid="ignore"):
+            by_dim = np.sqrt(np.nanmean((diff / scale) ** 2, axis=0))  # (T+1, S)
+        h_worst = max((h for h in (10, *reported) if h <= last and r["live"][:, h].any()), default=0)
+        worst = int(np.nanargmax(by_dim[h_worst])) if np.isfinite(by_dim[h_worst]).any() else 0
+        keys.update(worst_dimension=labels[worst], worst_dimension_nrmse=float(by_dim[h_worst, worst]),
+                    worst_dimension_horizon=h_worst)
+        write_error_table(run_dir / "error_by_dimension.csv", by_dim, labels)
+        error_by_dimension(by_dim, labels, run_dir / "plots" / "error_by_dimension.png",
+                           f"{env_id}: open-loop error of each state entry")
+        cols = xy or [0, 1][:model.state_size]
+        names = tuple(labels[c] for c in cols)
         xy_traces(r["true"][..., cols], r["model"][..., cols], r["goals"] if xy else None,
                   run_dir / "plots" / "traces.png", f"{env_id}: simulator vs model, {settings.episodes} episodes",
                   tuple(n + (" (m)" if xy else "") for n in names))

@@ -1,7 +1,10 @@
 """`motorlab dynamics fit`: train a forward model on transitions.npz.
 
 The loss is the mean squared error of the normalized state delta, as in the reference
-notebook; "valid_mse" is that loss on held-out episodes. Speed comes from keeping the
+notebook, or with probabilistic members the Gaussian negative log-likelihood plus PETS'
+penalty on the log-variance bounds; a reward head adds the normalized reward to the
+targets, a termination head a logistic loss. "valid_mse" is the squared error of the
+members' mean predictions of the normalized delta on held-out episodes, whatever the loss. Speed comes from keeping the
 whole data set in tensors and slicing batches out of one permutation per epoch (no
 DataLoader, no per-sample Python), larger batches with a larger learning rate decayed
 by a cosine schedule, and an ensemble trained as one batched network.
@@ -10,6 +13,7 @@ by a cosine schedule, and an ensemble trained as one batched network.
 from __future__ import annotations
 
 import copy
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -17,6 +21,7 @@ from typing import Any
 import numpy as np
 import torch
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+from torch.nn import functional as F
 
 from motorlab.dynamics.model import ForwardModel
 from motorlab.dynamics.transitions import Transitions
@@ -36,11 +41,48 @@ def split_episodes(episode: np.ndarray, fraction: float, seed: int) -> tuple[np.
     return np.flatnonzero(~is_valid), np.flatnonzero(is_valid)
 
 
+def _loss_parts(model: ForwardModel, x: torch.Tensor, y: torch.Tensor, done: torch.Tensor | None,
+                pos_weight: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+    """(training loss, mean squared error of the normalized delta) for inputs x (K, B, in) or
+    (B, in), Gaussian targets y (K, B, G) or (B, G), termination flags (K, B)."""
+    mean, logvar, logit = model.split(model.net(x))
+    sq = (mean - y) ** 2
+    if logvar is None:
+        loss = sq.mean()
+    else:  # Gaussian NLL per member (mean over rows and entries), summed over members, as mbrl-lib does
+        loss = (sq * torch.exp(-logvar) + logvar).mean((1, 2)).sum()
+        loss = loss + 0.01 * (model.max_logvar.sum() - model.min_logvar.sum())
+    if logit is not None:
+        loss = loss + F.binary_cross_entropy_with_logits(logit, done.expand_as(logit), pos_weight=pos_weight)
+    return loss, (loss if model.plain else sq[..., :model.state_size].mean()).detach()
+
+
+def evaluate_rows(model: ForwardModel, x: torch.Tensor, y: torch.Tensor, done: torch.Tensor | None,
+                  batch: int = 65536) -> dict[str, float]:
+    """Held-out numbers: valid_mse (the normalized delta, averaged over members, rows and entries),
+    and where the model has them valid_nll, valid_reward_mse, valid_termination_accuracy."""
+    sums: dict[str, float] = {}
+    with torch.no_grad():
+        for i in range(0, len(x), batch):
+            mean, logvar, logit = model.split(model.net(x[i:i + batch]))
+            target = y[i:i + batch]
+            sq = (mean - target) ** 2
+            parts = {"valid_mse": sq[..., :model.state_size].mean(-1)}
+            if logvar is not None:
+                parts["valid_nll"] = 0.5 * (sq * torch.exp(-logvar) + logvar + math.log(2 * math.pi)).mean(-1)
+            if "reward" in model.heads:
+                parts["valid_reward_mse"] = sq[..., model.state_size]
+            if logit is not None:
+                parts["valid_termination_accuracy"] = ((logit > 0) == done[i:i + batch].bool()).float()
+            for k, v in parts.items():
+                sums[k] = sums.get(k, 0.0) + float(v.mean(0).sum())
+    return {k: v / max(1, len(x)) for k, v in sums.items()}
+
+
 def normalized_mse(model: ForwardModel, x: torch.Tensor, y: torch.Tensor, batch: int = 65536) -> float:
     """Mean squared error of the normalized delta, averaged over members, rows and entries."""
-    with torch.no_grad():
-        total = sum(float(((model.net(x[i:i + batch]) - y[i:i + batch]) ** 2).sum()) for i in range(0, len(x), batch))
-    return total / (model.members * max(1, y.numel()))
+    return evaluate_rows(model, x, y, None if "termination" not in model.heads else torch.zeros(len(x)),
+                         batch)["valid_mse"]
 
 
 def check_settings(epochs: int, hidden: tuple[int, ...], ensemble: int, lr: float, batch_size: int,
@@ -60,7 +102,9 @@ def check_settings(epochs: int, hidden: tuple[int, ...], ensemble: int, lr: floa
 def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64, 64), ensemble: int = 1,
               lr: float = 2e-3, batch_size: int = 2000, valid_fraction: float = 0.1, patience: int | None = None,
               seed: int = 0, threads: int | None = None, run_dir: Path | None = None,
-              progress: bool = True, checked: bool = False) -> tuple[ForwardModel, dict[str, Any]]:
+              progress: bool = True, checked: bool = False, probabilistic: bool = False,
+              heads: tuple[str, ...] = (), init: ForwardModel | None = None,
+              valid_episodes: np.ndarray | None = None, device: str = "cpu") -> tuple[ForwardModel, dict[str, Any]]:
     """Train a normalized-delta forward model.
 
     Args:
@@ -73,27 +117,52 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
         patience: stop after this many epochs without a better valid_mse, keeping the best weights.
         run_dir: where metrics.csv, tensorboard/ go (nothing is written without it).
         checked: the settings were checked already (DynamicsFitSettings checks them once).
+        probabilistic: Gaussian members trained by NLL (PETS) instead of deterministic ones.
+        heads: "reward" and/or "termination", fitted with the dynamics.
+        init: warm start: a model of the same architecture whose weights training starts from (the
+            normalizers are refit to `data`).
+        valid_episodes: the held-out episode indices (instead of a `valid_fraction` draw), e.g. the
+            same ones round after round of a model-based loop.
+        device: where training runs ("cpu", "cuda", "auto").
 
     Returns:
-        The model (best weights when validating) and its metrics.
+        The model (best weights when validating, on the CPU) and its metrics.
     """
+    from motorlab.dynamics.model import device_for
+
     if not checked:
         check_settings(epochs, hidden, ensemble, lr, batch_size, valid_fraction, patience)
     if threads:
         torch.set_num_threads(threads)
     torch.manual_seed(seed)
-    train_rows, valid_rows = split_episodes(data.episode, valid_fraction, seed)
+    if valid_episodes is None:
+        train_rows, valid_rows = split_episodes(data.episode, valid_fraction, seed)
+    else:
+        is_valid = np.isin(data.episode, valid_episodes)
+        train_rows, valid_rows = np.flatnonzero(~is_valid), np.flatnonzero(is_valid)
     if len(train_rows) == 0:
         raise MotorlabError("no training rows left after the validation split; collect more episodes.")
     meta = {k: data.meta.get(k) for k in ("env_id", "state_layout", "state_labels", "goal_labels", "obs_dim",
                                           "action_low", "action_high")}
-    model = ForwardModel(data.states.shape[1], data.actions.shape[1], hidden, ensemble, meta=meta)
-    model.fit_normalizers(data.states[train_rows], data.actions[train_rows], data.next_states[train_rows])
-    model.float()
-    x, y = model.training_pairs(data.states, data.actions, data.next_states)
+    model = ForwardModel(data.states.shape[1], data.actions.shape[1], hidden, ensemble, meta=meta,
+                         probabilistic=probabilistic, heads=heads)
+    if init is not None:
+        model.load_state_dict(init.state_dict())
+    model.fit_normalizers(data.states[train_rows], data.actions[train_rows], data.next_states[train_rows],
+                          data.rewards[train_rows])
+    dev = device_for(device)
+    model.float().to(dev)
+    x, y = (t.to(dev) for t in model.training_pairs(data.states, data.actions, data.next_states, data.rewards))
+    done = torch.as_tensor(data.terminated, dtype=torch.float32, device=dev)
+    pos_weight = None
+    if "termination" in model.heads:  # ends are rare: weigh them up to 10x, so the classifier does not ignore them
+        ends = float(done[train_rows].sum())
+        pos_weight = torch.tensor(min(10.0, (len(train_rows) - ends) / max(ends, 1.0)), device=dev)
     x_train, y_train, x_valid, y_valid = x[train_rows], y[train_rows], x[valid_rows], y[valid_rows]
+    d_train, d_valid = done[train_rows], done[valid_rows]
 
-    optimizer = torch.optim.Adam(model.net.parameters(), lr=lr, foreach=True)
+    params = list(model.net.parameters()) + ([model.max_logvar, model.min_logvar] if probabilistic else [])
+    optimizer = torch.optim.Adam(params, lr=lr, foreach=True)
     steps_per_epoch = max(1, -(-len(x_train) // batch_size))
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=epochs * steps_per_epoch)
     writer = metrics = None
@@ -101,7 +170,8 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
         from torch.utils.tensorboard import SummaryWriter
 
         writer = SummaryWriter(str(Path(run_dir) / "tensorboard" / "motorlab"))
-        metrics = MetricsWriter(Path(run_dir) / "metrics.csv", ["epoch", "train_mse", "valid_mse", "lr", "seconds"])
+        metrics = MetricsWriter(Path(run_dir) / "metrics.csv", ["epoch", "train_loss", "train_mse", "valid_mse", "lr",
+                                                                "seconds"])
     generator = torch.Generator().manual_seed(seed)
     best, best_state, since_best, history = float("inf"), None, 0, []
     start = time.perf_counter()
@@ -112,26 +182,28 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
         for epoch in range(1, epochs + 1):
             model.net.train()
             # one permutation per member: each sees its own batch order
-            perms = torch.stack([torch.randperm(len(x_train), generator=generator) for _ in range(ensemble)])
-            total = 0.0
+            perms = torch.stack([torch.randperm(len(x_train), generator=generator) for _ in range(ensemble)]).to(dev)
+            total_loss = total_mse = 0.0
             for i in range(0, len(x_train), batch_size):
                 idx = perms[:, i:i + batch_size]
-                loss = ((model.net(x_train[idx]) - y_train[idx]) ** 2).mean()
+                loss, sq = _loss_parts(model, x_train[idx], y_train[idx], d_train[idx], pos_weight)
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 optimizer.step()
                 schedule.step()
-                total += float(loss.detach()) * idx.shape[1]
+                total_loss += float(loss.detach()) * idx.shape[1]
+                total_mse += float(sq) * idx.shape[1]
             model.net.eval()
-            train_mse = total / len(x_train)
-            valid_mse = normalized_mse(model, x_valid, y_valid) if len(x_valid) else float("nan")
-            row = {"epoch": epoch, "train_mse": train_mse, "valid_mse": valid_mse,
-                   "lr": schedule.get_last_lr()[0], "seconds": time.perf_counter() - start}
-            history.append(row)
+            held_out = evaluate_rows(model, x_valid, y_valid, d_valid) if len(x_valid) else {}
+            valid_mse = held_out.get("valid_mse", float("nan"))
+            row = {"epoch": epoch, "train_loss": total_loss / len(x_train), "train_mse": total_mse / len(x_train),
+                   "valid_mse": valid_mse, "lr": schedule.get_last_lr()[0], "seconds": time.perf_counter() - start}
+            history.append({**row, **held_out})
             if metrics:
                 metrics.write(row)
-                for k in ("train_mse", "valid_mse", "lr"):
-                    writer.add_scalar(f"dynamics/{k}", row[k], epoch)
+                for k, v in {**row, **held_out}.items():
+                    if k not in ("epoch", "seconds"):
+                        writer.add_scalar(f"dynamics/{k}", v, epoch)
             bar.update(task, advance=1, valid=f"{valid_mse:.2e}")
             if len(x_valid) and valid_mse < best:
                 best, best_state, since_best = valid_mse, copy.deepcopy(model.state_dict()), 0
@@ -145,9 +217,12 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
         writer.close()
     if best_state is not None:
         model.load_state_dict(best_state)
+    model.cpu()
+    best_row = min(history, key=lambda r: r["valid_mse"]) if len(x_valid) else history[-1]
     result = {"valid_mse": best if len(x_valid) else None, "train_mse": history[-1]["train_mse"],
-              "epochs_run": len(history), "best_epoch": (min(history, key=lambda r: r["valid_mse"])["epoch"]
-                                                        if len(x_valid) else len(history)),
+              **{k: best_row[k] for k in ("valid_nll", "valid_reward_mse", "valid_termination_accuracy")
+                 if k in best_row},
+              "epochs_run": len(history), "best_epoch": best_row["epoch"],
               "train_rows": int(len(x_train)), "valid_rows": int(len(x_valid)), "train_seconds": seconds,
               "history": history}
     return model, result

@@ -78,6 +78,13 @@ class Transitions:
         return self
 
 
+def concatenate(parts: list[Transitions], meta: dict[str, Any] | None = None) -> Transitions:
+    """The rows of several transition sets as one (episode indices as they are: keep them distinct),
+    with the first part's meta unless `meta` is given."""
+    arrays = {k: np.concatenate([getattr(p, k) for p in parts]) for k in _ARRAYS}
+    return Transitions(**arrays, meta=dict(parts[0].meta if meta is None else meta))
+
+
 def check_meta(meta: dict, state_size: int, source: str, fix: str) -> None:
     """The descriptive fields that transitions.npz and model.json share have the right types:
     env id and layout name strings, one label per state entry."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -33,11 +34,13 @@ def error_vs_horizon(horizons: np.ndarray, errors: dict[str, np.ndarray], path: 
     """Open-loop prediction error vs steps ahead: mean over episodes with the 10-90% range."""
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(6, 3.8))
-        for label, e in errors.items():  # e: (episodes, horizon)
-            line, = ax.plot(horizons, e.mean(0), label=f"{label}, mean")
-            if len(e) > 1:
-                ax.fill_between(horizons, *np.percentile(e, [10, 90], axis=0), color=line.get_color(), alpha=0.2,
-                                lw=0, label=f"10–90% of {len(e)} episodes")
+        for label, e in errors.items():  # e: (episodes, horizon), NaN after an episode's end
+            with np.errstate(invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # steps no episode reached: NaN, not drawn
+                line, = ax.plot(horizons, np.nanmean(e, 0), label=f"{label}, mean")
+                if len(e) > 1:
+                    ax.fill_between(horizons, *np.nanpercentile(e, [10, 90], axis=0), color=line.get_color(),
+                                    alpha=0.2, lw=0, label=f"10–90% of {len(e)} episodes")
         ax.set_xlabel("steps ahead (open loop)")
         ax.set_ylabel(ylabel)
         ax.set_title(title)
@@ -83,3 +86,61 @@ def distance_over_time(distances: np.ndarray, path: Path, title: str = "", dt: f
         ax.legend()
         return save_figure(fig, path, "Distance from fingertip to target under MPC at each control step: every "
                                       "episode (thin) and their median (bold).")
+
+
+def mbrl_curve(rows: list[dict], path: Path, title: str = "") -> Path | None:
+    """The model-based loop round by round: the planner's return against env steps collected (with the
+    collected episodes' own return), and the model's held-out error per round."""
+    if not rows:
+        return None
+    from motorlab.report.plots import steps_axis
+
+    steps = np.array([r["env_steps"] for r in rows], dtype=float)
+    with plt.rc_context(STYLE):
+        fig, (ax, err) = plt.subplots(1, 2, figsize=(10, 3.8))
+        evals = np.array([np.nan if r["eval_return_mean"] is None else r["eval_return_mean"] for r in rows], float)
+        if np.isfinite(evals).any():
+            spread = np.array([0.0 if r["eval_return_std"] is None else r["eval_return_std"] for r in rows], float)
+            line, = ax.plot(steps, evals, "o-", label="MPC on the round's model (evaluation)")
+            ax.fill_between(steps, evals - spread, evals + spread, color=line.get_color(), alpha=0.2, lw=0)
+        ax.plot(steps, [r["collect_return_mean"] for r in rows], "s--", color="tab:gray", ms=4,
+                label="episodes collected (round 1: random)")
+        ax.set_xlabel("env steps collected")
+        steps_axis(ax.xaxis)
+        ax.set_ylabel("return")
+        ax.set_title(title)
+        ax.legend(fontsize=8)
+        for key, label in (("valid_mse", "all held-out episodes"), ("valid_mse_first", "round 1's held-out episodes")):
+            values = np.array([np.nan if r[key] is None else r[key] for r in rows], float)
+            if np.isfinite(values).any():
+                err.semilogy(np.arange(1, len(rows) + 1), values, "o-", label=label)
+        err.set_xlabel("round")
+        err.set_ylabel("held-out MSE (normalized state delta)")
+        err.legend(fontsize=8)
+        return save_figure(fig, path, "Left: return of MPC on each round's model against the env steps collected so "
+                                      "far (mean ± std over the evaluation episodes), and of the episodes each round "
+                                      "collected. Right: the model's error on held-out episodes after each round.")
+
+
+def error_by_dimension(by_dim: np.ndarray, labels: list[str], path: Path, title: str = "") -> Path | None:
+    """Open-loop error of each state entry against steps ahead (normalized RMSE over episodes): one
+    line per entry for a few, a heat map for many."""
+    horizons = np.arange(len(by_dim))
+    with plt.rc_context(STYLE):
+        if len(labels) <= 8:
+            fig, ax = plt.subplots(figsize=(6, 3.8))
+            for i, label in enumerate(labels):
+                ax.plot(horizons, by_dim[:, i], label=label)
+            ax.set_ylabel("normalized RMSE")
+            ax.legend(fontsize=8)
+        else:
+            fig, ax = plt.subplots(figsize=(7, 0.25 * len(labels) + 1.5))
+            image = ax.imshow(by_dim.T, aspect="auto", interpolation="nearest", cmap="magma",
+                              extent=(-0.5, len(by_dim) - 0.5, len(labels) - 0.5, -0.5))
+            ax.set_yticks(range(len(labels)), labels, fontsize=7)
+            fig.colorbar(image, ax=ax, label="normalized RMSE")
+        ax.set_xlabel("steps ahead (open loop)")
+        ax.set_title(title)
+        return save_figure(fig, path, "Error of the model's open-loop prediction of each state entry against steps "
+                                      "ahead, in units of the entry's spread in the training data (RMSE over "
+                                      "episodes).")

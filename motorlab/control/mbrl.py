@@ -1,0 +1,273 @@
+"""The model-based loop (PETS, Chua et al. 2018; mbrl-lib's `pets` example), round by round.
+
+Round 1 collects episodes with random actions; every round then
+  1. refits the forward model on all transitions so far, warm-started from the last round's model,
+  2. evaluates MPC on that model (`eval_episodes`, fixed reset seeds, not added to the data),
+  3. and the next round collects its episodes with that planner.
+So the learning curve is the planner's return against the env steps collected so far.
+
+Every round writes `rounds/NN/`: transitions.npz (its episodes), model/ (the refit model), and
+round.json (the planner settings it collected with, its numbers), last, marking the round done.
+A killed loop resumes (`resume=True`) from the first round without round.json, redoing only
+the phase that was cut: collection and fitting are deterministic given the seed, so a resumed
+loop ends with the numbers an uninterrupted one would have.
+
+Held-out episodes: of the episodes numbered 0, 1, 2, ... across rounds, every `holdout_every`-th
+(1, 1 + k, 1 + 2k, ...) is never trained on. "valid_mse" is the model's error on all of them so
+far, "valid_mse_first" on the first round's, the same set every round.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+from motorlab.control.mpc_episodes import build_policy, run_episodes
+from motorlab.dynamics.collect import collect_transitions, episode_arrays
+from motorlab.dynamics.model import MODEL_JSON, ForwardModel, load_model
+from motorlab.dynamics.state import layout_for
+from motorlab.dynamics.train import evaluate_rows, fit_model
+from motorlab.dynamics.transitions import TRANSITIONS, Transitions, concatenate, load_transitions
+from motorlab.envs import EnvConfig, make_env
+from motorlab.errors import MotorlabError
+from motorlab.runs import MetricsWriter, read_json, write_json
+
+ROUND_JSON = "round.json"
+LOOP_JSON = "loop.json"
+CURVE = "curve.csv"
+# reset seeds: collected episode g of loop seed s resets with s * SEED_STRIDE + g, evaluation episode
+# j with s * SEED_STRIDE + EVAL_OFFSET + j (the same every round, so rounds are compared on one set)
+SEED_STRIDE, EVAL_OFFSET = 1_000_000, 900_000
+
+
+@dataclass
+class RoundRecord:
+    """One round's numbers: a row of curve.csv."""
+
+    round: int
+    env_steps: int  # collected so far, this round's included
+    episodes: int  # collected so far
+    collect_return_mean: float  # this round's collected episodes (random in round 1)
+    eval_return_mean: float | None
+    eval_return_std: float | None
+    valid_mse: float | None
+    valid_mse_first: float | None
+    plan_ms_median: float | None  # per env per control step, this round's evaluation
+    disagreement_mean: float | None
+    collect_seconds: float
+    fit_seconds: float
+    eval_seconds: float
+
+
+@dataclass(frozen=True)
+class LoopPlan:
+    """What the loop runs: the env, the rounds, and the fit and planner settings it passes on."""
+
+    env_id: str
+    rounds: int
+    episodes_per_round: int
+    eval_episodes: int
+    seed: int
+    parallel: int
+    holdout_every: int
+    state: str
+    fit: dict[str, Any]  # fit_model's keyword arguments
+    optimizer: str
+    plan: dict[str, Any]  # the optimizer's settings
+    scoring: dict[str, Any]  # build_policy's reward, termination, propagation, particles, device
+
+
+def holdout(episodes: np.ndarray, every: int) -> np.ndarray:
+    """The held-out ones of these episode numbers (1, 1 + every, ...); none when every == 0."""
+    return episodes[(episodes % every) == 1 % every] if every else episodes[:0]
+
+
+def _round_dir(run_dir: Path, r: int) -> Path:
+    return Path(run_dir) / "rounds" / f"{r:02d}"
+
+
+def _planner(plan: LoopPlan, model: ForwardModel, r: int):
+    env = make_env(EnvConfig(id=plan.env_id), shaped=False)
+    try:
+        return build_policy(env, plan.env_id, model, plan.optimizer, plan.seed * 1000 + r, **plan.scoring,
+                            **plan.plan)
+    finally:
+        env.close()
+
+
+def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | None, progress: bool) -> Transitions:
+    """Round r's episodes: random actions in round 1, else MPC on the last round's model."""
+    base = plan.seed * SEED_STRIDE + first_episode
+    n = plan.episodes_per_round
+    if model is None:
+        data = collect_transitions(plan.env_id, n, "random", workers=1, seed=base, state=plan.state, progress=False)
+        data.episode = data.episode + first_episode
+        return data
+    policy = _planner(plan, model, r)
+    result = run_episodes(plan.env_id, policy, n, base, min(plan.parallel, n), progress=progress,
+                          seeds=[base + i for i in range(n)], record=True)
+    # an episode whose simulation diverged is no transition of the dynamics: it is left out
+    kept = [i for i, p in enumerate(result.paths)
+            if np.isfinite(p.observations).all() and np.isfinite(p.rewards).all()]
+    if not kept:
+        raise MotorlabError(f"round {r + 1}: every episode ended on a numerical fault "
+                            f"({result.fault_log[0] if result.fault_log else 'non-finite observations'}).")
+    arrays = episode_arrays(*zip(*[tuple(result.paths[i]) for i in kept]), layout=policy.layout,
+                            episode_ids=[first_episode + i for i in kept])
+    return Transitions(**arrays, meta={})
+
+
+def _evaluate(plan: LoopPlan, model: ForwardModel, r: int, progress: bool) -> dict[str, float | None]:
+    if plan.eval_episodes == 0:
+        return {"eval_return_mean": None, "eval_return_std": None, "plan_ms_median": None, "disagreement_mean": None}
+    policy = _planner(plan, model, r)
+    base = plan.seed * SEED_STRIDE + EVAL_OFFSET
+    result = run_episodes(plan.env_id, policy, plan.eval_episodes, base, min(plan.parallel, plan.eval_episodes),
+                          progress=progress)
+    return {"eval_return_mean": float(result.returns.mean()), "eval_return_std": float(result.returns.std()),
+            "plan_ms_median": float(np.median(result.per_env_ms)), "disagreement_mean": policy.disagreement_mean()}
+
+
+def _held_out_mse(model: ForwardModel, data: Transitions, episodes: np.ndarray) -> float | None:
+    rows = np.flatnonzero(np.isin(data.episode, episodes))
+    if len(rows) == 0:
+        return None
+    x, y = model.training_pairs(data.states[rows], data.actions[rows], data.next_states[rows], data.rewards[rows])
+    return evaluate_rows(model, x, y, torch.as_tensor(data.terminated[rows], dtype=torch.float32))["valid_mse"]
+
+
+def check_resumable(run_dir: Path, plan: LoopPlan, resume: bool) -> None:
+    """A loop folder holding rounds continues only with resume=True and the same settings (more rounds allowed)."""
+    run_dir = Path(run_dir)
+    started = (run_dir / LOOP_JSON).is_file()
+    if started and not resume:
+        raise MotorlabError(f"{run_dir} holds an earlier mbrl loop; pass --resume to continue it, or choose "
+                            "another --out.")
+    if resume and started:
+        before = read_json(run_dir / LOOP_JSON)
+        now, before = _flat(_comparable(asdict(plan))), _flat(before)
+        changed = sorted(k for k in now.keys() | before.keys() if now.get(k) != before.get(k))
+        if changed:
+            raise MotorlabError(f"--resume continues {run_dir} with its own settings, but {', '.join(changed)} "
+                                "differ; run it with the settings in its config.toml (only --rounds may grow).")
+
+
+def _flat(settings: dict[str, Any]) -> dict[str, Any]:
+    """Nested settings (fit, plan, scoring) as one level, under their own names."""
+    flat = {}
+    for k, v in settings.items():
+        flat.update(v if isinstance(v, dict) else {k: v})
+    return flat
+
+
+def _comparable(plan: dict[str, Any]) -> dict[str, Any]:
+    """The settings a resumed loop must share with the interrupted one (JSON-shaped, rounds left out)."""
+    import json
+
+    return json.loads(json.dumps({k: v for k, v in plan.items() if k != "rounds"}))
+
+
+@dataclass
+class LoopResult:
+    records: list[RoundRecord]
+    model: ForwardModel  # the last round's
+    transitions: Transitions  # every round's
+    task: Any  # the reward and termination the planner scored (motorlab.dynamics.rewards.Task)
+
+
+def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool = False) -> LoopResult:
+    """The loop, round by round, into `run_dir` (see the module's docstring)."""
+    run_dir = Path(run_dir)
+    check_resumable(run_dir, plan, resume)
+    write_json(run_dir / LOOP_JSON, _comparable(asdict(plan)))
+    records: list[RoundRecord] = []
+    parts: list[Transitions] = []
+    meta: dict[str, Any] | None = None
+    model: ForwardModel | None = None
+    first_valid: np.ndarray | None = None
+    curve = MetricsWriter(run_dir / CURVE, list(RoundRecord.__dataclass_fields__))
+    columns = (TextColumn("mbrl {task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total} rounds"),
+               TextColumn("{task.fields[status]}"), TimeElapsedColumn())
+    try:
+        with Progress(*columns, disable=not progress) as bar:
+            task = bar.add_task(plan.env_id, total=plan.rounds, status="")
+            for r in range(plan.rounds):
+                folder = _round_dir(run_dir, r)
+                first_episode = r * plan.episodes_per_round
+                # 1. collect (kept if this round's transitions were written before a kill)
+                start = time.perf_counter()
+                if (folder / TRANSITIONS).is_file():
+                    data = load_transitions(folder / TRANSITIONS)
+                else:
+                    bar.update(task, status="collecting" if r else "collecting (random actions)")
+                    data = _collect(plan, r, first_episode, model, progress=False)
+                    if meta is None:
+                        meta = dict(data.meta, policy="random, then MPC on each round's model")
+                    data.meta = meta
+                    data.save(folder / TRANSITIONS)
+                meta = meta or data.meta
+                collect_seconds = time.perf_counter() - start
+                parts.append(data)
+                everything = concatenate(parts, meta)
+                valid = holdout(np.unique(everything.episode), plan.holdout_every)
+                if first_valid is None:
+                    first_valid = holdout(np.unique(data.episode), plan.holdout_every)
+                # 2. refit on everything so far, warm-started from the last model
+                start = time.perf_counter()
+                if (folder / "model" / MODEL_JSON).is_file():
+                    model = load_model(folder / "model")
+                    fit_result = read_json(folder / "model" / MODEL_JSON).get("metrics", {})
+                else:
+                    bar.update(task, status=f"fitting on {len(everything):,} transitions")
+                    model, fit_result = fit_model(everything, seed=plan.seed + r, init=model, valid_episodes=valid,
+                                                  progress=False, **plan.fit)
+                    fit_result.pop("history")
+                    model.save(folder / "model", metrics=fit_result)
+                fit_seconds = time.perf_counter() - start
+                # 3. evaluate the planner on the new model
+                start = time.perf_counter()
+                if (folder / ROUND_JSON).is_file():
+                    record = RoundRecord(**read_json(folder / ROUND_JSON)["record"])
+                else:
+                    bar.update(task, status="evaluating")
+                    numbers = _evaluate(plan, model, r, progress=False)
+                    record = RoundRecord(
+                        round=r + 1, env_steps=len(everything), episodes=len(np.unique(everything.episode)),
+                        collect_return_mean=float(np.bincount(data.episode - first_episode, weights=data.rewards)[
+                            np.unique(data.episode - first_episode)].mean()),
+                        valid_mse=fit_result.get("valid_mse"), valid_mse_first=_held_out_mse(model, everything,
+                                                                                             first_valid),
+                        collect_seconds=collect_seconds, fit_seconds=fit_seconds,
+                        eval_seconds=time.perf_counter() - start, **numbers)
+                    write_json(folder / ROUND_JSON, {
+                        "record": asdict(record),
+                        "collected_with": "random actions" if r == 0 else {
+                            "model": f"rounds/{r - 1:02d}/model", "optimizer": plan.optimizer, **plan.plan,
+                            **plan.scoring, "seed": plan.seed * 1000 + r - 1},
+                        "evaluated_with": {"model": f"rounds/{r:02d}/model", "optimizer": plan.optimizer, **plan.plan,
+                                           **plan.scoring, "seed": plan.seed * 1000 + r,
+                                           "episodes": plan.eval_episodes},
+                        "fit": {k: (list(v) if isinstance(v, tuple) else v) for k, v in plan.fit.items()},
+                        "held_out_episodes": valid.tolist()})
+                records.append(record)
+                curve.write(asdict(record))
+                shown = f"return {record.eval_return_mean:.1f}" if record.eval_return_mean is not None else ""
+                bar.update(task, advance=1, status=f"{record.env_steps:,} steps, {shown}")
+    finally:
+        curve.close()
+    return LoopResult(records, model, concatenate(parts, meta), _planner(plan, model, plan.rounds).task)
+
+
+def layout_name(env_id: str, state: str) -> str:
+    """The state layout the loop's transitions use (checked against the env)."""
+    env = make_env(EnvConfig(id=env_id), shaped=False)
+    try:
+        return layout_for(env_id, env.observation_space.shape[0], state).name
+    finally:
+        env.close()
