@@ -109,7 +109,11 @@ def kind_command(kind: StepKind, argument: str, epilog: str = "", flags: dict[st
 
     def register(report):
         params, convert = [], {}
-        for name, info in kind.settings.model_fields.items():
+        # the kind's own fields first, then those of the bases it shares with other kinds (a planner's, a model's)
+        own = list(kind.settings.__dict__.get("__annotations__", {}))
+        fields = sorted(kind.settings.model_fields.items(),
+                        key=lambda item: own.index(item[0]) if item[0] in own else len(own))
+        for name, info in fields:
             kind_of, convert[name] = _cli_type(info.annotation, "--" + name.replace("_", "-"))
             text = help_text(kind.settings, name)
             if name == argument:

@@ -149,7 +149,11 @@ def test_mpc_with_a_builtin_or_learned_reward_balances_longer_than_random(ip_mod
                  **TINY_PLAN)
     assert s["reward_source"] == reward
     assert s["termination_source"] == ("builtin" if reward == "builtin" else "learned")
-    assert s["disagreement_mean"] > 0  # three members: their disagreement is reported
+    assert s["disagreement_mean"] > 0  # three members: their disagreement is reported, step by step
+    steps, returns = (np.load(tmp_path / "episodes.npz")[k] for k in ("disagreement", "returns"))
+    # the pendulum pays 1 a step, but 0 for the step it falls on
+    assert returns.sum() <= len(steps) <= returns.sum() + len(returns)
+    assert np.isclose(steps.mean(), s["disagreement_mean"])
     assert s["final_distance_mean"] is None  # no fingertip in the pendulum's state
     assert s["return_mean"] > 3 * random_return(IP, 20)
 

@@ -98,10 +98,12 @@ class MpcSummary(Summary):
 
 
 class MpcKind(StepKind[MpcSettings, MpcSummary]):
-    """Model-predictive control: CEM on a learned forward model, maximizing the env's own reward.
+    """Model-predictive control on a learned forward model (CEM, MPPI or EvoTorch's CEM), maximizing a
+    builtin, user or learned reward.
 
-    summary.json: return_mean, return_std, final_distance_mean (metres), plan_ms_median (per env per control
-    step); episodes.npz, metrics.csv (one row per episode), plots/distance.png."""
+    summary.json: return_mean, return_std, final_distance_mean (metres, Reacher), plan_ms_median (per env per
+    control step), disagreement_mean (ensembles); episodes.npz (returns, distances, plan_ms, disagreement: one
+    per env per control step), metrics.csv (one row per episode), plots/distance.png."""
 
     name = "mpc"
     what = "MPC ({optimizer}) on {model} · {env}"
@@ -141,7 +143,10 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
         for i, (r, d) in enumerate(zip(returns, final, strict=True)):
             metrics.write({"episode": i, "return": r, "final_distance": d})
         metrics.close()
-        atomic_write_npz(run_dir / "episodes.npz", returns=returns, distances=distances, plan_ms=call_ms)
+        # the ensemble's disagreement on each action taken, one entry per env per control step
+        spread = np.concatenate(policy.disagreements) if policy.disagreements else np.zeros(0)
+        atomic_write_npz(run_dir / "episodes.npz", returns=returns, distances=distances, plan_ms=call_ms,
+                         disagreement=spread)
         if np.isfinite(distances).all():
             distance_over_time(distances, run_dir / "plots" / "distance.png",
                                f"{s.env}: MPC ({s.optimizer}, horizon {s.horizon}, {s.population} x {s.iterations})",
@@ -180,6 +185,8 @@ class MbrlSettings(PlannerSettings, ModelSettings):
     state: Literal["auto", "reacher", "observation"] = Field(
         "auto", description="State layout: auto (Reacher: the arm's 8-number state; else the observation)")
     seed: int = Field(0, ge=0, description="Random seed (resets, random actions, fitting, the planner)")
+    device: str = Field("auto", description="Where the model trains and the planner runs: auto (a GPU where torch "
+                        "sees one, else the CPU), cpu, cuda, cuda:N")
     resume: bool = Field(False, description="Continue the loop in --out after an interruption: finished rounds are "
                          "kept, the cut one is redone from its last finished phase")
 
