@@ -76,6 +76,7 @@ class LoopPlan:
     seed: int
     parallel: int
     holdout_every: int
+    until_return: float | None
     state: str
     fit: dict[str, Any]  # fit_model's keyword arguments
     optimizer: str
@@ -170,7 +171,7 @@ def _comparable(plan: dict[str, Any]) -> dict[str, Any]:
     """The settings a resumed loop must share with the interrupted one (JSON-shaped, rounds left out)."""
     import json
 
-    return json.loads(json.dumps({k: v for k, v in plan.items() if k != "rounds"}))
+    return json.loads(json.dumps({k: v for k, v in plan.items() if k not in ("rounds", "until_return")}))
 
 
 @dataclass
@@ -259,9 +260,12 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                 curve.write(asdict(record))
                 shown = f"return {record.eval_return_mean:.1f}" if record.eval_return_mean is not None else ""
                 bar.update(task, advance=1, status=f"{record.env_steps:,} steps, {shown}")
+                if (plan.until_return is not None and record.eval_return_mean is not None
+                        and record.eval_return_mean >= plan.until_return):
+                    break
     finally:
         curve.close()
-    return LoopResult(records, model, concatenate(parts, meta), _planner(plan, model, plan.rounds).task)
+    return LoopResult(records, model, concatenate(parts, meta), _planner(plan, model, len(records)).task)
 
 
 def layout_name(env_id: str, state: str) -> str:

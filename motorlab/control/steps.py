@@ -180,8 +180,13 @@ class MbrlSettings(PlannerSettings, ModelSettings):
     eval_episodes: int = Field(3, ge=0, description="MPC episodes evaluating each round's model (fixed reset seeds; "
                                "not added to the data)")
     ensemble: int = Field(5, gt=0, description="Members K, trained together as one batched net")
-    epochs: int = Field(25, gt=0, description="Passes over all data so far, each round (warm-started)")
+    epochs: int = Field(40, gt=0, description="Passes over all data so far, each round (warm-started)")
+    # small batches: the first rounds hold a few hundred transitions, and 2000-row batches would give
+    # them one gradient step an epoch (mbrl-lib's PETS uses 32-256)
+    batch_size: int = Field(64, gt=0, description="Rows per gradient step")
     parallel: int = Field(1, gt=0, description="Episodes run side by side, planned in one batched call")
+    until_return: float | None = Field(None, description="Stop after the first round whose evaluation reaches this "
+                                       "mean return (the env steps it took are the loop's steps to that return)")
     state: Literal["auto", "reacher", "observation"] = Field(
         "auto", description="State layout: auto (Reacher: the arm's 8-number state; else the observation)")
     seed: int = Field(0, ge=0, description="Random seed (resets, random actions, fitting, the planner)")
@@ -197,7 +202,8 @@ class MbrlSettings(PlannerSettings, ModelSettings):
         holdout_every = round(1 / self.valid_fraction) if self.valid_fraction > 0 else 0
         return LoopPlan(env_id=self.env, rounds=self.rounds, episodes_per_round=self.episodes_per_round,
                         eval_episodes=self.eval_episodes, seed=self.seed, parallel=self.parallel,
-                        holdout_every=holdout_every, state=layout_name(self.env, self.state), fit=fit,
+                        holdout_every=holdout_every, until_return=self.until_return,
+                        state=layout_name(self.env, self.state), fit=fit,
                         optimizer=self.optimizer, plan=self.plan(), scoring=self.scoring())
 
 
@@ -220,6 +226,7 @@ class MbrlSummary(Summary):
     propagation: str
     optimizer: str
     resumed_rounds: int  # rounds found finished when the run started (with --resume)
+    reached_return: bool | None  # with --until-return: whether a round's evaluation reached it
     wall_seconds: float
 
 
@@ -283,6 +290,7 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
             disagreement_mean=last.disagreement_mean, reward_source=task.reward_source,
             termination_source=task.termination_source, members=s.ensemble, probabilistic=s.probabilistic,
             propagation=s.propagation, optimizer=s.optimizer, resumed_rounds=done_before,
+            reached_return=None if s.until_return is None else bool(evals) and max(evals) >= s.until_return,
             wall_seconds=time.perf_counter() - start)
         return self.finish(run_dir, settings, summary)
 
