@@ -96,7 +96,43 @@ def check_plan_settings(horizon: int, population: int, iterations: int, elites: 
         raise MotorlabError(f"--elites ({elites}) cannot exceed --population ({population}).")
 
 
-class CEMPlanner:
+class GaussianPlanner:
+    """What CEM and MPPI share: a Gaussian over action sequences per env, in the action bounds,
+    sampled with a seeded generator on the planner's device, its mean warm-started from the last plan."""
+
+    def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int, population: int,
+                 iterations: int, init_std: float, seed: int, device: torch.device | str):
+        self.score = score
+        self.device = torch.device(device)
+        self.low = torch.as_tensor(low, dtype=torch.float32, device=self.device)
+        self.high = torch.as_tensor(high, dtype=torch.float32, device=self.device)
+        self.horizon, self.population, self.iterations = horizon, population, iterations
+        self.init_std = init_std * (self.high - self.low) / 2
+        self.generator = torch.Generator(self.device).manual_seed(seed)
+        self.mean: torch.Tensor | None = None
+
+    def reset(self, n: int) -> None:
+        """Forget the warm start; the next plan starts from the middle of the action range."""
+        self.mean = ((self.low + self.high) / 2).expand(n, self.horizon, -1).clone()
+
+    def start(self, states: torch.Tensor, goals: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The warm-started mean (n, H, A) for n envs (a fresh one when n changed), and the states and
+        goals repeated for each of the population's candidates."""
+        n, p = states.shape[0], self.population
+        if self.mean is None or self.mean.shape[0] != n:
+            self.reset(n)
+        return self.mean, states.repeat_interleave(p, 0), goals.repeat_interleave(p, 0)
+
+    def sample(self, mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
+        """`population` sequences (n, p, H, A) around each env's mean, clipped to the bounds; the first is the mean."""
+        n, p, h = mean.shape[0], self.population, self.horizon
+        noise = torch.randn((n, p, h, mean.shape[-1]), generator=self.generator, device=self.device)
+        samples = torch.maximum(torch.minimum(mean[:, None] + std[:, None] * noise, self.high), self.low)
+        samples[:, 0] = mean  # the current mean always competes
+        return samples
+
+
+class CEMPlanner(GaussianPlanner):
     """Batched CEM over action sequences; `plan(states, goals)` gives one action per env."""
 
     def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int = 15,
@@ -104,40 +140,27 @@ class CEMPlanner:
                  min_std: float = 0.05, momentum: float = 0.1, keep: float = 0.3, execute: str = "mean",
                  seed: int = 0, device: torch.device | str = "cpu"):
         check_plan_settings(horizon, population, iterations, elites)
-        self.score = score
-        self.device = torch.device(device)
-        self.low = torch.as_tensor(low, dtype=torch.float32, device=self.device)
-        self.high = torch.as_tensor(high, dtype=torch.float32, device=self.device)
-        self.horizon, self.population, self.iterations, self.elites = horizon, population, iterations, elites
-        half_range = (self.high - self.low) / 2
-        self.init_std, self.min_std = init_std * half_range, min_std * half_range
+        super().__init__(score, low, high, horizon, population, iterations, init_std, seed, device)
+        self.elites = elites
+        self.min_std = min_std * (self.high - self.low) / 2
         self.momentum = momentum
         self.keep = min(int(keep * elites), population - 1)  # elites carried into the next round
         self.execute = execute
         self.kept: torch.Tensor | None = None
-        self.generator = torch.Generator(self.device).manual_seed(seed)
-        self.mean: torch.Tensor | None = None
 
     def reset(self, n: int) -> None:
-        """Forget the warm start; the next plan starts from the middle of the action range."""
-        self.mean = ((self.low + self.high) / 2).expand(n, self.horizon, -1).clone()
+        super().reset(n)
         self.kept = None
 
     @torch.no_grad()
     def plan(self, states: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
         n, p, h = states.shape[0], self.population, self.horizon
-        if self.mean is None or self.mean.shape[0] != n:
-            self.reset(n)
-        mean = self.mean
+        mean, flat_states, flat_goals = self.start(states, goals)
         std = self.init_std.expand_as(mean).clone()
-        flat_states = states.repeat_interleave(p, 0)
-        flat_goals = goals.repeat_interleave(p, 0)
         rows = torch.arange(n, device=self.device)[:, None]
         kept = self.kept
         for _ in range(self.iterations):
-            noise = torch.randn((n, p, h, mean.shape[-1]), generator=self.generator, device=self.device)
-            samples = torch.maximum(torch.minimum(mean[:, None] + std[:, None] * noise, self.high), self.low)
-            samples[:, 0] = mean  # the current mean always competes
+            samples = self.sample(mean, std)
             if kept is not None:  # iCEM (Pinneri et al. 2020): the best few of the last round compete again
                 samples[:, 1:1 + kept.shape[1]] = kept
             returns = self.score(flat_states, samples.reshape(n * p, h, -1), flat_goals).reshape(n, p)
@@ -151,7 +174,7 @@ class CEMPlanner:
         return elite[:, 0, 0] if self.execute == "best" else mean[:, 0]
 
 
-class MPPIPlanner:
+class MPPIPlanner(GaussianPlanner):
     """Batched MPPI (Williams et al. 2017) over action sequences: each iteration moves the mean to the
     average of all samples weighted by exp(standardized return / temperature).
 
@@ -165,29 +188,16 @@ class MPPIPlanner:
         check_plan_settings(horizon, population, iterations, 1)
         if temperature <= 0:
             raise MotorlabError(f"--temperature must be positive, got {temperature}.")
-        self.score = score
-        self.device = torch.device(device)
-        self.low = torch.as_tensor(low, dtype=torch.float32, device=self.device)
-        self.high = torch.as_tensor(high, dtype=torch.float32, device=self.device)
-        self.horizon, self.population, self.iterations, self.temperature = horizon, population, iterations, temperature
-        self.std = init_std * (self.high - self.low) / 2
-        self.generator = torch.Generator(self.device).manual_seed(seed)
-        self.mean: torch.Tensor | None = None
-
-    def reset(self, n: int) -> None:
-        self.mean = ((self.low + self.high) / 2).expand(n, self.horizon, -1).clone()
+        super().__init__(score, low, high, horizon, population, iterations, init_std, seed, device)
+        self.temperature = temperature
 
     @torch.no_grad()
     def plan(self, states: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
         n, p, h = states.shape[0], self.population, self.horizon
-        if self.mean is None or self.mean.shape[0] != n:
-            self.reset(n)
-        mean = self.mean
-        flat_states, flat_goals = states.repeat_interleave(p, 0), goals.repeat_interleave(p, 0)
+        mean, flat_states, flat_goals = self.start(states, goals)
+        std = self.init_std.expand_as(mean)
         for _ in range(self.iterations):
-            noise = torch.randn((n, p, h, mean.shape[-1]), generator=self.generator, device=self.device)
-            samples = torch.maximum(torch.minimum(mean[:, None] + self.std * noise, self.high), self.low)
-            samples[:, 0] = mean
+            samples = self.sample(mean, std)
             returns = self.score(flat_states, samples.reshape(n * p, h, -1), flat_goals).reshape(n, p)
             z = (returns - returns.mean(1, keepdim=True)) / (returns.std(1, keepdim=True) + 1e-8)
             weights = torch.softmax(z / self.temperature, dim=1)
