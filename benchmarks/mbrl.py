@@ -349,6 +349,9 @@ def main() -> None:
     parser.add_argument("--sac-from", type=Path, default=None,
                         help="reuse SAC's runs from an earlier run's runs.json (with their budget and evaluation)")
     parser.add_argument("--quick", action="store_true", help="a smoke run: " + json.dumps(QUICK))
+    parser.add_argument("--loop-set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a loop setting for every env (MbrlSettings field), e.g. the PETS variant: "
+                             "--loop-set probabilistic=true --loop-set propagation=ts --loop-set particles=5")
     args = parser.parse_args()
     if args.quick:
         for k, v in QUICK.items():
@@ -359,7 +362,8 @@ def main() -> None:
         parser.error(f"unknown env(s) {unknown}; choose from {list(ENVS)}")
     arms = {a.strip() for a in args.arms.split(",")}
     seeds = list(range(args.seeds))
-    budgets = {n: {**PER_ENV[n], **(QUICK_LOOP if args.quick else {})} for n in names}
+    overrides = dict(item.split("=", 1) for item in args.loop_set)  # pydantic reads "true", "5" into their types
+    budgets = {n: {**PER_ENV[n], **(QUICK_LOOP if args.quick else {}), **overrides} for n in names}
 
     started = time.perf_counter()
     reward_checks = {n: check_user_reward(n) for n in names if ENVS[n]["reward"] != "builtin"}

@@ -13,8 +13,8 @@ the phase that was cut: collection and fitting are deterministic given the seed,
 loop ends with the numbers an uninterrupted one would have.
 
 Held-out episodes: of the episodes numbered 0, 1, 2, ... across rounds, every `holdout_every`-th
-(1, 1 + k, 1 + 2k, ...) is never trained on. "valid_mse" is the model's error on all of them so
-far, "valid_mse_first" on the first round's, the same set every round.
+(see `holdout`) is never trained on. "valid_mse" is the model's error on all of them so far,
+"valid_mse_first" on those of the first round that held one out, the same set every round.
 """
 
 from __future__ import annotations
@@ -84,9 +84,14 @@ class LoopPlan:
     scoring: dict[str, Any]  # build_policy's reward, termination, propagation, particles, device
 
 
-def holdout(episodes: np.ndarray, every: int) -> np.ndarray:
-    """The held-out ones of these episode numbers (1, 1 + every, ...); none when every == 0."""
-    return episodes[(episodes % every) == 1 % every] if every else episodes[:0]
+def holdout(episodes: np.ndarray, every: int, per_round: int) -> np.ndarray:
+    """The held-out ones of these episode numbers: every `every`-th, starting from the second (1, 1 +
+    every, ...) where rounds collect several, so round 1 has one; with one episode a round, from the
+    every-th (every - 1, 2 every - 1, ...), so the planner's first episodes are all trained on. None
+    when every == 0."""
+    if not every:
+        return episodes[:0]
+    return episodes[(episodes % every) == (1 % every if per_round > 1 else every - 1)]
 
 
 def _round_dir(run_dir: Path, r: int) -> Path:
@@ -216,9 +221,9 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                 collect_seconds = time.perf_counter() - start
                 parts.append(data)
                 everything = concatenate(parts, meta)
-                valid = holdout(np.unique(everything.episode), plan.holdout_every)
-                if first_valid is None:
-                    first_valid = holdout(np.unique(data.episode), plan.holdout_every)
+                valid = holdout(np.unique(everything.episode), plan.holdout_every, plan.episodes_per_round)
+                if first_valid is None or not len(first_valid):  # the first round that holds one out
+                    first_valid = holdout(np.unique(data.episode), plan.holdout_every, plan.episodes_per_round)
                 # 2. refit on everything so far, warm-started from the last model
                 start = time.perf_counter()
                 if (folder / "model" / MODEL_JSON).is_file():

@@ -216,7 +216,7 @@ class MbrlSummary(Summary):
     final_return_std: float | None
     best_return_mean: float | None
     valid_mse: float | None  # the last model's, on all held-out episodes
-    valid_mse_first: float | None  # on round 1's held-out episodes
+    valid_mse_first: float | None  # on the first held-out episodes (the same set every round)
     plan_ms_median: float | None  # per env per control step, over every round's evaluation
     disagreement_mean: float | None
     reward_source: str

@@ -110,7 +110,7 @@ def mbrl_curve(rows: list[dict], path: Path, title: str = "") -> Path | None:
         ax.set_ylabel("return")
         ax.set_title(title)
         ax.legend(fontsize=8)
-        for key, label in (("valid_mse", "all held-out episodes"), ("valid_mse_first", "round 1's held-out episodes")):
+        for key, label in (("valid_mse", "all held-out episodes"), ("valid_mse_first", "the first held-out episodes")):
             values = np.array([np.nan if r[key] is None else r[key] for r in rows], float)
             if np.isfinite(values).any():
                 err.semilogy(np.arange(1, len(rows) + 1), values, "o-", label=label)
