@@ -116,7 +116,8 @@ def mbrl_curve(rows: list[dict], path: Path, title: str = "") -> Path | None:
                 err.semilogy(np.arange(1, len(rows) + 1), values, "o-", label=label)
         err.set_xlabel("round")
         err.set_ylabel("held-out MSE (normalized state delta)")
-        err.legend(fontsize=8)
+        if err.lines:  # no episode held out yet (one a round, fewer rounds than the hold-out interval)
+            err.legend(fontsize=8)
         return save_figure(fig, path, "Left: return of MPC on each round's model against the env steps collected so "
                                       "far (mean ± std over the evaluation episodes), and of the episodes each round "
                                       "collected. Right: the model's error on held-out episodes after each round.")
