@@ -122,7 +122,9 @@ def kind_command(kind: StepKind, argument: str, epilog: str = "", flags: dict[st
                 continue
             names = flags.get(name, ("--" + name.replace("_", "-"),))
             limits = {"min": 0} if name == "seed" else {}
-            if kind_of is bool:  # a switch: absent is the field's default
+            if kind_of is bool:  # a switch: absent is the field's default; one that is on by default can be turned off
+                if info.default is True and len(names) == 1:
+                    names = (f"{names[0]}/--no-{names[0].removeprefix('--')}",)
                 default, annotation = info.default, Annotated[bool, typer.Option(*names, help=text)]
             elif info.is_required():
                 default, annotation = inspect.Parameter.empty, Annotated[kind_of, typer.Option(*names, help=text)]
@@ -527,8 +529,9 @@ def mpc(s, settings) -> None:
 
 
 @kind_command(MBRL, "env", epilog="Examples:\n\n  motorlab mbrl InvertedPendulum-v5 --rounds 5 --out runs/ip-mbrl\n\n"
-                                  "  motorlab mbrl Pusher-v5 --rounds 20 --probabilistic --propagation ts --particles 20 "
-                                  "--out runs/pusher-pets\n\n"
+                                  "  motorlab mbrl Pusher-v5 --rounds 20 --particles 20 --out runs/pusher-pets\n\n"
+                                  "  motorlab mbrl Pusher-v5 --rounds 20 --no-probabilistic --propagation mean   "
+                                  "# deterministic members\n\n"
                                   "  motorlab mbrl mypkg.envs:MyArm-v0 --reward mypkg.rewards:reach --rounds 10\n\n"
                                   "  motorlab mbrl Pusher-v5 --rounds 20 --out runs/pusher-pets --resume   # after a kill")
 def mbrl(s, settings) -> None:

@@ -30,7 +30,7 @@ from motorlab.extras import require
 Scorer = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
 
 
-def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", particles: int = 1,
+def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", particles: int | None = None,
                  generator: torch.Generator | None = None) -> Scorer:
     """Return of each action sequence under the forward model and a task (reward, termination;
     see motorlab.dynamics.rewards.Task; a None reward or a "learned" termination use the model's heads)
@@ -41,6 +41,8 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
     is elementwise over its leading dimensions, and one call instead of H saves ~10 torch calls per
     step ahead. Other models step with `step_fn`, collecting their heads' outputs on the way.
     """
+    if particles is None:  # one rollout per candidate, or under TS one particle per member
+        particles = model.members if propagation == "ts" else 1
     if particles < 1:
         raise MotorlabError(f"--particles must be positive, got {particles}.")
     if propagation == "ts" and particles % model.members:

@@ -29,7 +29,7 @@ from motorlab.report.video import filming, record_episode, write_mp4
 
 def build_policy(env, env_id: str, model: Path | ForwardModel, optimizer: str = "cem", seed: int = 0,
                  threads: int | None = 1, reward: str = "auto", termination: str = "auto", propagation: str = "mean",
-                 particles: int = 1, device: str = "cpu", **settings) -> MPCPolicy:
+                 particles: int | None = None, device: str = "cpu", **settings) -> MPCPolicy:
     """An MPC policy for `env` on a forward model (or the model folder holding one), checked against the
     env and its layout. `reward` and `termination` say what it scores (motorlab.dynamics.rewards.resolve_task);
     `settings` are the optimizer's (horizon, population, iterations, elites or temperature)."""
