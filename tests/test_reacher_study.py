@@ -82,7 +82,7 @@ def test_bundled_reacher_recipes_parse(name):
 
 @pytest.mark.parametrize("change, fragments", [
     (('model = "@model"\nepisodes = 2\nhorizon', 'model = "@collect"\nepisodes = 2\nhorizon'),
-     ["model '@collect' names no earlier dynamics-fit step"]),
+     ["model '@collect' names no earlier dynamics-fit or mbrl step"]),
     (("iterations = 2", 'iterations = 2\noptimizer = "adam"'), ["optimizer"]),
     (("horizon = 3", "horizon = 0"), ["horizon", "greater than 0"]),
     (('env = "Reacher-v5"\nepisodes = 200', 'env = "Reacher-v9"\nepisodes = 200'), ["unknown env id"]),
