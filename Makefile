@@ -40,6 +40,8 @@ lint: $(STAMP)  ## ruff (pyflakes, isort, bugbear) and the import layers (lint-i
 
 # Two workers, each test file on one of them (tests of one file share their fixtures and folders):
 # most tests wait on `motorlab` subprocesses, so two files at a time keep both cores busy.
+# tests/conftest.py adjusts loadfile: files sharing an expensive session fixture go to one worker
+# together (SHARED), and files are handed out longest first (SECONDS), not most tests first.
 test: lint $(VENV)/.browser  ## the whole test suite, as CI runs it (under 15 min on 2 cores)
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile
 
@@ -55,6 +57,7 @@ bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/dynamics_collect.py
 	$(VENV)/bin/python benchmarks/dynamics_fit.py
 	$(VENV)/bin/python benchmarks/mpc.py
+	$(VENV)/bin/python benchmarks/mbrl.py --sac-steps 12000
 	$(VENV)/bin/python benchmarks/upkie_fps.py
 
 clean:

@@ -10,7 +10,7 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 pytest.register_assert_rewrite("helpers")
 
-from helpers import ENV_ID, TINY_PPO, assert_ok, run_cli  # noqa: E402
+from helpers import ENV_ID, TINY_PPO, assert_ok, run_cli, scaled_recipe  # noqa: E402
 
 # `make test-fast` (pytest -m fast), the edit loop: every cheap unit-level file, and one end-to-end
 # test per workflow (robust pendulum, SAR on the MyoSuite hand, forward model + MPC on Reacher).
@@ -31,6 +31,70 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.name in FAST_FILES or item.nodeid in FAST_TESTS:
             item.add_marker(pytest.mark.fast)
+    if hasattr(config, "workerinput"):  # an xdist worker: the units of work in the order they are handed out
+        items.sort(key=lambda item: -SECONDS.get(unit(item.nodeid), float("inf")))  # stable: tests keep their order
+
+
+# ---- `make test`: pytest -n 2 --dist loadfile, with two changes (pytest_xdist_make_scheduler) ----
+# Each test file is one unit of work for one worker, its tests sharing their module fixtures and
+# folders. 1. Files that share an expensive session fixture are one unit, so that it is made once.
+SHARED = {
+    # sar_hand_quick (below): its report in Chromium, and the SAR study's steps
+    "test_bundled_reports.py": "sar-hand-quick", "test_sar_study.py": "sar-hand-quick",
+    # hand_play_run and hand_activations: SAC on the MyoSuite hand, and activations collected from it
+    "test_collect.py": "hand", "test_sar_cli.py": "hand", "test_determinism.py": "hand",
+    "test_zeroshot_video_compare.py": "hand",
+}
+# 2. Units start longest first (xdist would start the files with the most tests first), so the
+# last to start are short and both workers finish together. About how many seconds each unit
+# takes in `make test`; a file not listed here starts first (it may be long).
+SECONDS = {
+    "tests/test_sweep.py": 270, "sar-hand-quick": 180, "hand": 160, "tests/test_parallel_steps.py": 120,
+    "tests/test_user_env.py": 90, "tests/test_upkie.py": 70, "tests/test_train_evaluate.py": 60,
+    "tests/test_safe_loading.py": 55, "tests/test_dynamics_cli.py": 50, "tests/test_report.py": 45,
+    "tests/test_cli_errors.py": 45, "tests/test_fuzz.py": 45, "tests/test_synergy_signals.py": 35,
+    "tests/test_reacher_study.py": 30, "tests/test_resume.py": 25, "tests/test_recipes.py": 18,
+    "tests/test_extras.py": 16, "tests/test_dynamics.py": 14, "tests/test_plots.py": 13, "tests/test_myosuite.py": 12,
+    "tests/test_steps_to_success.py": 8, "tests/test_synergy_wrapper.py": 7, "tests/test_sar_formats.py": 6,
+    "tests/test_faults_success.py": 5, "tests/test_sklearn_import.py": 1.2, "tests/test_pid.py": 0.8,
+    "tests/test_schedules.py": 0.7, "tests/test_lqr.py": 0.5, "tests/test_dynamics_collect.py": 0.5,
+    "tests/test_layers.py": 0.4, "tests/test_results.py": 0.3, "tests/test_runner.py": 0.2, "tests/test_sar.py": 0.2,
+    "tests/test_wrappers.py": 0.1, "tests/test_runs.py": 0.05,
+}
+
+
+def unit(nodeid: str) -> str:
+    """The unit of work a test belongs to: its file, or the name of the files it shares a fixture with."""
+    path = nodeid.split("::", 1)[0]
+    return SHARED.get(path.rsplit("/", 1)[-1], path)
+
+
+def pytest_xdist_make_scheduler(config, log):
+    if config.getoption("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class Units(LoadScopeScheduling):
+        """--dist loadfile, with the units above."""
+
+        def _split_scope(self, nodeid: str) -> str:
+            return unit(nodeid)
+
+    config.option.loadscopereorder = False  # hand the units out in collection order (sorted above)
+    return Units(config, log)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def user_modules_stay_in_their_file():
+    """A test file that imports a user's env module in this process (motorlab then passes it on to
+    every process it starts, in $MOTORLAB_IMPORTS) does not pass it on to later files' processes,
+    which may not find it (tests/userpkg is on their PYTHONPATH only where a test puts it)."""
+    before = os.environ.get("MOTORLAB_IMPORTS")
+    yield
+    if before is None:
+        os.environ.pop("MOTORLAB_IMPORTS", None)
+    else:
+        os.environ["MOTORLAB_IMPORTS"] = before
 
 
 @pytest.fixture(scope="session")
@@ -95,3 +159,14 @@ def legs_sar(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("sar") / "legs.npz"
     import_sklearn(PUBLISHED_SAR / "locomotion", trust=True, out=out)
     return out
+
+
+@pytest.fixture(scope="session")
+def sar_hand_quick(tmp_path_factory) -> tuple[Path, Path]:
+    """The bundled sar-hand-quick study at the tests' scale (helpers.SCALED), run once from the CLI:
+    (its recipe file, its folder). Its report is opened in Chromium (test_bundled_reports.py) and its
+    steps are checked (test_sar_study.py); both files are one unit of `make test` (SHARED)."""
+    folder = tmp_path_factory.mktemp("sar-hand-quick")
+    recipe = scaled_recipe("sar-hand-quick", folder)
+    assert_ok(run_cli("run", recipe, "--out", folder / "study", timeout=900))
+    return recipe, folder / "study"

@@ -118,3 +118,40 @@ def episode_rows(rows: list[dict[str, str]]) -> list[dict[str, str]]:
 COLLECT_EPISODES, COLLECT_PERCENTILE, COLLECT_PREVIEW, COLLECT_SEED = 4, 50.0, 4, 0
 COLLECT_ARGS = ["--episodes", str(COLLECT_EPISODES), "--percentile", str(COLLECT_PERCENTILE),
                 "--preview", str(COLLECT_PREVIEW), "--seed", str(COLLECT_SEED)]
+
+
+# ---- bundled recipes at the tests' scale --------------------------------------------
+
+# Bundled recipes at the tests' scale: what the tests check (every step runs and writes its
+# files, numbers, findings and figures) does not depend on the budgets. recipe -> [(pattern,
+# divisor or replacement)]: a divisor turns the number in the pattern's group 1 into
+# max(1, n // divisor); a string replaces the match (re.sub).
+# collect in-process: at this scale a pool of fresh interpreters costs more than it saves (pools: test_collect.py)
+ONE_WORKER = (r'(kind = "collect"\n)', r"\1workers = 1\n")
+SCALED = {
+    # ~3.5 min on 2 cores as bundled: collect 5 of 5 preview episodes, zero-shot 5 episodes per env
+    "sar-hand-quick": [(r"timesteps = (\d+)", 10), (r"eval_every = (\d+)", 5), (r"episodes = (\d+)", 10),
+                       (r"preview = (\d+)", 4), ONE_WORKER],
+    # its collection (5000 episodes), fit (20 epochs) and MPC (10 episodes); the check keeps its 3 episodes
+    "reacher-quick": [(r"episodes = (\d{2,})", 5), (r"epochs = (\d+)", 4)],
+    # ~2 min on 2 cores as bundled
+    "sar-ant-quick": [(r"timesteps = (\d+)", 4), (r"eval_every = (\d+)", 4), ONE_WORKER],
+}
+
+
+def scaled_recipe(name: str, folder: Path) -> Path:
+    """The bundled recipe `name` changed as SCALED says, written to folder/<name>.toml."""
+    import re
+
+    from motorlab.recipes import find_recipe
+
+    text = find_recipe(name).read_text()
+    for pattern, how in SCALED[name]:
+        def divided(m, d=how):
+            return m.group(0).replace(m.group(1), str(max(1, int(m.group(1)) // d)))
+
+        text, n = re.subn(pattern, how if isinstance(how, str) else divided, text)
+        assert n, f"{name}: nothing matches {pattern!r}"  # the recipe changed: update SCALED
+    path = Path(folder) / f"{name}.toml"
+    path.write_text(text)
+    return path

@@ -1,11 +1,10 @@
-"""The reports of the bundled quick recipes (what `make demo` shows a new user), as they are,
+"""The reports of the bundled quick recipes (what `make demo` shows a new user), at the tests' scale,
 opened in headless Chromium: the recipe's findings come first and are all filled, every step
 shows its labelled numbers, every figure has data and a caption, and the screenshot script
 that makes the README's pictures works on them."""
 
 from __future__ import annotations
 
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -13,32 +12,18 @@ from pathlib import Path
 import pytest
 from test_report import Opened, _check_page, browser, headline_numbers  # noqa: F401  (browser: a fixture)
 
-from helpers import assert_ok, read_summary, run_cli
-from motorlab.recipes import find_recipe, load_recipe
+from helpers import assert_ok, read_summary, run_cli, scaled_recipe
+from motorlab.recipes import load_recipe
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-# sar-hand-quick as bundled takes ~3.5 min on 2 cores; its steps, findings and figures are
-# tested at a fifth of its budgets (what is tested does not depend on them). reacher-quick as is.
-SCALED = {"sar-hand-quick": [(r"timesteps = (\d+)", 5), (r"eval_every = (\d+)", 5), (r"episodes = (\d+)", 5),
-                             (r"preview = (\d+)", 4)]}
-
-
-def scaled_recipe(name: str, folder: Path) -> Path | str:
-    """The bundled recipe `name`, its budgets divided as SCALED says (or its name, as bundled)."""
-    if name not in SCALED:
-        return name
-    text = find_recipe(name).read_text()
-    for pattern, factor in SCALED[name]:
-        text = re.sub(pattern, lambda m, f=factor: m.group(0).replace(m.group(1), str(int(m.group(1)) // f)), text)
-    path = folder / f"{name}.toml"
-    path.write_text(text)
-    return path
-
-
+# Both at the tests' scale (helpers.SCALED: what is tested does not depend on the budgets).
+# sar-hand-quick is the study conftest.py runs once for this file and test_sar_study.py.
 @pytest.fixture(scope="module", params=["reacher-quick", "sar-hand-quick"])
 def bundled(request, tmp_path_factory) -> tuple[str, Path]:
+    if request.param == "sar-hand-quick":
+        return request.param, request.getfixturevalue("sar_hand_quick")[1]
     folder = tmp_path_factory.mktemp(request.param)
     assert_ok(run_cli("run", scaled_recipe(request.param, folder), "--out", folder / "study", timeout=900))
     return request.param, folder / "study"

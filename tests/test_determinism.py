@@ -19,8 +19,10 @@ def _twice(tmp_path, *args) -> tuple:
     return outs
 
 
-def test_ppo_training_repeats(tmp_path):
-    a, b = _twice(tmp_path, "train", ENV_ID, *TINY_PPO, "--seed", "3", "--no-progress")
+def test_ppo_training_repeats(ppo_run, tmp_path):
+    # ppo_run (conftest.py) is the first of the two: the same command, in a fresh process
+    a, b = ppo_run, tmp_path / "second"
+    assert_ok(run_cli("train", ENV_ID, *TINY_PPO, "--seed", "0", "--no-progress", "--out", b))
     sa, sb = read_summary(a), read_summary(b)
     for key in ("eval_return_mean", "eval_return_min", "eval_episode_lengths", "train_episodes"):
         assert sa[key] == sb[key], key

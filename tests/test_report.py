@@ -46,6 +46,8 @@ policy = "@ppo"
 name = "video"
 kind = "video"
 run = "@pid"
+width = 160  # 1000-step episodes: ~10 s each to render and encode at 640x480, ~1 s at this size
+height = 120
 """
 
 

@@ -26,34 +26,30 @@ def exploit(marker: Path) -> bytes:
     return pickle.dumps(Exploit())
 
 
-def test_run_folder_commands_never_unpickle(ppo_run, tmp_path):
-    """model.zip swapped for a pickle that runs code: evaluate, plot, report, export and a resumed
-    evaluation of the exported folder all work, and the pickle never runs."""
+def test_run_folder_commands_never_unpickle_and_export_holds_no_pickle(ppo_run, tmp_path):
+    """model.zip swapped for a pickle that runs code: evaluate, plot, report, export and an evaluation
+    of the exported folder all work, and the pickle never runs. The exported folder holds no pickle
+    and evaluates as the run does."""
     run = tmp_path / "run"
     shutil.copytree(ppo_run, run)
     marker = tmp_path / "pwned"
     (run / "model.zip").write_bytes(exploit(marker))
     (run / "vec_normalize.pkl").write_bytes(exploit(marker))
-    assert_ok(run_cli("evaluate", run, "--episodes", "2", "--out", tmp_path / "eval"))
+    assert_ok(run_cli("evaluate", run, "--episodes", "3", "--seed", "5", "--out", tmp_path / "eval"))
     assert_ok(run_cli("plot", run))
     assert_ok(run_cli("report", run, "--out", tmp_path / "report.html"))
-    assert_ok(run_cli("export", run, "--out", tmp_path / "shared"))
-    assert_ok(run_cli("evaluate", tmp_path / "shared", "--episodes", "2", "--out", tmp_path / "eval2"))
+    shared = tmp_path / "shared"
+    assert_ok(run_cli("export", run, "--out", shared))
+    assert_ok(run_cli("evaluate", shared, "--episodes", "3", "--seed", "5", "--out", tmp_path / "eval2"))
     assert not marker.exists()
 
-
-def test_exported_run_holds_no_pickle_and_evaluates_the_same(ppo_run, tmp_path):
-    shared = tmp_path / "shared"
-    assert_ok(run_cli("export", ppo_run, "--out", shared))
     names = {p.relative_to(shared).as_posix() for p in shared.rglob("*") if p.is_file()}
     assert {"policy.json", "policy.safetensors", "config.toml", "summary.json", "metrics.csv"} <= names
     assert not any(n.endswith((".zip", ".pkl", ".pt", ".pth")) or n.startswith(("checkpoint", "tensorboard"))
                    for n in names), names
-    assert any(n.startswith("plots/") for n in names) == (ppo_run / "plots").is_dir()
-    assert read_summary(shared)["exported_from"] == str(ppo_run.resolve())
-    for folder in (ppo_run, shared):
-        assert_ok(run_cli("evaluate", folder, "--episodes", "3", "--seed", "5", "--out", tmp_path / folder.name / "e"))
-    a, b = (read_summary(tmp_path / f.name / "e") for f in (ppo_run, shared))
+    assert (run / "plots").is_dir() and any(n.startswith("plots/") for n in names)
+    assert read_summary(shared)["exported_from"] == str(run.resolve())
+    a, b = read_summary(tmp_path / "eval"), read_summary(tmp_path / "eval2")
     assert a["episode_lengths"] == b["episode_lengths"] and a["return_mean"] == b["return_mean"]
 
 

@@ -1,5 +1,6 @@
-"""The SAR study as a recipe: play -> collect -> VAF -> fit -> SAR-RL vs RL-E2E -> zero-shot
--> learning curves, each step in its own folder; a re-run keeps every finished step."""
+"""The SAR study as a recipe (the bundled sar-hand-quick, at the tests' scale): play -> collect ->
+VAF -> fit -> SAR-RL vs RL-E2E -> zero-shot -> learning curves, each step in its own folder; a
+re-run keeps every finished step."""
 
 from __future__ import annotations
 
@@ -16,95 +17,23 @@ from motorlab.recipes import bundled, load_recipe, parse_recipe
 from motorlab.studies import run_study
 from motorlab.synergy import load_sar
 
-N_SYNERGIES = 5
-PHI = 0.66
-ZS_ENV = "myoHandReorientID-v0"
-SEEDS = [0, 1]
-
-MINI_RECIPE = f"""
-name = "sar-mini"
-description = "the SAR study at toy scale"
-
-[defaults]
-preset = "sar-sac"
-hyperparams = {{ learning_starts = 100, gradient_steps = 4, policy_kwargs = {{ net_arch = {{ pi = [32, 32], qf = [32, 32] }} }} }}
-solve_episodes = 2
-progress = false
-
-[[steps]]
-name = "play"
-kind = "train"
-env = "myoHandReorient8-v0"
-timesteps = 400
-
-[[steps]]
-name = "collect"
-kind = "collect"
-run = "@play"
-episodes = 6
-preview = 4
-percentile = 50
-workers = 1
-
-[[steps]]
-name = "vaf"
-kind = "vaf"
-activations = "@collect"
-threshold = 0.8
-
-[[steps]]
-name = "fit"
-kind = "fit"
-activations = "@collect"
-n_synergies = {N_SYNERGIES}
-
-[[steps]]
-name = "sar-rl"
-kind = "train"
-env = "myoHandReorient100-v0"
-sar = "@fit"
-phi = {PHI}
-timesteps = 300
-seeds = {SEEDS}
-
-[[steps]]
-name = "rl-e2e"
-kind = "train"
-env = "myoHandReorient100-v0"
-timesteps = 300
-seeds = {SEEDS}
-
-[[steps]]
-name = "zeroshot"
-kind = "zeroshot"
-runs = ["@sar-rl", "@rl-e2e"]
-envs = ["{ZS_ENV}"]
-episodes = 2
-
-[[steps]]
-name = "curves"
-kind = "compare"
-groups = {{ "SAR-RL" = ["@sar-rl"], "RL-E2E" = ["@rl-e2e"] }}
-title = "mini"
-"""
-
+# The bundled sar-hand-quick at the tests' scale (conftest.py's sar_hand_quick, run once for this
+# file and test_bundled_reports.py): play -> collect -> VAF -> fit by VAF -> SAR-RL (phi 0.66) vs
+# RL-E2E on two seeds each, the two chains trained at once -> zero-shot -> learning curves.
 STEP_DIRS = ["play", "collect", "vaf", "fit", "sar-rl/seed0", "sar-rl/seed1", "rl-e2e/seed0", "rl-e2e/seed1",
              "zeroshot", "curves"]
 
 
 @pytest.fixture(scope="module")
-def study(tmp_path_factory):
-    root = tmp_path_factory.mktemp("study")
-    recipe = root / "sar-mini.toml"
-    recipe.write_text(MINI_RECIPE)
-    out = root / "out"
-    proc = run_cli("run", recipe, "--out", out, timeout=600)
-    assert_ok(proc)
-    return recipe, out, proc
+def study(sar_hand_quick):
+    """(recipe file, study folder, the recipe's steps by name as written in the file)."""
+    recipe, out = sar_hand_quick
+    steps = {step["name"]: step for step in tomllib.loads(recipe.read_text())["steps"]}
+    return recipe, out, steps
 
 
 def test_every_step_has_its_folder(study):
-    _, out, _ = study
+    _, out, steps = study
     for d in STEP_DIRS:
         assert (out / d / "summary.json").is_file(), d
     assert (out / "collect" / "activations.npz").is_file()
@@ -113,36 +42,46 @@ def test_every_step_has_its_folder(study):
     assert_png(out / "zeroshot" / "plots" / "zeroshot.png")
     assert not (out / "sar-rl" / "summary.json").exists()  # seeds, not the step, are runs
     sar = load_sar(out / "fit" / "sar.npz")
-    assert (sar.n_synergies, sar.n_muscles) == (N_SYNERGIES, HAND_MUSCLES)
+    # fit by VAF: the smallest N the VAF step found for the same threshold
+    assert steps["fit"]["vaf"] == steps["vaf"]["threshold"]
+    n = read_summary(out / "vaf")["n_for_threshold"]
+    assert (sar.n_synergies, sar.n_muscles) == (n, HAND_MUSCLES) and 1 <= n < HAND_MUSCLES
 
 
 def test_sar_rl_trains_in_the_fitted_synergy_space(study):
-    _, out, _ = study
+    _, out, steps = study
     sar_path = str((out / "fit" / "sar.npz").resolve())
-    for seed in SEEDS:
+    seeds, phi = steps["sar-rl"]["seeds"], steps["sar-rl"]["phi"]
+    assert seeds == steps["rl-e2e"]["seeds"] and len(seeds) == 2 and 0 < phi < 1
+    for seed in seeds:
         cfg = tomllib.loads((out / "sar-rl" / f"seed{seed}" / "config.toml").read_text())
-        assert cfg["env"]["sar"] == sar_path and cfg["env"]["phi"] == pytest.approx(PHI) and cfg["seed"] == seed
+        assert cfg["env"]["sar"] == sar_path and cfg["env"]["phi"] == pytest.approx(phi) and cfg["seed"] == seed
         e2e = tomllib.loads((out / "rl-e2e" / f"seed{seed}" / "config.toml").read_text())
         assert "sar" not in e2e["env"] and e2e["seed"] == seed
+    n = load_sar(out / "fit" / "sar.npz").n_synergies
     policy = json.loads((out / "sar-rl" / "seed0" / "policy.json").read_text())
-    assert policy["action_space"]["shape"] == [N_SYNERGIES + HAND_MUSCLES]  # [synergies, raw muscles]
+    assert policy["action_space"]["shape"] == [n + HAND_MUSCLES]  # [synergies, raw muscles]
     e2e_policy = json.loads((out / "rl-e2e" / "seed0" / "policy.json").read_text())
     assert e2e_policy["action_space"]["shape"] == [HAND_MUSCLES]
 
 
 def test_study_summary(study):
-    _, out, _ = study
+    _, out, steps = study
     s = read_summary(out)
+    seeds = steps["sar-rl"]["seeds"]
     assert s["steps"] == ["play", "collect", "vaf", "fit", "sar-rl", "rl-e2e", "zeroshot", "curves"]
-    assert s["fit.n_synergies"] == N_SYNERGIES and s["fit.n_muscles"] == HAND_MUSCLES
-    assert s["collect.episodes_kept"] == 6 and s["collect.n_muscles"] == HAND_MUSCLES
+    assert s["fit.n_synergies"] == load_sar(out / "fit" / "sar.npz").n_synergies and s["fit.n_muscles"] == HAND_MUSCLES
+    assert s["collect.episodes_kept"] == steps["collect"]["episodes"] and s["collect.n_muscles"] == HAND_MUSCLES
     assert s["vaf.n_for_threshold"] == read_summary(out / "vaf")["n_for_threshold"]
     assert s["sar-rl.seeds"] == 2 and s["rl-e2e.seeds"] == 2
+    envs = steps["zeroshot"]["envs"]
+    assert "myoHandReorientID-v0" in envs
     for step in ("sar-rl", "rl-e2e"):
-        per_seed = [s[f"zeroshot.{step}/seed{k}.{ZS_ENV}.success_rate"] for k in SEEDS]
-        mean = s[f"zeroshot.{step}.{ZS_ENV}.success_rate_mean"]
-        assert 0.0 <= mean <= 1.0 and mean == pytest.approx(statistics.fmean(per_seed))
-        returns = [read_summary(out / step / f"seed{k}")["eval_return_mean"] for k in SEEDS]
+        for env in envs:
+            per_seed = [s[f"zeroshot.{step}/seed{k}.{env}.success_rate"] for k in seeds]
+            mean = s[f"zeroshot.{step}.{env}.success_rate_mean"]
+            assert 0.0 <= mean <= 1.0 and mean == pytest.approx(statistics.fmean(per_seed))
+        returns = [read_summary(out / step / f"seed{k}")["eval_return_mean"] for k in seeds]
         assert s[f"{step}.return_mean"] == pytest.approx(statistics.fmean(returns))
     assert s["curves.SAR-RL.seeds"] == 2 and s["curves.RL-E2E.seeds"] == 2
     assert (out / "table.txt").read_text().startswith("step")

@@ -1,7 +1,7 @@
 """Synergies beyond muscles: `collect --signal auto|act|ctrl|action` records muscle activations
 (MyoSuite), the actuator controls MuJoCo applied (a Gymnasium robot) or the env's actions (an env
 without MuJoCo); a SAR of motor commands drives the env's actions inside its bounds; the robot
-recipe `sar-ant-quick` runs end to end."""
+recipe `sar-ant-quick` runs end to end (at the tests' scale)."""
 
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ from helpers import (
     read_summary,
     run_cli,
     run_kind,
+    scaled_recipe,
 )
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
@@ -219,8 +220,8 @@ def test_a_non_box_action_space_is_a_clear_error():
 # ---- the robot recipe, end to end ---------------------------------------------------------
 
 def test_robot_quick_recipe_end_to_end(tmp_path):
-    out = tmp_path / "study"
-    assert_ok(run_cli("run", "sar-ant-quick", "--out", out, timeout=600))
+    out = tmp_path / "study"  # its training budgets divided by 4 (helpers.SCALED)
+    assert_ok(run_cli("run", scaled_recipe("sar-ant-quick", tmp_path), "--out", out, timeout=600))
     summary = read_summary(out)
     for arm in ("sar-rl", "rl-e2e", "zeroshot-sar-rl", "zeroshot-rl-e2e"):
         assert np.isfinite(summary[f"{arm}.return_mean"]), arm

@@ -1,6 +1,7 @@
 """Upkie wheeled biped (upkie 13, PyBullet backend): motorlab's env defaults, the
 balancing reward, one-env-per-process isolation, PID, delay/history, a tiny PPO run
-with parallel envs, evaluation (episode length, falls), video, and bad inputs."""
+with parallel envs (in the recipe's study), evaluation (episode length, falls), video,
+and bad inputs."""
 
 from __future__ import annotations
 
@@ -106,13 +107,13 @@ def test_pid_balances_the_whole_episode_where_doing_nothing_falls():
     probe = make_env(cfg)
     pid, zero = load_policy("pid", probe, UPKIE), load_policy("zero", probe, UPKIE)
     probe.close()
-    balanced = evaluate(pid, cfg, episodes=3, seed=0)
+    balanced = evaluate(pid, cfg, episodes=2, seed=0)  # 2000 steps each
     np.testing.assert_array_equal(balanced.lengths, 2000)
     assert balanced.falls == 0 and balanced.success.all()
     assert (balanced.returns > 3500).all()  # upright and still most of the time, not just alive
-    fallen = evaluate(zero, cfg, episodes=3, seed=0)
-    assert fallen.falls == 3 and (fallen.lengths < 2000).all() and not fallen.success.any()
-    assert fallen.summary()["falls"] == 3
+    fallen = evaluate(zero, cfg, episodes=2, seed=0)
+    assert fallen.falls == 2 and (fallen.lengths < 2000).all() and not fallen.success.any()
+    assert fallen.summary()["falls"] == 2
 
 
 def test_delay_and_history_wrap_upkie():
@@ -131,30 +132,6 @@ def test_delay_and_history_wrap_upkie():
         assert delay._action[0] == pytest.approx(0.3)
     finally:
         env.close()
-
-
-def test_tiny_ppo_with_two_env_processes_then_evaluate(tmp_path):
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    run = tmp_path / "ppo"
-    assert_ok(run_cli("train", UPKIE, "--algo", "ppo", "--n-envs", "2", "--timesteps", "1024",
-                      "--set", "n_steps=256", "--set", "batch_size=64", "--solve-episodes", "2",
-                      "--no-progress", "--out", run))
-    s = read_summary(run)
-    assert s["timesteps"] >= 1024 and s["eval_episodes"] == 2
-    assert s["eval_falls"] + s["eval_success_rate"] * 2 == pytest.approx(2)  # each episode: fell or stood
-    assert 0 < s["eval_episode_length_mean"] <= 2000
-    (events,) = (run / "tensorboard" / "PPO_1").glob("events.out.tfevents.*")  # SB3's own log
-    tags = EventAccumulator(str(events)).Reload().Tags()["scalars"]
-    assert "time/fps" in tags and "rollout/ep_len_mean" in tags
-
-    proc = run_cli("evaluate", run, "--episodes", "2", "--delay", "0.05", "--delay-on", "action",
-                   "--out", tmp_path / "eval")
-    assert_ok(proc)
-    e = read_summary(tmp_path / "eval")
-    assert e["env_id"] == UPKIE and e["delay"] == 0.05 and e["episodes"] == 2
-    assert e["falls"] == sum(n < 2000 for n in e["episode_lengths"])
-    assert "falls" in proc.stdout
 
 
 def test_video_of_a_pid_episode(tmp_path):
@@ -202,6 +179,12 @@ def test_missing_install_is_explained(missing, fragment):
 
 
 def test_upkie_recipe_runs_end_to_end_on_tiny_budgets(tmp_path):
+    """The bundled study on tiny budgets; its PPO step trains with two env processes, and its run
+    folder is evaluated again from the command line."""
+    import tomllib
+
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
     from motorlab.recipes import bundled
 
     text = bundled()["upkie"].read_text()
@@ -225,3 +208,20 @@ def test_upkie_recipe_runs_end_to_end_on_tiny_budgets(tmp_path):
     table = (tmp_path / "study" / "table.txt").read_text()
     assert "falls 0/2" in table and "video/episode_0.mp4" in table
     assert "delay 0.1 s on action" in table and "delay 0.1 s on both" in table
+
+    run = tmp_path / "study" / "ppo"  # PPO with two env processes
+    assert tomllib.loads((run / "config.toml").read_text())["n_envs"] == 2
+    trained = read_summary(run)
+    assert trained["timesteps"] >= 512 and trained["eval_episodes"] == 2
+    assert trained["eval_falls"] + trained["eval_success_rate"] * 2 == pytest.approx(2)  # each episode: fell or stood
+    assert 0 < trained["eval_episode_length_mean"] <= 200
+    (events,) = (run / "tensorboard" / "PPO_1").glob("events.out.tfevents.*")  # SB3's own log
+    tags = EventAccumulator(str(events)).Reload().Tags()["scalars"]
+    assert "time/fps" in tags and "rollout/ep_len_mean" in tags
+    proc = run_cli("evaluate", run, "--episodes", "2", "--delay", "0.05", "--delay-on", "action",
+                   "--out", tmp_path / "eval")
+    assert_ok(proc)
+    e = read_summary(tmp_path / "eval")
+    assert e["env_id"] == UPKIE and e["delay"] == 0.05 and e["episodes"] == 2
+    assert e["falls"] == sum(n < 200 for n in e["episode_lengths"]) and max(e["episode_lengths"]) <= 200
+    assert "falls" in proc.stdout

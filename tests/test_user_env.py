@@ -52,15 +52,7 @@ def test_module_env_id_trains_and_the_folder_rebuilds_its_env(arm_run, tmp_path)
 
 
 def test_import_flag_and_folders_that_remember_it(tmp_path):
-    run = tmp_path / "heavy"
-    # --import anywhere on the line; the module registers two ids, the plain one is used
-    assert_ok(run_cli("train", "ArmReachHeavy-v0", "--import", "userpkg.arm", *TINY_PPO, "--out", run,
-                      "--no-progress"))
-    assert json.loads((run / "environment.json").read_text())["imports"] == ["userpkg.arm"]
-    assert read_summary(run)["env_id"] == "ArmReachHeavy-v0"
-    # later commands on the folder import the module again, without being told
-    assert_ok(run_cli("evaluate", run, "--episodes", "2", "--out", tmp_path / "eval"))
-    assert read_summary(tmp_path / "eval")["env_id"] == "ArmReachHeavy-v0"
+    # a folder trained with --import remembers it: test_synergies_of_the_arms_motor_commands_and_sar_training
     assert_ok(run_cli("--import", "userpkg.arm", "evaluate", "zero", "--env", "ArmReach-v0", "--episodes", "1",
                       "--out", tmp_path / "zero"))
     assert_ok(run_cli("dynamics", "collect", "ArmReach-v0", "--import=userpkg.arm", "--episodes", "8",
@@ -70,18 +62,25 @@ def test_import_flag_and_folders_that_remember_it(tmp_path):
 
 def test_synergies_of_the_arms_motor_commands_and_sar_training(arm_run, tmp_path):
     """Collect (from the folder, fresh processes), fit and train in the synergy space of a body
-    without muscles: the signal is the actuator commands."""
+    without muscles: the signal is the actuator commands. The env of that training is named by
+    --import, and later commands on its folder import the module again without being told."""
     assert_ok(run_cli("synergies", "collect", arm_run, "--episodes", "6", "--preview", "4", "--workers", "2",
                       "--out", tmp_path / "commands"))
     collected = read_summary(tmp_path / "commands")
     assert collected["signal"] == "ctrl" and collected["n_signals"] == 3 and collected["samples"] == 600
     assert_ok(run_cli("synergies", "fit", tmp_path / "commands", "--n-synergies", "2", "--out", tmp_path / "sar"))
+    run = tmp_path / "sar-rl"
+    # --import anywhere on the line; the module registers two ids, the plain one is used
     assert_ok(run_cli("train", "ArmReachHeavy-v0", "--import", "userpkg.arm", "--sar", tmp_path / "sar" / "sar.npz",
-                      *TINY_PPO, "--out", tmp_path / "sar-rl", "--no-progress"))
-    trained = read_summary(tmp_path / "sar-rl")
+                      *TINY_PPO, "--out", run, "--no-progress"))
+    trained = read_summary(run)
     assert trained["timesteps"] == 256 and trained["eval_episode_length_mean"] == 100
-    policy = json.loads((tmp_path / "sar-rl" / "policy.json").read_text())
+    assert trained["env_id"] == "ArmReachHeavy-v0"
+    assert json.loads((run / "environment.json").read_text())["imports"] == ["userpkg.arm"]
+    policy = json.loads((run / "policy.json").read_text())
     assert policy["action_space"]["shape"] == [2]  # the policy acts in the 2 synergies of the arm's 3 motors
+    assert_ok(run_cli("evaluate", run, "--episodes", "2", "--out", tmp_path / "eval"))
+    assert read_summary(tmp_path / "eval")["env_id"] == "ArmReachHeavy-v0"
 
 
 def test_errors_name_the_module_and_what_went_wrong(tmp_path):
