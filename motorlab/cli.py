@@ -8,6 +8,7 @@ folder without summary.json, i.e. visibly unfinished.
 
 from __future__ import annotations
 
+import functools
 import inspect
 import json
 import os
@@ -15,7 +16,7 @@ import sys
 import tomllib
 from pathlib import Path
 from types import UnionType
-from typing import Annotated, Any, Literal, Optional, Union, get_args, get_origin
+from typing import Annotated, Any, Literal, Optional, Union, get_args, get_origin, get_type_hints
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering works without a display
 
@@ -31,7 +32,7 @@ from motorlab.dynamics.steps import (  # noqa: E402
     DYNAMICS_COLLECT,
     DYNAMICS_FIT,
 )
-from motorlab.envs import EnvConfig, early_end_label, register_myosuite  # noqa: E402
+from motorlab.envs import DISTURBANCES, EnvConfig, describe_env, early_end_label, register_myosuite  # noqa: E402
 from motorlab.errors import MotorlabError  # noqa: E402
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT, EvaluateSettings, ZeroshotSettings, settings_for  # noqa: E402
 from motorlab.kinds import KINDS  # noqa: E402
@@ -39,6 +40,7 @@ from motorlab.recipes import bundled, fields_of, load_recipe, step_union  # noqa
 from motorlab.report.steps import COMPARE, VIDEO, CompareSettings  # noqa: E402
 from motorlab.rl.config import TrainConfig  # noqa: E402
 from motorlab.rl.steps import TRAIN  # noqa: E402
+from motorlab.robustness.steps import ROBUSTNESS, RobustnessSettings  # noqa: E402
 from motorlab.runs import is_complete, read_text_file  # noqa: E402
 from motorlab.settings import Settings, help_text  # noqa: E402
 from motorlab.stepkind import StepKind  # noqa: E402
@@ -173,7 +175,7 @@ def _cli_type(annotation: Any, flag: str) -> tuple[type, Any]:
 
 Out = Annotated[Optional[Path], typer.Option("--out", help="Run folder to write (default: runs/<step>-<timestamp>).")]
 Seed = Annotated[Optional[int], typer.Option("--seed", min=0, help="Random seed (default 0).")]
-Delay = Annotated[Optional[float], opt(EnvConfig, "--delay")]
+Delay = Annotated[Optional[str], opt(EnvConfig, "--delay")]
 DelayOn = Annotated[Optional[str], opt(EnvConfig, "--delay-on")]
 History = Annotated[Optional[int], opt(EnvConfig, "--history")]
 Success = Annotated[Optional[str], opt(EnvConfig, "--success")]
@@ -183,11 +185,35 @@ EnvArgs = Annotated[Optional[list[str]], typer.Option(
 
 
 def _env_flags(env: str | None, delay, delay_on, history, reward=None, sar=None, phi=None,
-               env_args: list[str] | None = None, success: str | None = None) -> dict:
+               env_args: list[str] | None = None, success: str | None = None,
+               disturbances: dict[str, Any] | None = None) -> dict:
     given = {"id": env, "delay": delay, "delay_on": delay_on, "history": history, "reward": reward,
              "sar": str(sar) if sar else None, "phi": phi, "success": success,
-             "kwargs": _parse_sets(env_args, "--env-arg") if env_args else None}
+             "kwargs": _parse_sets(env_args, "--env-arg") if env_args else None, **(disturbances or {})}
     return {k: v for k, v in given.items() if v is not None}
+
+
+def disturbance_options(fn):
+    """Give a command one option per disturbance setting (--obs-noise, --latency, --push-body, ...;
+    type, choices and help from EnvConfig, written once there). The command receives the given ones
+    as `disturbances`, a dict."""
+    signature = inspect.signature(fn)
+    added = []
+    for name in DISTURBANCES:  # as text: amounts may be ranges (0..0.02), the settings check and convert them
+        added.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None, annotation=Annotated[
+            Optional[str], opt(EnvConfig, "--" + name.replace("_", "-"))]))
+    hints = get_type_hints(fn, include_extras=True)  # the module's annotations are strings (__future__)
+    params = [p.replace(annotation=hints.get(p.name, p.annotation)) for p in signature.parameters.values()
+              if p.name != "disturbances"] + added
+
+    @functools.wraps(fn)
+    def command(**given: Any):
+        disturbances = {k: v for k in DISTURBANCES if (v := given.pop(k)) is not None}
+        return fn(**given, disturbances=disturbances)
+
+    command.__signature__ = signature.replace(parameters=params)
+    command.__annotations__ = {p.name: p.annotation for p in params}
+    return command
 
 
 def _parse_sets(items: list[str], flag: str = "--set") -> dict:
@@ -223,6 +249,7 @@ T = TrainConfig
                        "--history 10 --delay 0.2\n\n"
                        "  motorlab train Upkie-PyBullet-Pendulum --n-envs 2 --timesteps 150000 "
                        "--env-arg 'init_rand={\"pitch\": 0.1}'")
+@disturbance_options
 def train(
     env_id: Annotated[Optional[str], typer.Argument(
         help="Gymnasium env id, e.g. InvertedPendulum-v5 (may be left out with --config).")] = None,
@@ -238,7 +265,8 @@ def train(
         help="Named settings: fast (motorlab's most sample-efficient for balancing), sb3-ppo, sb3-sac, "
              "sar-sac (the SAR study's reference SAC), sar-sac-synergy (the same, learning_starts 5000), "
              "sar-sac-fast (the reference SAC with 4 env processes and 1 gradient step per 25 env steps: "
-             "~18x faster on 2 cores). Flags override it.")] = None,
+             "~18x faster on 2 cores), upkie-balancer (Upkie's ppo_balancer: randomized action lag, "
+             "action and observation noise, random initial state, history 10). Flags override it.")] = None,
     timesteps: Annotated[Optional[int], opt(T, "--timesteps")] = None,
     seed: Annotated[Optional[int], opt(T, "--seed", min=0)] = None,
     out: Out = None,
@@ -262,6 +290,7 @@ def train(
     env_arg: EnvArgs = None,
     success: Success = None,
     progress: Annotated[bool, opt(T, "--progress/--no-progress")] = True,
+    disturbances: dict[str, Any] | None = None,
 ):
     """Train a policy on ENV_ID and write a run folder.
 
@@ -274,7 +303,7 @@ def train(
         "until_solved": until_solved or None, "solve_episodes": solve_episodes, "solve_return": solve_return,
         "eval_every": eval_every, "n_envs": n_envs, "normalize": normalize, "device": device, "progress": progress,
         "checkpoint_every": checkpoint_every,
-        "env": _env_flags(env_id, delay, delay_on, history, reward, sar, phi, env_arg, success),
+        "env": _env_flags(env_id, delay, delay_on, history, reward, sar, phi, env_arg, success, disturbances),
     }
     if hp:
         settings["hyperparams"] = _parse_sets(hp)
@@ -328,6 +357,7 @@ def _merge_config(path: Path, flags: dict) -> dict:
 @command(EVALUATE, epilog="Examples:\n\n  motorlab evaluate runs/ppo --delay 0.2 --episodes 20\n\n"
                           "  motorlab evaluate pid --env InvertedPendulum-v5\n\n"
                           "  motorlab evaluate 'pid:kp=[1,20,0,0],kd=[1,3,0,0]' --env InvertedPendulum-v5")
+@disturbance_options
 def evaluate(
     policy: Annotated[str, arg(EvaluateSettings, "policy")],
     env: Annotated[Optional[str], typer.Option(help="Env id (default: the run's training env).")] = None,
@@ -339,18 +369,18 @@ def evaluate(
     episodes: Annotated[Optional[int], opt(EvaluateSettings, "--episodes")] = None,
     seed: Seed = None,
     out: Out = None,
+    disturbances: dict[str, Any] | None = None,
 ):
     """Evaluate a policy deterministically; print a table, write summary.json.
 
     summary.json: return_mean, return_std, return_min, return_max, success_rate,
     episode_lengths. Returns are the task's own (training-time reward shaping is not applied).
     """
-    settings = settings_for(policy, _env_flags(env, delay, delay_on, history, env_args=env_arg, success=success),
-                            episodes, seed)
+    settings = settings_for(policy, _env_flags(env, delay, delay_on, history, env_args=env_arg, success=success,
+                                               disturbances=disturbances), episodes, seed)
     s = EVALUATE.run(settings, out)
     env_cfg = settings.env
-    table = Table(title=f"{policy} on {env_cfg.id}" + (f", delay {env_cfg.delay} s" if env_cfg.delay else "")
-                  + (f", history {env_cfg.history}" if env_cfg.history > 1 else ""))
+    table = Table(title=f"{policy} on {describe_env(env_cfg)}")
     for col in ("episodes", "return mean ± std", "min", "max", "success", "mean length", early_end_label(env_cfg.id)):
         table.add_column(col, justify="right")
     table.add_row(str(s.episodes), f"{s.return_mean:.1f} ± {s.return_std:.1f}", f"{s.return_min:.1f}",
@@ -379,6 +409,42 @@ def zeroshot(
     s = ZEROSHOT.run(ZEROSHOT.make(runs=[str(r) for r in run_dirs], envs=envs, episodes=episodes, seed=seed), out,
                      console=stdout)
     stdout.print(f"written: {s.run_dir}/summary.json, {s.run_dir}/plots/zeroshot.png")
+    _warn_faults(s)
+
+
+@command(ROBUSTNESS, epilog="Examples:\n\n"
+                            "  motorlab robustness pid runs/ppo runs/ppo-history --vary delay=0:0.3:7 --episodes 20\n\n"
+                            "  motorlab robustness runs/ppo --vary obs-noise=0:0.05:6 --vary latency=0:4:5\n\n"
+                            "  motorlab robustness pid runs/ppo --vary push-force=0:40:5 --push-body pole "
+                            "--push-direction x")
+@disturbance_options
+def robustness(
+    policies: Annotated[list[str], arg(RobustnessSettings, "policies")],
+    vary: Annotated[list[str], opt(RobustnessSettings, "--vary")],
+    env: Annotated[Optional[str], typer.Option(
+        help="Env id for built-in controllers (default: the first run's); with run folders, each acts in "
+             "its own training env.")] = None,
+    delay: Delay = None,
+    delay_on: DelayOn = None,
+    env_arg: EnvArgs = None,
+    episodes: Annotated[Optional[int], opt(RobustnessSettings, "--episodes")] = None,
+    seed: Seed = None,
+    workers: Annotated[Optional[int], opt(RobustnessSettings, "--workers", min=1)] = None,
+    out: Out = None,
+    disturbances: dict[str, Any] | None = None,
+):
+    """How far each policy holds as a disturbance grows: evaluate every policy at every value of each
+    --vary grid (one disturbance at a time, the others at the policy's own settings, the same reset
+    seeds at every value); print a table, write curves.csv, summary.json and plots/robustness.png.
+
+    Every policy meets the same env: the options given here (e.g. --push-body pole for --vary
+    push-force, --delay-on action for --vary delay) plus the grid's disturbance. Run folders keep
+    their own env id, arguments, history and synergies, not the noise or delay they trained with.
+    """
+    fixed = _env_flags(env, delay, delay_on, None, env_args=env_arg, disturbances=disturbances)
+    s = ROBUSTNESS.run(ROBUSTNESS.make(policies=policies, vary=vary, episodes=episodes, seed=seed, workers=workers,
+                                       env=fixed or None), out, console=stdout)
+    stdout.print(f"written: {s.run_dir}/summary.json, curves.csv, plots/robustness.png")
     _warn_faults(s)
 
 
@@ -643,7 +709,9 @@ def sweep(
 
 @app.command(epilog="Examples:\n\n  motorlab export runs/ppo --out share/ppo          # only the files safe to send\n\n"
                     "  motorlab export ppo_pendulum.zip --trust --env InvertedPendulum-v5 --out runs/imported\n\n"
-                    "  motorlab export sac.zip --vecnormalize vec_normalize.pkl --trust --env Hopper-v5 --out runs/sac")
+                    "  motorlab export sac.zip --vecnormalize vec_normalize.pkl --trust --env Hopper-v5 --out runs/sac\n\n"
+                    "  motorlab export runs/ppo --onnx --out deploy/ppo     # policy.onnx for a robot "
+                    "(docs/deployment.md)")
 def export(
     source: Annotated[Path, typer.Argument(help="A run folder, or an SB3 zip written by model.save.")],
     out: Annotated[Path, typer.Option("--out", help="The folder to write.")],
@@ -654,6 +722,10 @@ def export(
     vecnormalize: Annotated[Optional[Path], typer.Option(
         help="VecNormalize.save's file, if the zip's policy saw normalized observations.")] = None,
     algo: Annotated[Optional[str], typer.Option(help="ppo (also A2C), sac or td3 (default: read from the zip).")] = None,
+    onnx: Annotated[bool, typer.Option(
+        "--onnx", help="Write the run's policy as OUT/policy.onnx for onnxruntime on a robot (observation "
+                       "normalization, history stack and action bounds inside the graph; checked against torch "
+                       "to 1e-5 first) and its interface as OUT/policy.onnx.json.")] = False,
 ):
     """Write a policy folder that is safe to share: no pickle in it.
 
@@ -664,6 +736,17 @@ def export(
     """
     from motorlab.export import export_run, export_sb3_zip
 
+    if onnx:
+        if env or vecnormalize or algo or trust:
+            raise MotorlabError("--onnx exports a run folder's policy; --trust, --env, --vecnormalize and --algo are "
+                                "for SB3 zips (export the zip to a folder first, then that folder with --onnx).")
+        from motorlab.deploy_onnx import export_onnx
+
+        s = export_onnx(source, out)
+        stdout.print(f"exported {s['algo'].upper()} policy to ONNX (history {s['history']}, max |onnxruntime - "
+                     f"torch| {s['max_abs_error']:.1g} on {s['checked_observations']} observations) -> {s['onnx']}, "
+                     f"{s['sidecar']}", highlight=False)
+        return
     if source.is_dir():
         if env or vecnormalize or algo or trust:
             raise MotorlabError(f"{source} is a run folder: it is exported as it is, without --trust, --env, "

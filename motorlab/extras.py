@@ -21,6 +21,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "upkie": ("upkie==13.1.0", "pybullet==3.2.7"),
     "ray": ("ray[tune]==2.60.0",),
     "evotorch": ("evotorch==0.6.1",),
+    "onnx": ("onnx==1.23.2", "onnxruntime==1.20.1"),
 }
 
 

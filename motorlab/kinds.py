@@ -9,6 +9,7 @@ from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
 from motorlab.report.steps import COMPARE, VIDEO
 from motorlab.rl.steps import TRAIN
+from motorlab.robustness.steps import ROBUSTNESS
 from motorlab.stepkind import StepKind
 from motorlab.synergy.steps import COLLECT, FIT, VAF
 
@@ -20,6 +21,7 @@ KINDS: dict[str, StepKind] = {k.name: k for k in (
     VAF,
     FIT,
     ZEROSHOT,
+    ROBUSTNESS,
     COMPARE,
     DYNAMICS_COLLECT,
     DYNAMICS_FIT,

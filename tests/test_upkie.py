@@ -190,7 +190,8 @@ def test_upkie_recipe_runs_end_to_end_on_tiny_budgets(tmp_path):
     text = bundled()["upkie"].read_text()
     for old, new in [("timesteps = 150000", "timesteps = 512\nhyperparams = { n_steps = 128, batch_size = 64 }"),
                      ("eval_every = 50000", "eval_every = 256"), ("solve_episodes = 5", "solve_episodes = 2"),
-                     ("episodes = 10", "episodes = 2"),
+                     ("episodes = 10", "episodes = 2"), ("episodes = 5", "episodes = 2"),
+                     ('"delay=0:0.2:5", "obs-noise=0:0.04:5"', '"delay=0,0.2"'),
                      ("init_rand = { pitch = 0.1 } }", "init_rand = { pitch = 0.1 }, time_limit = 1.0 }")]:
         assert old in text
         text = text.replace(old, new)
@@ -199,7 +200,7 @@ def test_upkie_recipe_runs_end_to_end_on_tiny_budgets(tmp_path):
     assert_ok(run_cli("run", recipe, "--out", tmp_path / "study"))
     s = read_summary(tmp_path / "study")
     assert s["steps"] == ["pid", "pid-on-delay", "pid-on-delay-both", "ppo", "ppo-eval", "ppo-on-delay",
-                          "ppo-on-delay-both", "video"]
+                          "ppo-on-delay-both", "ppo-robust", "robustness", "video"]
     assert s["pid.falls"] == 0 and s["pid.episode_length_mean"] == 200  # 1 s episodes at 200 Hz
     for step in ("ppo-eval", "ppo-on-delay", "ppo-on-delay-both"):
         assert 0 <= s[f"{step}.falls"] <= 2 and 0 < s[f"{step}.episode_length_mean"] <= 200
@@ -208,6 +209,16 @@ def test_upkie_recipe_runs_end_to_end_on_tiny_budgets(tmp_path):
     table = (tmp_path / "study" / "table.txt").read_text()
     assert "falls 0/2" in table and "video/episode_0.mp4" in table
     assert "delay 0.1 s on action" in table and "delay 0.1 s on both" in table
+
+    # the ppo_balancer-like PPO trained with domain randomization, and the curves of all three balancers
+    robust = tomllib.loads((tmp_path / "study" / "ppo-robust" / "config.toml").read_text())
+    assert robust["env"]["delay"] == "0.05..0.15" and robust["env"]["history"] == 10
+    assert robust["env"]["obs_noise"] == 0.01 and robust["env"]["kwargs"]["init_rand"]["pitch"] == 0.25
+    curves = read_summary(tmp_path / "study" / "robustness")
+    # success: Upkie's own flag, standing until the time limit
+    assert curves["policies"] == ["pid", "ppo", "ppo-robust"] and curves["measure"] == "success"
+    assert curves["curves"]["pid"]["delay"]["success_rate"][0] == 1  # PID stands without lag
+    assert "robustness/plots/robustness.png" in (tmp_path / "study" / "report.html").read_text()
 
     run = tmp_path / "study" / "ppo"  # PPO with two env processes
     assert tomllib.loads((run / "config.toml").read_text())["n_envs"] == 2

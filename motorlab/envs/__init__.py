@@ -17,6 +17,15 @@ from typing import Any, ClassVar, Literal
 import gymnasium as gym
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from motorlab.envs.disturbances import (
+    GaussianNoise,
+    Latency,
+    MotorNoise,
+    RandomPush,
+    muscle_fatigue,
+    parse_span,
+    span_text,
+)
 from motorlab.envs.rewards import resolve_reward
 from motorlab.envs.upkie import is_upkie, make_upkie, register_upkie
 from motorlab.envs.wrappers import DelayOn, LowPassDelay, NumericalGuard, RewardShaping, delay_alpha, env_dt_of
@@ -31,7 +40,7 @@ from motorlab.user_modules import (
     user_env_ids,
 )
 
-__all__ = ["EnvConfig", "EnvSettings", "ENV_KEYS", "make_env", "check_env_id", "max_return", "env_dt", "LowPassDelay", "RewardShaping",
+__all__ = ["EnvConfig", "EnvSettings", "ENV_KEYS", "DISTURBANCES", "describe_env", "make_env", "check_env_id", "max_return", "env_dt", "LowPassDelay", "RewardShaping",
            "delay_alpha", "register_myosuite"]
 
 def _route_mujoco_warnings() -> None:
@@ -56,12 +65,39 @@ class EnvConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     id: str = Field("InvertedPendulum-v5", description="Gymnasium env id, e.g. InvertedPendulum-v5")
-    delay: float | None = Field(None, description="Low-pass delay time constant TAU in seconds (alpha = dt/TAU "
-                                "must be in (0, 1)); e.g. 0.2")
+    delay: float | str | None = Field(None, description="Low-pass delay time constant TAU in seconds (alpha = "
+                                      "dt/TAU must be in (0, 1)), e.g. 0.2, or a range drawn per episode, e.g. "
+                                      "0.05..0.3")
     # Actuation and perception delay, as in the robust-policy workflow (docs/design.md).
     delay_on: DelayOn = Field("both", description="What the delay filters: both (actuation and perception), "
                               "action or observation")
     history: int = Field(1, ge=1, description="Stack the last K observations (K=1: none)")
+    # What real robots do beyond the lag (motorlab.envs.disturbances); any amount may be a range
+    # "LOW..HIGH" drawn anew each episode (domain randomization).
+    latency: int | str | None = Field(None, description="Transport latency in whole env steps (nothing arrives "
+                                      "early, unlike --delay), e.g. 2, or a range per episode, e.g. 0..3")
+    latency_on: DelayOn = Field("both", description="What the latency holds back: both, action or observation")
+    obs_noise: float | str | list[float] | None = Field(
+        None, description="Gaussian noise std on every observation the policy sees: one std (0.01), a range per "
+        "episode (0..0.02) or one std per element (0.01,0,0.05,0)")
+    action_noise: float | str | list[float] | None = Field(
+        None, description="Gaussian noise std on every command before the env gets it (then clipped to the "
+        "action space): one std, a range per episode, or one std per element")
+    push_body: str | None = Field(None, description="Push this body of the MuJoCo model at random times (e.g. "
+                                  "pole, torso); with --push-force")
+    push_force: float | str = Field(10.0, description="Push magnitude in newtons, or a range per push, e.g. 5..20")
+    push_interval: float | str = Field("1..3", description="Seconds from one push to the next, drawn from this "
+                                       "range (or fixed)")
+    push_duration: float | None = Field(None, gt=0, description="Seconds each push lasts (default: one env "
+                                        "step, an impulse)")
+    push_direction: Literal["horizontal", "x", "y", "z", "any"] = Field(
+        "horizontal", description="Push direction: a random horizontal one, along x, y or z (random sign), or any")
+    motor_noise: float | str | None = Field(None, description="MyoSuite: motor noise on the muscle excitations, "
+                                            "as a multiple of van Beers et al. 2004 (1 = signal-dependent std "
+                                            "0.103 + constant std 0.185), or a range per episode, e.g. 0..1")
+    fatigue: Literal["off", "fresh", "random"] = Field(
+        "off", description="MyoSuite: 3CC-r muscle fatigue, muscles rested at each reset (fresh) or in a random "
+        "fatigue state (random)")
     reward: str | None = Field(None, description="Reward shaping: task, alive, quadratic, action-penalty, or "
                                "module:function (fn(next_obs, action, reward, terminated, info) -> float)")
     sar: str | None = Field(None, description="Act in synergy space: a sar.npz from `motorlab synergies fit` or "
@@ -80,6 +116,33 @@ class EnvConfig(BaseModel):
         "info['solved']): any (solved at any step), final (solved at its last step), or auto (final for "
         "MyoSuite's walking tasks, any otherwise)")
 
+    @field_validator("delay", "latency", "push_force", "push_interval", "motor_noise", mode="before")
+    @classmethod
+    def _amount(cls, v, info):
+        """A number or a range LOW..HIGH ([LOW, HIGH] in TOML), stored as the number or "LOW..HIGH"."""
+        if v is None:
+            return v
+        what = {"delay": "delay time constant (s)", "latency": "latency (steps)", "push_force": "push force (N)",
+                "push_interval": "push interval (s)", "motor_noise": "motor noise"}[info.field_name]
+        low, high = parse_span(v, what, integer=info.field_name == "latency")
+        if low == high:
+            return int(low) if info.field_name == "latency" else low
+        return span_text((low, high))
+
+    @field_validator("obs_noise", "action_noise", mode="before")
+    @classmethod
+    def _noise(cls, v, info):
+        if v is None or isinstance(v, list):
+            return v
+        if isinstance(v, str) and "," in v:  # one std per element, from the command line
+            try:
+                return [float(x) for x in v.split(",") if x.strip()]
+            except ValueError:
+                raise MotorlabError(f"{info.field_name.replace('_', ' ')} {v!r}: write stds separated by commas, "
+                                    "e.g. 0.01,0,0.05,0.") from None
+        low, high = parse_span(v, {"obs_noise": "observation noise", "action_noise": "action noise"}[info.field_name])
+        return low if low == high else span_text((low, high))
+
     @field_validator("sar")
     @classmethod
     def _absolute(cls, v):
@@ -87,9 +150,15 @@ class EnvConfig(BaseModel):
         return str(Path(v).resolve()) if v and not v.startswith("@") else v  # "@step": a recipe's, resolved when it runs
 
 
+# The disturbance settings (noise, latency, pushes, MyoSuite's motor noise and fatigue), named alike
+# everywhere: a recipe's fields, the CLI's --obs-noise ..., robustness' --vary obs-noise=...
+DISTURBANCES = ("latency", "latency_on", "obs_noise", "action_noise", "push_body", "push_force", "push_interval",
+                "push_duration", "push_direction", "motor_noise", "fatigue")
+
 # Recipe and CLI names of the env settings every env-taking step shares (EnvConfig's fields).
 ENV_KEYS = {"env": "id", "delay": "delay", "delay_on": "delay_on", "history": "history", "reward": "reward",
-            "sar": "sar", "phi": "phi", "env_kwargs": "kwargs", "success": "success"}
+            "sar": "sar", "phi": "phi", "env_kwargs": "kwargs", "success": "success",
+            **{k: k for k in DISTURBANCES}}
 
 
 class EnvSettings(Settings):
@@ -215,11 +284,21 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
                 raise MotorlabError(f"{cfg.id} does not take these settings: {e}.") from None
         if name in user_env_ids():
             check_user_env(env, cfg.id)
+    if cfg.motor_noise is not None:
+        env = MotorNoise(env, cfg.motor_noise)  # MyoSuite's own wrappers, on the muscle excitations
+    if cfg.fatigue != "off":
+        env = muscle_fatigue(env, cfg.fatigue)
     env = NumericalGuard(env)
     if shaped and cfg.reward and cfg.reward != "task":
         env = RewardShaping(env, resolve_reward(cfg.reward), name=cfg.reward)
+    if cfg.push_body:
+        env = RandomPush(env, cfg.push_body, cfg.push_force, cfg.push_interval, cfg.push_duration, cfg.push_direction)
     if cfg.delay:
         env = LowPassDelay(env, cfg.delay, on=cfg.delay_on)
+    if cfg.latency:
+        env = Latency(env, cfg.latency, on=cfg.latency_on)
+    if cfg.obs_noise is not None or cfg.action_noise is not None:
+        env = GaussianNoise(env, cfg.obs_noise, cfg.action_noise)
     if cfg.sar:
         from motorlab.synergy.wrapper import SynergyActionWrapper
 
@@ -234,7 +313,18 @@ def describe_env(env: EnvConfig) -> str:
     """The env and its wrappers in a few words: "InvertedPendulum-v5, delay 0.2 s on both, history 10"."""
     tags = [env.id]
     if env.delay:
-        tags.append(f"delay {env.delay:g} s on {env.delay_on}")  # action, observation or both
+        tags.append(f"delay {env.delay} s on {env.delay_on}")  # action, observation or both
+    if env.latency:
+        tags.append(f"latency {env.latency} steps on {env.latency_on}")
+    for key, unit in (("obs_noise", "observation noise std"), ("action_noise", "action noise std"),
+                      ("motor_noise", "motor noise x")):
+        value = getattr(env, key)
+        if value is not None:
+            tags.append(f"{unit} {','.join(f'{v:g}' for v in value) if isinstance(value, list) else value}")
+    if env.push_body:
+        tags.append(f"pushes on {env.push_body}: {env.push_force} N every {env.push_interval} s")
+    if env.fatigue != "off":
+        tags.append(f"muscle fatigue ({env.fatigue})")
     if env.history > 1:
         tags.append(f"history {env.history}")
     if env.sar:

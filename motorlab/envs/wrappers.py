@@ -12,6 +12,7 @@ from typing import Any, Literal
 import gymnasium as gym
 import numpy as np
 
+from motorlab.envs.disturbances import EpisodeRandom, env_dt_of, parse_span
 from motorlab.errors import MotorlabError
 from motorlab.faults import FAULT_KEY
 
@@ -19,17 +20,6 @@ DelayOn = Literal["action", "observation", "both"]
 
 # fn(next_obs, action, reward, terminated, info) -> shaped reward
 RewardFn = Callable[[np.ndarray, np.ndarray, float, bool, dict], float]
-
-
-def env_dt_of(base_env) -> float | None:
-    """Seconds per step of an unwrapped env: its `dt`, else MuJoCo timestep x frame skip."""
-    dt = getattr(base_env, "dt", None)
-    if dt is None:
-        model = getattr(base_env, "mj_model", None) or getattr(base_env, "model", None)
-        skip = getattr(base_env, "frame_skip", None)
-        if model is not None and skip is not None and hasattr(model, "opt"):
-            dt = float(model.opt.timestep) * int(skip)
-    return float(dt) if dt is not None else None
 
 
 def delay_alpha(dt: float, time_constant: float) -> float:
@@ -49,7 +39,7 @@ def delay_alpha(dt: float, time_constant: float) -> float:
     return alpha
 
 
-class LowPassDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
+class LowPassDelay(EpisodeRandom, gym.utils.RecordConstructorArgs):
     """Actuation and/or perception delay as a first-order low-pass filter.
 
     Each step `y <- y + alpha * (x - y)` with `alpha = dt / time_constant`, where x
@@ -59,11 +49,15 @@ class LowPassDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     Args:
         env: an env with a Box action space and a `dt` (MuJoCo envs have one).
-        time_constant: seconds; must exceed the env's dt.
+        time_constant: seconds; must exceed the env's dt. A range "LOW..HIGH" draws the
+            time constant anew each episode (domain randomization); a draw at or below dt
+            means no lag in that episode (alpha = 1).
         on: "action", "observation" or "both".
     """
 
-    def __init__(self, env: gym.Env, time_constant: float, on: DelayOn = "both"):
+    SALT = 5
+
+    def __init__(self, env: gym.Env, time_constant: float | str, on: DelayOn = "both"):
         gym.utils.RecordConstructorArgs.__init__(self, time_constant=time_constant, on=on)
         super().__init__(env)
         if on not in ("action", "observation", "both"):
@@ -73,13 +67,20 @@ class LowPassDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
             raise MotorlabError(f"{env.spec.id if env.spec else env} has no step dt; delay needs one.")
         if not isinstance(env.action_space, gym.spaces.Box):
             raise MotorlabError("delay needs a continuous (Box) action space.")
-        self.time_constant = float(time_constant)
-        self.alpha = delay_alpha(float(dt), self.time_constant)
+        self.dt = float(dt)
+        self.span = parse_span(time_constant, "delay time constant (s)")
+        if self.span[0] == self.span[1]:
+            delay_alpha(self.dt, self.span[0])  # a fixed time constant must lag: dt < tau
+        self.time_constant = self.span[1]
+        self.alpha = self._alpha(self.time_constant)
         self.on = on
         space = env.action_space
         self._action_rest = np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
         self._action = self._action_rest.copy()
         self._obs: np.ndarray | None = None
+
+    def _alpha(self, tau: float) -> float:
+        return 1.0 if tau <= self.dt else self.dt / tau
 
     @property
     def filters_action(self) -> bool:
@@ -90,7 +91,12 @@ class LowPassDelay(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return self.on in ("observation", "both")
 
     def reset(self, **kwargs: Any):
+        self._seed(kwargs)
         obs, info = self.env.reset(**kwargs)
+        if self.span[0] != self.span[1]:
+            self.time_constant = self.draw(self.span)
+            self.alpha = self._alpha(self.time_constant)
+            info.setdefault("disturbances", {})["delay"] = self.time_constant
         self._action = self._action_rest.copy()
         self._obs = np.array(obs, copy=True)
         return self._obs.copy(), info

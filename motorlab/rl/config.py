@@ -11,7 +11,7 @@ from typing import Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from motorlab.control.lqr import LQRSettings
-from motorlab.envs import EnvSettings
+from motorlab.envs import EnvSettings, fold_env
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.rl.schedules import schedule_ends
 
@@ -103,6 +103,23 @@ PRESETS["sar-sac-fast"] = {
 }
 
 
+# Upkie's own sim-to-real PPO balancer (upkie/ppo_balancer, settings.gin), as far as motorlab's
+# Upkie-PyBullet-Pendulum env allows: domain randomization (an action lag whose time constant is
+# drawn per episode from 0.05..0.15 s, Gaussian action and observation noise, random initial pitch,
+# velocity and pitch rate), 10 stacked observations, and its PPO settings (small networks, lr 3e-3,
+# clip 0.1). Its own wrappers also add the last action to the observation and bound the command's
+# rate of change; motorlab has neither. Upkie's training runs 2M steps; recipes run far fewer.
+PRESETS["upkie-balancer"] = {
+    "algo": "ppo",
+    "lr": "3e-3",
+    "clip_range": "0.1",
+    "env": {"delay": "0.05..0.15", "delay_on": "action", "action_noise": 0.05, "obs_noise": 0.01, "history": 10,
+            "kwargs": {"init_rand": {"pitch": 0.25, "v_x": 0.1, "omega_y": 0.1}}},
+    "hyperparams": {"n_steps": 2048, "batch_size": 64, "n_epochs": 10, "gae_lambda": 0.95, "ent_coef": 0.0,
+                    "policy_kwargs": {"net_arch": {"pi": [16, 16], "vf": [32, 32]}}},
+}
+
+
 def resolve(settings: dict[str, Any]) -> TrainConfig:
     """Apply the named preset (if any) under the given settings and validate.
 
@@ -114,10 +131,19 @@ def resolve(settings: dict[str, Any]) -> TrainConfig:
     if preset is not None:
         if preset not in PRESETS:
             raise MotorlabError(f"unknown preset {preset!r}{did_you_mean(preset, PRESETS)}; presets: {', '.join(PRESETS)}.")
-        merged = {k: (dict(v) if isinstance(v, dict) else v) for k, v in PRESETS[preset].items()}
+        merged = fold_env(PRESETS[preset]) if "env" in PRESETS[preset] else dict(PRESETS[preset])
+        settings = fold_env(settings)  # a recipe's flat env fields (delay = 0.2) meet the preset's env
     for key, value in settings.items():
         if isinstance(value, dict) and isinstance(merged.get(key), dict):
-            merged[key] = {**merged[key], **value}
+            merged[key] = _merged(merged[key], value)
         else:
             merged[key] = value
     return TrainConfig.model_validate(merged)
+
+
+def _merged(base: dict[str, Any], given: dict[str, Any]) -> dict[str, Any]:
+    """`given` over `base`, nested dicts key by key (a preset's env kwargs under the recipe's)."""
+    out = dict(base)
+    for key, value in given.items():
+        out[key] = _merged(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out

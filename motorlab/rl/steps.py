@@ -23,7 +23,7 @@ class TrainSummary(Summary):
     algo: str
     preset: str | None
     seed: int
-    delay: float | None
+    delay: float | str | None
     history: int
     timesteps: int
     budget: int

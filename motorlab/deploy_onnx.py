@@ -1,0 +1,438 @@
+"""`motorlab export RUN --onnx`: a run's policy as one ONNX file, for a robot that has no torch.
+
+The graph holds everything between the robot's raw observation and the command it sends:
+
+    obs ─► history stack (K > 1) ─► normalization (obs_rms, clip) ─► the policy's deterministic
+        action (PPO: the mean, clipped to the action box; SAC/TD3: tanh, unscaled to the box)
+        ─► SAR decode (runs acting in synergy space) ─► action
+
+so that onnxruntime and numpy are all a robot needs (docs/deployment.md; examples/onnx_runner.py).
+Inputs and outputs (float32, dynamic batch dimension "batch"):
+
+    obs             [batch, D]     the newest observation, as the env gives it (not normalized)
+    obs_stack       [batch, K*D]   K > 1 only: the last stack, oldest observation first; at an
+                                   episode's start, the first observation repeated K times
+    action          [batch, A]     what the env (robot) takes
+    next_obs_stack  [batch, K*D]   K > 1 only: feed it back as obs_stack at the next step
+
+The stack lives in the graph, not in the caller: the order and the reset padding are the
+training env's (Gymnasium's FrameStackObservation, padding_type="reset"), and a caller cannot
+get them wrong. What the training env adds to model the robot (low-pass delay, latency, noise,
+pushes) or to score the task (reward shaping) is not in the graph: the robot brings its own, and
+the sidecar lists them under `not_in_graph`.
+
+The exporter is torch's TorchScript one (`dynamo=False`): for these small MLPs it needs only
+the `onnx` package (the dynamo exporter also needs onnxscript and onnx-ir), writes opset 17 /
+IR 8 that older onnxruntime builds on robots read, takes milliseconds and prints nothing. Before
+anything is written, onnxruntime runs the graph on observations from the env and random ones,
+and its actions must equal `SB3Policy.act`'s (plus the SAR decode) to TOLERANCE.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+import warnings
+from importlib import metadata
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from motorlab.envs import EnvConfig, env_dt, make_env
+from motorlab.errors import MotorlabError
+from motorlab.extras import missing
+from motorlab.policies import BUILTIN_POLICIES, POLICY_JSON, SB3Policy, load_policy_files
+from motorlab.runs import CONFIG, atomic_write_bytes, read_json, require_run_dir, write_json
+from motorlab.synergy.wrapper import SynergyActionWrapper
+
+ONNX_FILE = "policy.onnx"
+SIDECAR = "policy.onnx.json"  # the interface and the export check, for people and for tools
+FORMAT = "motorlab-onnx-policy/1"
+OPSET = 17
+TOLERANCE = 1e-5  # largest |onnxruntime - torch| allowed on any action element (float32)
+RANDOM_OBSERVATIONS = 256
+ENV_STEPS = 200  # observations from env steps for the check: a few episodes, a second or so
+DYNAMIC = "batch"
+# EnvConfig fields the graph implements, or that say nothing about the policy's inputs and outputs
+IN_GRAPH = {"id", "history", "sar", "phi", "kwargs", "success"}
+
+
+def export_onnx(run_dir: Path, out: Path, seed: int = 0) -> dict[str, Any]:
+    """Write a run's policy as `out/policy.onnx` and its interface as `out/policy.onnx.json`.
+
+    Args:
+        run_dir: a finished run folder holding an SB3 policy (PPO, A2C, SAC, TD3), from
+            `motorlab train` or `motorlab export`.
+        out: the folder to write (created if needed; may be the run folder itself).
+        seed: seeds the env episodes and random observations of the check.
+
+    Returns:
+        The summary: `files` (paths written), `onnx`, `sidecar`, `inputs`, `outputs` (name,
+        shape, dtype, description each), `max_abs_error` (onnxruntime against torch),
+        `tolerance`, `checked_observations`, `env_observations`, `opset`, `ir_version`, `algo`,
+        `env_id`, `history`, `dt` (seconds per env step), `observation_size`, `action_size`,
+        `normalized`, `sar`, `phi`, `not_in_graph`, `exported_from`, `versions`, `format`.
+
+    Raises:
+        MotorlabError: not a finished run folder, a run without an SB3 policy (PID, LQR,
+            evaluate runs), a policy the graph cannot express, onnx or onnxruntime missing,
+            or onnxruntime's actions differ from torch's by more than TOLERANCE. Nothing is
+            written then, and files already in `out` stay as they were.
+    """
+    run_dir = _require_run(run_dir)
+    out = _out_dir(out)
+    meta = _sb3_meta(run_dir)
+    onnx, ort = _require_onnx()
+    env_cfg = _env_config(run_dir)
+    history = env_cfg.history if env_cfg else 1
+    policy = load_policy_files(run_dir)
+    assert isinstance(policy, SB3Policy)  # _sb3_meta checked the type
+    obs_size = _observation_size(policy, history)
+    env = make_env(env_cfg, shaped=False) if env_cfg else None
+    try:
+        decode = _synergy_decode(env) if env_cfg and env_cfg.sar else None
+        stacks = _env_stacks(env, policy, seed) if env is not None else np.zeros((0, obs_size * history), np.float32)
+        dt = env_dt(env) if env is not None else None  # the control period the policy was trained at
+    finally:
+        if env is not None:
+            env.close()
+    module = _deployed_module(policy, meta, history, obs_size, decode)
+    model = onnx.load_from_string(_to_onnx(module, history, obs_size))
+    stacks = np.concatenate([stacks, _random_stacks(policy, stacks, RANDOM_OBSERVATIONS, seed)])
+    error = _check(ort, model.SerializeToString(), policy, decode, stacks, history, obs_size)
+
+    action_size = int(decode.size if decode else policy.policy.action_space.shape[0])
+    inputs, outputs = _interface(obs_size, history, action_size)
+    not_in_graph = _not_in_graph(env_cfg)
+    info = {
+        "format": FORMAT, "onnx": ONNX_FILE, "inputs": inputs, "outputs": outputs, "opset": OPSET,
+        "ir_version": int(model.ir_version), "algo": meta.get("algo"), "env_id": env_cfg.id if env_cfg else None,
+        "history": history, "dt": dt, "observation_size": obs_size, "action_size": action_size,
+        "normalized": policy.obs_mean is not None, "sar": env_cfg.sar if env_cfg else None,
+        "phi": env_cfg.phi if env_cfg and env_cfg.sar else None, "not_in_graph": not_in_graph,
+        "max_abs_error": error, "tolerance": TOLERANCE, "checked_observations": len(stacks),
+        "env_observations": len(stacks) - RANDOM_OBSERVATIONS, "exported_from": str(run_dir.resolve()),
+        "versions": {name: _version(name) for name in ("torch", "onnx", "onnxruntime", "stable-baselines3")},
+    }
+    _add_metadata(model, info)
+    onnx.checker.check_model(model)
+    # the graph first, then its description: a sidecar never describes a graph that is not there
+    atomic_write_bytes(out / ONNX_FILE, model.SerializeToString())
+    write_json(out / SIDECAR, info)
+    return {**info, "files": [str(out / ONNX_FILE), str(out / SIDECAR)], "onnx": str(out / ONNX_FILE),
+            "sidecar": str(out / SIDECAR)}
+
+
+# ---- what can be exported ------------------------------------------------------------
+
+def _require_run(run_dir: Path) -> Path:
+    run_dir = Path(run_dir)
+    if str(run_dir).split(":", 1)[0] in BUILTIN_POLICIES and not run_dir.exists():
+        raise MotorlabError(f"{run_dir} is a built-in controller, not a run folder; --onnx exports the neural "
+                            "policy of a run folder from `motorlab train` (PPO, SAC, TD3).")
+    return require_run_dir(run_dir)
+
+
+def _out_dir(out: Path) -> Path:
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise MotorlabError(f"--out {out} is a file; give a folder (policy.onnx and {SIDECAR} are written in it).")
+    return out
+
+
+def _sb3_meta(run_dir: Path) -> dict[str, Any]:
+    """policy.json of a run with an SB3 policy; any other run is one clear error."""
+    if not (run_dir / POLICY_JSON).is_file():
+        raise MotorlabError(f"{run_dir} holds no policy ({POLICY_JSON} is missing); --onnx exports the policy "
+                            "of a run folder from `motorlab train`.")
+    meta = read_json(run_dir / POLICY_JSON)
+    kind = meta.get("type")
+    if kind in ("pid", "lqr"):
+        raise MotorlabError(f"{run_dir} holds {'an LQR' if kind == 'lqr' else 'a PID'} controller, not a neural policy; --onnx exports "
+                            "PPO, SAC and TD3 policies (a linear controller is a few lines on the robot: its "
+                            f"gains are in {run_dir / POLICY_JSON}).")
+    if kind != "sb3":
+        raise MotorlabError(f"{run_dir / POLICY_JSON} has policy type {kind!r}; --onnx exports PPO, SAC and TD3 "
+                            "policies.")
+    return meta
+
+
+def _require_onnx() -> tuple[ModuleType, ModuleType]:
+    """onnx and onnxruntime, or the error that says how to install them."""
+    try:
+        import onnx
+        import onnxruntime
+    except ImportError as e:
+        raise missing(f"motorlab export --onnx needs {e.name or 'onnx'}", "onnx") from None
+    return onnx, onnxruntime
+
+
+def _env_config(run_dir: Path) -> EnvConfig | None:
+    """The env the policy was trained in, from config.toml (None: an imported zip without --env)."""
+    try:
+        config = tomllib.loads((run_dir / CONFIG).read_text())
+    except (OSError, ValueError):
+        return None
+    env = config.get("env")
+    if not isinstance(env, dict) or not env.get("id"):
+        return None
+    try:
+        return EnvConfig(**env)
+    except ValueError as e:
+        raise MotorlabError(f"{run_dir / CONFIG}: its [env] settings are not valid ({e.__class__.__name__}); "
+                            "re-run training.") from None
+
+
+def _observation_size(policy: SB3Policy, history: int) -> int:
+    shape = policy.policy.observation_space.shape
+    if len(shape) != 1 or shape[0] % history:
+        raise MotorlabError(f"the policy's observations have shape {shape}, which is not {history} stacked "
+                            "flat observations; --onnx exports policies on flat (Box) observations.")
+    if not isinstance(policy.policy.action_space, gym.spaces.Box) or len(policy.policy.action_space.shape) != 1:
+        raise MotorlabError(f"the policy's action space is {policy.policy.action_space}; --onnx exports flat Box "
+                            "actions.")
+    return shape[0] // history
+
+
+def _not_in_graph(env_cfg: EnvConfig | None) -> list[str]:
+    """The training env's settings that are not the policy's: they model the robot (delay, latency,
+    noise, pushes, fatigue) or score the task (reward), so the robot brings them itself."""
+    if env_cfg is None:
+        return []
+    return [f"{name} = {getattr(env_cfg, name)!r}" for name, field in EnvConfig.model_fields.items()
+            if name not in IN_GRAPH and getattr(env_cfg, name) != field.get_default(call_default_factory=True)]
+
+
+# ---- the SAR decode ------------------------------------------------------------------
+
+class _Decode:
+    """The affine synergy decode of a SynergyActionWrapper, as plain arrays."""
+
+    def __init__(self, wrapper: SynergyActionWrapper):
+        self.wrapper = wrapper
+        self.matrix, self.bias = np.asarray(wrapper._matrix), np.asarray(wrapper._bias)
+        self.clip = bool(wrapper._clip)
+        self.low, self.high = np.asarray(wrapper._low), np.asarray(wrapper._high)
+        self.size = self.matrix.shape[1]
+
+    def __call__(self, actions: np.ndarray) -> np.ndarray:
+        """What the env receives for each row of policy actions: the wrapper's own code."""
+        return np.stack([self.wrapper.action(a) for a in actions]).astype(np.float32)
+
+
+def _synergy_decode(env: gym.Env) -> _Decode:
+    layer = env
+    while isinstance(layer, gym.Wrapper):
+        if isinstance(layer, SynergyActionWrapper):
+            return _Decode(layer)
+        layer = layer.env
+    raise MotorlabError("the run's env acts in synergy space, but its env has no synergy wrapper; re-run training.")
+
+
+# ---- the graph -----------------------------------------------------------------------
+
+def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int, decode: _Decode | None):
+    """A torch module computing what `SB3Policy.act` (and the SAR decode) computes, stack included."""
+    import torch
+    from stable_baselines3.common.distributions import (
+        DiagGaussianDistribution,
+        SquashedDiagGaussianDistribution,
+        StateDependentNoiseDistribution,
+    )
+    from stable_baselines3.common.policies import ActorCriticPolicy
+    from stable_baselines3.common.preprocessing import preprocess_obs
+    from stable_baselines3.sac.policies import SACPolicy
+    from stable_baselines3.td3.policies import TD3Policy
+
+    sb3 = policy.policy
+    dist = getattr(sb3, "action_dist", None) or getattr(getattr(sb3, "actor", None), "action_dist", None)
+    if isinstance(sb3, TD3Policy):
+        squash = False  # the actor ends in tanh itself
+    elif isinstance(dist, SquashedDiagGaussianDistribution):
+        squash = True
+    elif isinstance(dist, StateDependentNoiseDistribution):
+        squash = dist.bijector is not None  # gSDE's deterministic action is tanh(mean) when it squashes
+    elif isinstance(dist, DiagGaussianDistribution):
+        squash = False
+    else:
+        raise MotorlabError(f"the policy's action distribution is {type(dist).__name__}; --onnx exports Gaussian "
+                            "policies (PPO, A2C, SAC, TD3 on Box actions).")
+    space = sb3.action_space
+
+    def f64(a: Any) -> torch.Tensor:
+        return torch.as_tensor(np.asarray(a, dtype=np.float64))
+
+    class DeployedPolicy(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.sb3 = sb3
+            self.normalized = policy.obs_mean is not None
+            if self.normalized:
+                # float64, as SB3Policy.act normalizes (numpy promotes to the statistics' float64)
+                self.register_buffer("mean", f64(policy.obs_mean))
+                self.register_buffer("std", f64(np.sqrt(policy.obs_var + policy.epsilon)))
+            self.register_buffer("low", torch.as_tensor(space.low, dtype=torch.float32))
+            self.register_buffer("high", torch.as_tensor(space.high, dtype=torch.float32))
+            if decode is not None:
+                self.register_buffer("decode_matrix", f64(decode.matrix))
+                self.register_buffer("decode_bias", f64(decode.bias))
+                self.register_buffer("decode_low", f64(decode.low))
+                self.register_buffer("decode_high", f64(decode.high))
+
+        def act(self, x: torch.Tensor) -> torch.Tensor:
+            if self.normalized:
+                x = torch.clamp((x.double() - self.mean) / self.std, -policy.clip_obs, policy.clip_obs).float()
+            x = preprocess_obs(x, sb3.observation_space, normalize_images=sb3.normalize_images)
+            if isinstance(sb3, ActorCriticPolicy):
+                features = sb3.pi_features_extractor(x)
+                a = sb3.action_net(sb3.mlp_extractor.forward_actor(features))
+            elif isinstance(sb3, SACPolicy):
+                a, _, _ = sb3.actor.get_action_dist_params(x)
+            else:
+                a = sb3.actor(x)
+            if squash:
+                a = torch.tanh(a)
+            # what SB3's predict does with a Box action, in the same float32 operations
+            if sb3.squash_output:
+                a = self.low + (0.5 * (a + 1.0) * (self.high - self.low))
+            else:
+                a = torch.minimum(torch.maximum(a, self.low), self.high)
+            if decode is not None:
+                command = a.double() @ self.decode_matrix + self.decode_bias
+                if decode.clip:
+                    command = torch.minimum(torch.maximum(command, self.decode_low), self.decode_high)
+                a = command.float()
+            return a
+
+        def forward(self, obs: torch.Tensor, obs_stack: torch.Tensor | None = None):
+            if history == 1:
+                return self.act(obs)
+            stack = torch.cat([obs_stack[:, obs_size:], obs], dim=1)  # drop the oldest, append the newest
+            return self.act(stack), stack
+
+    return DeployedPolicy().eval()
+
+
+def _to_onnx(module, history: int, obs_size: int) -> bytes:
+    """The module as ONNX bytes, batch dimension dynamic."""
+    import io
+
+    import torch
+
+    inputs, outputs = ["obs"], ["action"]
+    args = (torch.zeros(2, obs_size),)
+    if history > 1:
+        inputs.append("obs_stack")
+        outputs.append("next_obs_stack")
+        args = (torch.zeros(2, obs_size), torch.zeros(2, obs_size * history))
+    buffer = io.BytesIO()
+    with warnings.catch_warnings(), torch.no_grad():
+        warnings.simplefilter("ignore")  # the TorchScript exporter's deprecation notice, tracer notes
+        torch.onnx.export(module, args, buffer, dynamo=False, opset_version=OPSET, input_names=inputs,
+                          output_names=outputs, dynamic_axes={name: {0: DYNAMIC} for name in inputs + outputs})
+    return buffer.getvalue()
+
+
+def _interface(obs_size: int, history: int, action_size: int) -> tuple[list[dict], list[dict]]:
+    """The graph's inputs and outputs as the sidecar and metadata_props describe them."""
+    stack = history * obs_size
+    inputs = [{"name": "obs", "shape": [DYNAMIC, obs_size], "dtype": "float32",
+               "description": "the newest observation, as the env gives it (not normalized)"}]
+    outputs = [{"name": "action", "shape": [DYNAMIC, action_size], "dtype": "float32",
+                "description": "the action to send to the env (robot), in the env's action units"}]
+    if history > 1:
+        inputs.append({"name": "obs_stack", "shape": [DYNAMIC, stack], "dtype": "float32",
+                       "description": f"the last {history} observations, oldest first: the previous step's "
+                                      f"next_obs_stack; at an episode's start, the first observation repeated "
+                                      f"{history} times (np.tile(obs, {history}))"})
+        outputs.append({"name": "next_obs_stack", "shape": [DYNAMIC, stack], "dtype": "float32",
+                        "description": "obs_stack with obs appended and the oldest dropped: feed it back as "
+                                       "obs_stack at the next step"})
+    return inputs, outputs
+
+
+def _add_metadata(model, info: dict[str, Any]) -> None:
+    """The interface and the export check in the model's metadata_props (strings; JSON for lists)."""
+    model.producer_name = "motorlab"
+    model.doc_string = (f"motorlab {info['algo']} policy for {info['env_id']}: see the metadata_props "
+                        "'interface' and docs/deployment.md")
+    for key, value in info.items():
+        entry = model.metadata_props.add()
+        entry.key = key
+        entry.value = value if isinstance(value, str) else json.dumps(value)
+    entry = model.metadata_props.add()
+    entry.key, entry.value = "interface", json.dumps({"inputs": info["inputs"], "outputs": info["outputs"]})
+
+
+def _version(name: str) -> str | None:
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+# ---- the check: onnxruntime against torch ----------------------------------------------
+
+def _env_stacks(env: gym.Env, policy: SB3Policy, seed: int) -> np.ndarray:
+    """Observations the policy sees in its own env (stacked as in training), over a few episodes."""
+    seen, episode = [], 0
+    while len(seen) < ENV_STEPS:
+        obs, _ = env.reset(seed=seed + episode)
+        episode += 1
+        for _ in range(ENV_STEPS - len(seen)):
+            obs = np.asarray(obs, dtype=np.float32)
+            seen.append(obs)
+            obs, _, terminated, truncated, _ = env.step(policy.act(obs[None])[0])
+            if terminated or truncated:
+                break
+    return np.array(seen, dtype=np.float32)
+
+
+def _random_stacks(policy: SB3Policy, seen: np.ndarray, n: int, seed: int) -> np.ndarray:
+    """Stacked observations around the ones the policy knows (its normalization statistics, else
+    the env's), inside the observation box, a sixteenth of them far enough out to hit the clip."""
+    rng = np.random.default_rng(seed)
+    space = policy.policy.observation_space
+    if policy.obs_mean is not None:
+        center, scale = policy.obs_mean, np.sqrt(policy.obs_var + policy.epsilon)
+    elif len(seen) > 1:
+        center, scale = seen.mean(axis=0), seen.std(axis=0) + 0.1
+    else:
+        center, scale = np.zeros(space.shape), np.ones(space.shape)
+    z = rng.normal(size=(n, *space.shape))
+    z[: n // 16] *= policy.clip_obs + 2.0  # past the normalization's clip
+    stacks = np.clip(center + 2.0 * scale * z, space.low, space.high)
+    return stacks.astype(np.float32)
+
+
+def _check(ort: ModuleType, model: bytes, policy: SB3Policy, decode: _Decode | None, stacks: np.ndarray,
+           history: int, obs_size: int) -> float:
+    """Largest |onnxruntime - torch| over the actions for `stacks`; raises past TOLERANCE.
+
+    Each row is fed as the graph is fed on a robot: its newest observation as obs, and the
+    stack it came from (its oldest observation first, the row shifted by one) as obs_stack."""
+    session = ort.InferenceSession(model, providers=["CPUExecutionProvider"])
+    feed = {"obs": stacks[:, -obs_size:]}
+    if history > 1:
+        # the stack before this step: any observation may come first, the rest is the row's oldest K-1
+        feed["obs_stack"] = np.concatenate([stacks[:, -obs_size:], stacks[:, :-obs_size]], axis=1)
+    results = session.run(None, feed)
+    expected = policy.act(stacks)
+    if decode is not None:
+        expected = decode(expected)
+    got = results[0]
+    if got.shape != expected.shape or got.dtype != np.float32:
+        raise MotorlabError(f"onnxruntime gives actions of shape {got.shape} ({got.dtype}), torch {expected.shape}; "
+                            "policy.onnx not written (a motorlab bug: please report it).")
+    error = float(np.max(np.abs(got.astype(np.float64) - expected.astype(np.float64)), initial=0.0))
+    if not error <= TOLERANCE:  # NaN fails too
+        raise MotorlabError(f"onnxruntime's actions differ from torch's by up to {error:.3g} (tolerance "
+                            f"{TOLERANCE:g}) on {len(stacks)} observations; policy.onnx not written (a motorlab "
+                            "bug: please report it).")
+    if history > 1 and not np.array_equal(results[1], stacks):
+        raise MotorlabError("the graph's next_obs_stack is not the training env's observation stack; policy.onnx "
+                            "not written (a motorlab bug: please report it).")
+    return error
