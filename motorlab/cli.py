@@ -368,6 +368,7 @@ def evaluate(
     success: Success = None,
     episodes: Annotated[Optional[int], opt(EvaluateSettings, "--episodes")] = None,
     seed: Seed = None,
+    workers: Annotated[Optional[int], opt(EvaluateSettings, "--workers", min=1)] = None,
     out: Out = None,
     disturbances: dict[str, Any] | None = None,
 ):
@@ -377,7 +378,7 @@ def evaluate(
     episode_lengths. Returns are the task's own (training-time reward shaping is not applied).
     """
     settings = settings_for(policy, _env_flags(env, delay, delay_on, history, env_args=env_arg, success=success,
-                                               disturbances=disturbances), episodes, seed)
+                                               disturbances=disturbances), episodes, seed, workers)
     s = EVALUATE.run(settings, out)
     env_cfg = settings.env
     table = Table(title=f"{policy} on {describe_env(env_cfg)}")
@@ -397,6 +398,7 @@ def zeroshot(
     envs: Annotated[list[str], opt(ZeroshotSettings, "--envs")],
     episodes: Annotated[Optional[int], opt(ZeroshotSettings, "--episodes")] = None,
     seed: Seed = None,
+    workers: Annotated[Optional[int], opt(ZeroshotSettings, "--workers", min=1)] = None,
     out: Out = None,
 ):
     # `--envs A B`: click gives B to RUN_DIRS; an env id that is not a path belongs to --envs.
@@ -406,7 +408,8 @@ def zeroshot(
     envs = [e for item in [*envs, *map(str, moved)] for e in item.split(",") if e]
     if not run_dirs:
         raise MotorlabError("give at least one run folder and one env (--envs ID ...).")
-    s = ZEROSHOT.run(ZEROSHOT.make(runs=[str(r) for r in run_dirs], envs=envs, episodes=episodes, seed=seed), out,
+    s = ZEROSHOT.run(ZEROSHOT.make(runs=[str(r) for r in run_dirs], envs=envs, episodes=episodes, seed=seed,
+                                   workers=workers), out,
                      console=stdout)
     stdout.print(f"written: {s.run_dir}/summary.json, {s.run_dir}/plots/zeroshot.png")
     _warn_faults(s)

@@ -33,6 +33,9 @@ class Policy(Protocol):
 
     def act(self, obs: np.ndarray) -> np.ndarray: ...
 
+    # Optional: `reset_row(i)` starts a new episode in row i alone (stateful controllers clear that
+    # row's state); evaluation then starts each env's next episode as soon as the last one ends.
+
 
 POLICY_JSON = "policy.json"
 POLICY_WEIGHTS = "policy.safetensors"
@@ -45,6 +48,9 @@ class ZeroPolicy:
     def reset(self, n: int) -> None:
         pass
 
+    def reset_row(self, i: int) -> None:
+        pass
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         return np.repeat(self.action[None], len(obs), axis=0)
 
@@ -55,6 +61,9 @@ class RandomPolicy:
         self.rng = np.random.default_rng(seed)
 
     def reset(self, n: int) -> None:
+        pass
+
+    def reset_row(self, i: int) -> None:
         pass
 
     def act(self, obs: np.ndarray) -> np.ndarray:
@@ -120,6 +129,9 @@ class SB3Policy:
 
     def reset(self, n: int) -> None:
         pass
+
+    def reset_row(self, i: int) -> None:
+        pass  # stateless: history, when there is one, lives in the env's observation
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float32)

@@ -18,7 +18,7 @@ FAST_FILES = {
     "test_layers.py", "test_runner.py", "test_recipes.py", "test_schedules.py", "test_wrappers.py", "test_sar.py",
     "test_lqr.py", "test_pid.py", "test_dynamics_collect.py", "test_sklearn_import.py", "test_faults_success.py",
     "test_steps_to_success.py", "test_myosuite.py", "test_synergy_wrapper.py", "test_plots.py", "test_dynamics.py",
-    "test_extras.py", "test_runs.py", "test_results.py",
+    "test_extras.py", "test_runs.py", "test_results.py", "test_disturbances.py",
 }
 FAST_TESTS = {
     "tests/test_train_evaluate.py::test_evaluate_run_folder",  # pendulum: train (CLI), evaluate, plot
@@ -50,10 +50,12 @@ SHARED = {
 # takes in `make test`; a file not listed here starts first (it may be long).
 SECONDS = {
     "tests/test_sweep.py": 270, "sar-hand-quick": 180, "hand": 160, "tests/test_parallel_steps.py": 120,
-    "tests/test_user_env.py": 90, "tests/test_upkie.py": 70, "tests/test_train_evaluate.py": 60,
+    "tests/test_user_env.py": 90, "tests/test_upkie.py": 100, "tests/test_train_evaluate.py": 60,
     "tests/test_safe_loading.py": 55, "tests/test_dynamics_cli.py": 50, "tests/test_report.py": 45,
     "tests/test_cli_errors.py": 45, "tests/test_fuzz.py": 45, "tests/test_synergy_signals.py": 35,
-    "tests/test_reacher_study.py": 30, "tests/test_resume.py": 25, "tests/test_recipes.py": 18,
+    "tests/test_reacher_study.py": 30, "tests/test_onnx_export.py": 30, "tests/test_robustness.py": 25,
+    "tests/test_parallel_eval.py": 12,
+    "tests/test_disturbances.py": 8, "tests/test_resume.py": 25, "tests/test_recipes.py": 18,
     "tests/test_extras.py": 16, "tests/test_dynamics.py": 14, "tests/test_plots.py": 13, "tests/test_myosuite.py": 12,
     "tests/test_steps_to_success.py": 8, "tests/test_synergy_wrapper.py": 7, "tests/test_sar_formats.py": 6,
     "tests/test_faults_success.py": 5, "tests/test_sklearn_import.py": 1.2, "tests/test_pid.py": 0.8,

@@ -63,6 +63,12 @@ class PIDController:
         self._integral = np.zeros((n, self.obs_dim))
         self._prev = None
 
+    def reset_row(self, i: int) -> None:
+        """A new episode in row i alone: no integral, and no derivative kick on its first step."""
+        self._integral[i] = 0.0
+        if self._prev is not None:
+            self._prev[i] = np.nan  # replaced by the row's first error on the next act()
+
     def act(self, obs: np.ndarray) -> np.ndarray:
         obs = np.atleast_2d(obs)
         if obs.shape[1] != self.obs_dim:
@@ -73,7 +79,7 @@ class PIDController:
         if self._integral is None or self._integral.shape[0] != obs.shape[0]:
             self.reset(obs.shape[0])
         err = obs - (self.setpoint if self.setpoint is not None else 0.0)
-        prev = err if self._prev is None else self._prev  # no derivative kick on the first step
+        prev = err if self._prev is None else np.where(np.isnan(self._prev), err, self._prev)  # no kick at a start
         self._integral += err * self.dt
         u = err @ self.kp.T + self._integral @ self.ki.T + ((err - prev) / self.dt) @ self.kd.T
         self._prev = err.copy()

@@ -1,5 +1,7 @@
 """Batched evaluation rollouts: N episodes stepped side by side, one policy call
 per time step for the whole batch (stateful controllers keep one row per episode).
+The envs step in this process or in worker processes (`motorlab.evaluation.pool`);
+the policy always acts here, so the results do not depend on where the envs live.
 
 Returns are the task's own returns (reward shaping is for training only).
 """
@@ -9,14 +11,20 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from motorlab.envs import EnvConfig, env_dt, make_env, max_return
-from motorlab.faults import fault_line, fault_of
+from motorlab.envs import EnvConfig, max_return
+from motorlab.errors import MotorlabError
+from motorlab.evaluation.pool import SUCCESS_KEYS, EnvPool, auto_workers, make_pool, step_success
+from motorlab.faults import fault_line
 from motorlab.policies import Policy
 from motorlab.runs import read_config
+
+__all__ = ["SUCCESS_KEYS", "EpisodeSuccess", "Evaluator", "Rollouts", "evaluate", "step_success", "success_mode",
+           "trained_env_settings"]
 
 
 @dataclass
@@ -54,17 +62,6 @@ class Rollouts:
         }
 
 
-SUCCESS_KEYS = ("solved", "success", "is_success")
-
-
-def step_success(info: dict) -> bool | None:
-    """The env's own success flag for this step (MyoSuite: info["solved"]), or None."""
-    for key in SUCCESS_KEYS:
-        if key in info:
-            return bool(info[key])
-    return None
-
-
 # MyoSuite's walking tasks (myoLegWalk-v0, myoLeg{Hilly,Rough,Stair}TerrainWalk-v0): their
 # "solved" is "upright and within 0.5 m/s of the commanded speed" at that step, which a body
 # falling forward also meets for a moment before it is counted as fallen.
@@ -100,7 +97,10 @@ class EpisodeSuccess:
         self.flagged = np.zeros(n, dtype=bool)
 
     def step(self, i: int, info: dict) -> None:
-        flag = step_success(info)
+        self.flag(i, step_success(info))
+
+    def flag(self, i: int, flag: bool | None) -> None:
+        """Row i's step reported `flag` (`step_success` of its info; None: no flag)."""
         if flag is not None:
             self.flagged[i] = True
             self.solved[i] = flag if self.final else self.solved[i] | flag
@@ -122,103 +122,173 @@ class Evaluator:
         env_cfg: the env and wrappers the policy was made for.
         episodes: episodes per evaluation, run as one batch.
         seed: episode i starts from reset(seed=seed + i), so evaluations repeat exactly.
+        workers: processes stepping the envs: this one and workers - 1 children (1: this one
+            only, as training-time evaluation does); results are the same for any number.
     """
 
-    def __init__(self, env_cfg: EnvConfig, episodes: int, seed: int):
+    def __init__(self, env_cfg: EnvConfig, episodes: int, seed: int, workers: int = 1):
+        if workers < 1:
+            raise MotorlabError(f"--workers must be at least 1, got {workers}.")
         self.env_cfg = env_cfg
         self.episodes = episodes
         self.seed = seed
-        self.envs = [make_env(env_cfg, shaped=False) for _ in range(episodes)]
+        self.pool: EnvPool = make_pool(env_cfg, episodes, workers)
+        self.workers = self.pool.workers  # processes used (1: this one)
         self.target = max_return(env_cfg.id)
-        self.dt = env_dt(self.envs[0]) or 0.0
+        self.dt = self.pool.dt or 0.0
+
+    @property
+    def envs(self) -> list[gym.Env]:
+        """The envs, where they live in this process (workers=1)."""
+        envs = getattr(self.pool, "envs", None)
+        if envs is None:
+            raise AttributeError("the envs live in worker processes (workers > 1)")
+        return envs
 
     @property
     def observation_space(self) -> gym.Space:
-        return self.envs[0].observation_space
+        return self.pool.observation_space
 
     @property
     def action_space(self) -> gym.Space:
-        return self.envs[0].action_space
+        return self.pool.action_space
 
     def run(self, policy: Policy, stop_below: float | None = None, record: bool = False,
             first_seed: int | None = None, count: int | None = None) -> Rollouts:
-        """Run one episode per env.
+        """Run `count` episodes (default: one per env), episode i from reset seed first_seed + i.
+
+        Row r of the batch (env r) runs episodes r, r + R, r + 2R, ... (R envs), each starting as
+        soon as the one before it ends, so the envs stay busy until the last episodes instead of
+        waiting for the longest episode of every batch. Which row runs which episode does not depend
+        on how the envs are spread over processes, so results are the same for any `workers`.
+        A policy without `reset_row` (a row's state restarted alone) runs its episodes R at a time.
 
         Args:
             policy: acts on a batch of observations.
             stop_below: abort as soon as any episode ends with a return below this
                 (used by --until-solved: one failure already means "not solved").
             record: keep observation and action traces.
-            first_seed, count: run only the first `count` envs, episode i from
-                first_seed + i (default: all envs from the evaluator's seed).
+            first_seed, count: episodes and the seed of the first (default: one per env, from the
+                evaluator's seed).
         """
         n = self.episodes if count is None else count
         first = self.seed if first_seed is None else first_seed
-        envs = self.envs[:n]
-        obs = np.stack([env.reset(seed=first + i)[0] for i, env in enumerate(envs)])
-        policy.reset(n)
-        active = np.ones(n, dtype=bool)
+        rows = min(n, self.episodes)
+        if not hasattr(policy, "reset_row") and n > rows:
+            parts = []
+            for start in range(0, n, rows):
+                parts.append(self.run(policy, stop_below, record, first + start, min(rows, n - start)))
+                if parts[-1].aborted:
+                    break
+            return join_rollouts(parts)
+        episode = np.arange(rows)  # the episode each row runs now
+        obs = self.pool.reset([first + i for i in range(rows)])
+        policy.reset(rows)
+        active = np.ones(rows, dtype=bool)
         returns = np.zeros(n)
         lengths = np.zeros(n, dtype=int)
         success = np.zeros(n, dtype=bool)
-        outcome = EpisodeSuccess(n, self.target, success_mode(self.env_cfg))
+        done = np.zeros(n, dtype=bool)
+        outcome = EpisodeSuccess(rows, self.target, success_mode(self.env_cfg))
         falls = 0
         fault_log: list[str] = []
-        traces_o = [[o] for o in obs] if record else []
+        traces_o: list[list] = [[] for _ in range(n)] if record else []
         traces_a: list[list] = [[] for _ in range(n)] if record else []
+        if record:
+            for r in range(rows):
+                traces_o[r].append(obs[r].copy())  # copies: obs rows are overwritten step by step
         while active.any():
             actions = np.asarray(policy.act(obs), dtype=np.float32)
-            for i in np.flatnonzero(active):
-                o, r, terminated, truncated, info = envs[i].step(actions[i])
-                obs[i] = o
-                returns[i] += r
+            following = episode + rows  # each row's next episode, started by the env worker if this one ends
+            restarts = np.where(following < n, first + following, -1)
+            steps = self.pool.step(actions, active, restarts)
+            for j, r in enumerate(steps.rows):
+                i = episode[r]
+                returns[i] += steps.reward[j]
                 lengths[i] += 1
-                outcome.step(i, info)
+                outcome.flag(r, steps.flag(j))
                 if record:
-                    traces_o[i].append(o)
-                    traces_a[i].append(actions[i])
-                if terminated or truncated:
-                    active[i] = False
-                    success[i] = bool(outcome.end(i, returns[i]))
-                    fault = fault_of(info)
-                    if fault:
-                        fault_log.append(fault_line(first + i, lengths[i], fault))
-                    falls += bool(terminated) and not fault
-                    if stop_below is not None and returns[i] < stop_below:
-                        done = ~active
-                        return Rollouts(returns[done], lengths[done], success[done], aborted=True,
-                                        falls=falls, fault_log=fault_log, dt=self.dt)
+                    traces_o[i].append(steps.obs[j])
+                    traces_a[i].append(actions[r])
+                if not (steps.terminated[j] or steps.truncated[j]):
+                    obs[r] = steps.obs[j]
+                    continue
+                done[i] = True
+                success[i] = bool(outcome.end(r, returns[i]))
+                fault = steps.fault.get(int(r))
+                if fault:
+                    fault_log.append(fault_line(first + i, lengths[i], fault))
+                falls += bool(steps.terminated[j]) and not fault
+                if stop_below is not None and returns[i] < stop_below:
+                    return Rollouts(returns[done], lengths[done], success[done], aborted=True,
+                                    falls=falls, fault_log=fault_log, dt=self.dt)
+                if steps.restarted[j]:
+                    episode[r] = following[r]
+                    obs[r] = steps.first_obs[j]
+                    policy.reset_row(r)
+                    if record:
+                        traces_o[episode[r]].append(steps.first_obs[j].copy())
+                else:
+                    active[r] = False
         return Rollouts(
-            returns, lengths, success, falls=falls, fault_log=fault_log, dt=self.dt,
+            returns, lengths, success, falls=falls, fault_log=sorted(fault_log, key=_seed_of), dt=self.dt,
             observations=[np.array(t) for t in traces_o], actions=[np.array(t) for t in traces_a],
         )
 
     def close(self) -> None:
-        for env in self.envs:
-            env.close()
+        self.pool.close()
+
+    def __enter__(self) -> Evaluator:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.pool.__exit__(*exc)
 
 
 def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, record: bool = False,
-             batch: int = 50) -> Rollouts:
+             batch: int = 50, workers: int | None = None) -> Rollouts:
     """Evaluate `policy` for `episodes` episodes on the env `env_cfg` describes.
 
-    Episodes run `batch` at a time on the same `batch` envs (episode i always
-    starts from seed + i), so hundreds of episodes of a large model neither hold
-    nor build hundreds of envs.
+    Episodes run on `batch` envs, each env running its share one after another (episode i
+    always starts from seed + i; see `Evaluator.run`), so hundreds of episodes of a large model
+    neither hold nor build hundreds of envs. The envs step in `workers` processes, this one and
+    workers - 1 children (None: every core when the work is large enough to pay for starting
+    them, see `pool.auto_workers`; 1: this process only); the policy acts in this process on the
+    same batches either way, so the results are the same, number for number.
+
+    Raises:
+        MotorlabError: workers < 1; an env worker that failed or died (one line).
     """
-    ev = Evaluator(env_cfg, min(batch, episodes), seed)  # envs are made once and reused batch after batch
+    if workers is not None and workers < 1:
+        raise MotorlabError(f"--workers must be at least 1, got {workers}.")
+    size = min(batch, episodes)
+    n = auto_workers(env_cfg, episodes, size) if workers is None else workers
     try:
-        parts = [ev.run(policy, record=record, first_seed=seed + start, count=min(batch, episodes - start))
-                 for start in range(0, episodes, batch)]
-    finally:
-        ev.close()
+        ev = Evaluator(env_cfg, size, seed, workers=n)
+    except MotorlabError:
+        if workers is not None or n == 1:
+            raise
+        # auto: an env the workers cannot build (registered only in this process, not by a module
+        # they import) still evaluates here; a real error is raised again by the serial pool
+        ev = Evaluator(env_cfg, size, seed, workers=1)
+    with ev:
+        return ev.run(policy, record=record, first_seed=seed, count=episodes)
+
+
+def join_rollouts(parts: list[Rollouts]) -> Rollouts:
+    """Consecutive parts of one evaluation as one."""
     if len(parts) == 1:
         return parts[0]
     return Rollouts(np.concatenate([p.returns for p in parts]), np.concatenate([p.lengths for p in parts]),
-                    np.concatenate([p.success for p in parts]),
+                    np.concatenate([p.success for p in parts]), aborted=any(p.aborted for p in parts),
                     falls=sum(p.falls for p in parts), fault_log=[line for p in parts for line in p.fault_log],
                     observations=[o for p in parts for o in p.observations],
                     actions=[a for p in parts for a in p.actions], dt=parts[0].dt)
+
+
+def _seed_of(line: str) -> int:
+    """faults.log lines in episode order ("seed=12 length=...")."""
+    return int(line.split()[0].removeprefix("seed="))
 
 
 def trained_env_settings(run_dir: Path) -> dict:

@@ -31,12 +31,15 @@ class EvaluateSettings(EnvSettings):
                         "zero, random")
     episodes: int = Field(10, gt=0, description="Evaluation episodes")
     seed: int = Field(0, ge=0, description="Random seed (env resets: episode i starts from seed + i)")
+    workers: int | None = Field(None, ge=1, description="Processes stepping the envs, this one included "
+                                "(default: every core when the evaluation is large enough to pay for starting "
+                                "the others; 1: this process only); results are the same for any number")
 
 
 class EvaluateSummary(Summary):
     policy: str
     env_id: str
-    delay: float | None
+    delay: float | str | None  # a range "LOW..HIGH" when drawn per episode
     history: int
     seed: int
     max_return: float | None
@@ -54,7 +57,7 @@ class EvaluateSummary(Summary):
 
 
 def settings_for(policy: str, env: dict[str, Any], episodes: int | None = None,
-                 seed: int | None = None) -> EvaluateSettings:
+                 seed: int | None = None, workers: int | None = None) -> EvaluateSettings:
     """Evaluation settings for `policy` on the env its run folder trained on (if it is a run
     folder), with the given env settings (id, delay, history, kwargs, ...) on top.
 
@@ -69,7 +72,7 @@ def settings_for(policy: str, env: dict[str, Any], episodes: int | None = None,
     merged = merge_env(base, env)
     if "id" not in merged:
         raise MotorlabError(f"no env for {policy!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")
-    return EVALUATE.make(policy=policy, env=merged, episodes=episodes, seed=seed)
+    return EVALUATE.make(policy=policy, env=merged, episodes=episodes, seed=seed, workers=workers)
 
 
 def merge_env(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
@@ -115,7 +118,7 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
             target = max_return(env_cfg.id)
         finally:
             probe.close()
-        result = evaluate(policy, env_cfg, settings.episodes, settings.seed)
+        result = evaluate(policy, env_cfg, settings.episodes, settings.seed, workers=settings.workers)
         run_dir = self.start(out)
         summary = EvaluateSummary(policy=settings.policy, env_id=env_cfg.id, delay=env_cfg.delay,
                                   history=env_cfg.history, seed=settings.seed, max_return=target,
@@ -166,6 +169,9 @@ class ZeroshotSettings(Settings):
     envs: list[str] = Field(min_length=1, description="Env ids the policies never trained on")
     episodes: int = Field(500, gt=0, description="Episodes per run and env")
     seed: int = Field(0, ge=0, description="Random seed (env resets)")
+    workers: int | None = Field(None, ge=1, description="Processes stepping the envs, this one included "
+                                "(default: every core when the evaluation is large enough to pay for starting "
+                                "the others; 1: this process only); results are the same for any number")
 
 
 class ZeroshotSummary(Summary):
@@ -190,7 +196,8 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
         from motorlab.evaluation.zeroshot import transfer
         from motorlab.report.plots import grouped_bars
 
-        t = transfer([Path(r) for r in settings.runs], settings.envs, settings.episodes, settings.seed)
+        t = transfer([Path(r) for r in settings.runs], settings.envs, settings.episodes, settings.seed,
+                     workers=settings.workers)
         run_dir = self.start(out)
         grouped_bars(t.envs, {n: [t.results[n][e]["success_rate"] for e in t.envs] for n in t.names},
                      "success rate", run_dir / "plots" / "zeroshot.png",

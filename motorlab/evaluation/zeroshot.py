@@ -13,6 +13,7 @@ from pathlib import Path
 
 from motorlab.envs import EnvConfig, check_env_id
 from motorlab.errors import MotorlabError
+from motorlab.evaluation.pool import keep_workers
 from motorlab.evaluation.rollouts import evaluate, trained_env_settings
 from motorlab.policies import load_run_policy
 from motorlab.runs import require_run_dir
@@ -33,8 +34,10 @@ def run_label(run: Path) -> str:
     return f"{run.parent.name}/{run.name}" if re.fullmatch(r"seed\d+", run.name) else run.name
 
 
-def transfer(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: int = 0) -> Transfer:
-    """Evaluate every run's policy on every env, `episodes` episodes each from `seed`.
+def transfer(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: int = 0,
+             workers: int | None = None) -> Transfer:
+    """Evaluate every run's policy on every env, `episodes` episodes each from `seed`, the envs
+    stepping in `workers` processes (see `evaluate`; the results do not depend on it).
 
     Raises:
         MotorlabError: no runs or envs, unknown env id, a policy whose action or
@@ -44,6 +47,8 @@ def transfer(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: i
         raise MotorlabError("give at least one run folder and one env (--envs ID ...).")
     if episodes <= 0:
         raise MotorlabError(f"--episodes must be positive, got {episodes}.")
+    if workers is not None and workers < 1:
+        raise MotorlabError(f"--workers must be at least 1, got {workers}.")
     for env_id in envs:
         check_env_id(env_id)
     runs = [require_run_dir(Path(r)) for r in run_dirs]
@@ -52,13 +57,14 @@ def transfer(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: i
         names = [str(r) for r in runs]
     results: dict[str, dict[str, dict]] = {}
     fault_log: list[str] = []
-    for name, run in zip(names, runs, strict=True):
-        base = trained_env_settings(run)
-        policy = load_run_policy(run)
-        results[name] = {}
-        for env_id in envs:
-            cfg = EnvConfig.model_validate({**base, "id": env_id})
-            rollouts = evaluate(policy, cfg, episodes, seed)
-            results[name][env_id] = rollouts.summary()
-            fault_log += [f"{name} on {env_id}: {line}" for line in rollouts.fault_log]
+    with keep_workers():  # every evaluation below steps its envs in the same worker processes
+        for name, run in zip(names, runs, strict=True):
+            base = trained_env_settings(run)
+            policy = load_run_policy(run)
+            results[name] = {}
+            for env_id in envs:
+                cfg = EnvConfig.model_validate({**base, "id": env_id})
+                rollouts = evaluate(policy, cfg, episodes, seed, workers=workers)
+                results[name][env_id] = rollouts.summary()
+                fault_log += [f"{name} on {env_id}: {line}" for line in rollouts.fault_log]
     return Transfer(names, list(envs), results, fault_log)

@@ -97,15 +97,16 @@ class Curves:
         and the rate that holds."""
         rows = self.at(group, key)
         returns = [np.concatenate([p.returns for p in pts]) for pts in rows]
-        return {
+        out = {
             "values": list(next(a for a in self.axes if a.key == key).values),
             "return_mean": [float(np.mean(r)) for r in returns],
             "return_q25": [float(np.percentile(r, 25)) for r in returns],
             "return_q75": [float(np.percentile(r, 75)) for r in returns],
-            f"{self.measure.replace(' ', '_')}_rate": [self.rate(pts) for pts in rows] if self.measure != "return"
-            else None,
             "seeds": len(rows[0]),
         }
+        if self.measure != "return":  # "success_rate" or "no_fall_rate"
+            out[f"{self.measure.replace(' ', '_')}_rate"] = [self.rate(pts) for pts in rows]
+        return out
 
 
 # What a run folder's env settings say about the policy itself, kept under test: the env, its
