@@ -54,7 +54,7 @@ def test_pid_holds_less_as_the_delay_grows(tmp_path, ppo_seeds):
     # PID balances without delay and falls under 0.3 s: the grid's ends only
     assert pid["return_mean"][0] == 1000 and pid["return_mean"][-1] < 200
     assert pid["success_rate"][0] == 1 and pid["success_rate"][-1] == 0
-    assert s["pid.delay.holds_to"] in (0.0, 0.1)
+    assert s["pid.delay.holds_from"] == 0 and s["pid.delay.holds_to"] in (0.0, 0.1)
     ppo = s["curves"]["ppo"]["delay"]  # the two seeds are one curve
     assert ppo["seeds"] == 2 and len(ppo["return_mean"]) == 3
     with open(out / "curves.csv") as f:
@@ -62,7 +62,7 @@ def test_pid_holds_less_as_the_delay_grows(tmp_path, ppo_seeds):
     assert len(rows) == 3 * (3 + 2) * 3  # policies x grid values x episodes
     assert {r["run"] for r in rows if r["policy"] == "ppo"} == {"ppo/seed0", "ppo/seed1"}
     assert_png(out / "plots" / "robustness.png")
-    assert "holds to" in proc.stdout
+    assert "holds over" in proc.stdout
     assert s["numerical_faults"] == 0
 
 
@@ -84,3 +84,19 @@ def test_cli_errors_are_one_line(tmp_path):
     assert_one_line_error(run_cli("robustness", "pid", "--env", ENV_ID, "--vary", "delay=0:0.2:3",
                                   "--vary", "delay=0:0.1:2", "--out", tmp_path / "d"), "twice")
     assert not any((tmp_path / x).exists() for x in "abcd")
+
+
+def test_holds_is_the_widest_band_not_only_from_zero():
+    """A policy trained under a 0.2 s delay fails without delay and holds around it."""
+    import numpy as np
+
+    from motorlab.robustness.curves import Curves, Point
+
+    axis = parse_axis("delay=0,0.1,0.2,0.3")
+    ok = {"delay-trained": [0, 1, 1, 0], "plain": [1, 1, 0, 0], "never": [0, 0, 0, 0]}
+    points = [Point(g, g, "delay", v, np.full(10, 1000.0 * o), np.full(10, 1000), np.full(10, bool(o)), 0)
+              for g, row in ok.items() for v, o in zip(axis.values, row, strict=True)]
+    curves = Curves([axis], list(ok), points, "success", 10)
+    assert curves.holds("delay-trained", "delay") == (0.1, 0.2)
+    assert curves.holds("plain", "delay") == (0.0, 0.1)
+    assert curves.holds("never", "delay") is None

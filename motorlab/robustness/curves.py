@@ -74,23 +74,31 @@ class Curves:
         n = sum(len(p.returns) for p in points)
         return 1.0 - sum(p.falls for p in points) / n
 
-    def holds_to(self, group: str, key: str) -> float | None:
-        """The largest grid value up to which the policy holds at every value (None: not even at the
-        smallest); "return" measure: while its mean return stays within 90% of its first value's."""
+    def holds(self, group: str, key: str) -> tuple[float, float] | None:
+        """The widest run of consecutive grid values over which the policy holds (None: at none).
+
+        A policy trained under a delay may fail without it and hold around it, so this is a band,
+        not "up to": (low, high), the first of the widest runs. Holding is >= 90% of episodes
+        succeeding (or not falling); with the "return" measure, a mean return within 10% of the
+        policy's best on the grid."""
         values = next(a for a in self.axes if a.key == key).values
-        first = None
-        reached = None
-        for value, pts in zip(values, self.at(group, key), strict=True):
-            if self.measure == "return":
-                mean = float(np.mean(np.concatenate([p.returns for p in pts])))
-                first = mean if first is None else first
-                ok = mean >= first - (1 - HOLDS) * abs(first)
-            else:
-                ok = self.rate(pts) >= HOLDS
-            if not ok:
-                break
-            reached = value
-        return reached
+        rows = self.at(group, key)
+        if self.measure == "return":
+            means = [float(np.mean(np.concatenate([p.returns for p in pts]))) for pts in rows]
+            best = max(means)
+            ok = [m >= best - (1 - HOLDS) * abs(best) for m in means]
+        else:
+            ok = [self.rate(pts) >= HOLDS for pts in rows]
+        best_run: tuple[int, int] | None = None
+        start = None
+        for i, good in enumerate([*ok, False]):
+            if good and start is None:
+                start = i
+            elif not good and start is not None:
+                if best_run is None or i - 1 - start > best_run[1] - best_run[0]:
+                    best_run = (start, i - 1)
+                start = None
+        return None if best_run is None else (values[best_run[0]], values[best_run[1]])
 
     def curve(self, group: str, key: str) -> dict[str, list]:
         """A curve as numbers: per grid value the mean return, its quartiles over episodes and seeds,

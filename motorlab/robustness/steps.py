@@ -59,7 +59,8 @@ class RobustnessSettings(Settings):
 
 
 class RobustnessSummary(Summary):
-    """Also "<policy>.<disturbance>.holds_to" for every policy and disturbance, and "curves"."""
+    """Also "<policy>.<disturbance>.holds_from" and ".holds_to" (the widest range of grid values over
+    which it holds; null: at none) for every policy and disturbance, and "curves"."""
 
     policies: list[str]
     vary: dict[str, list[float]]
@@ -92,23 +93,25 @@ class RobustnessKind(StepKind[RobustnessSettings, RobustnessSummary]):
         write_points_csv(run_dir / "curves.csv", curves)
         robustness_plot(curves, run_dir / "plots" / "robustness.png",
                         f"Robustness on {targets[0].env['id']}: {settings.episodes} episodes per point")
-        holds = {f"{g}.{a.key}.holds_to": curves.holds_to(g, a.key) for g in curves.groups for a in axes}
+        bands = {(g, a.key): curves.holds(g, a.key) for g in curves.groups for a in axes}
+        holds = {f"{g}.{key}.holds_{end}": (band[i] if band else None)
+                 for (g, key), band in bands.items() for i, end in enumerate(("from", "to"))}
         rule = (f"{curves.measure} in >= 90% of episodes" if curves.measure != "return"
-                else "return within 10% of the least disturbed one")
+                else "mean return within 10% of its best")
         table = Table(title=f"robustness on {targets[0].env['id']}: {settings.episodes} episodes per point; "
-                            f"holds to: the largest value up to which {rule}")
+                            f"holds over: the widest range of grid values with {rule}")
         table.add_column("policy")
         for a in axes:
-            table.add_column(f"{a.key.replace('_', '-')}: return at {a.values[0]:g} -> {a.values[-1]:g}",
+            table.add_column(f"{a.key.replace('_', '-')}: return at " + ", ".join(f"{v:g}" for v in a.values),
                              justify="right")
-            table.add_column("holds to", justify="right")
+            table.add_column("holds over", justify="right")
         for g in curves.groups:
             cells = []
             for a in axes:
-                c = curves.curve(g, a.key)
-                cells += [f"{c['return_mean'][0]:.1f} -> {c['return_mean'][-1]:.1f}",
-                          show(holds[f"{g}.{a.key}.holds_to"]) if holds[f"{g}.{a.key}.holds_to"] is not None
-                          else "never"]
+                band = bands[(g, a.key)]
+                cells += [" ".join(f"{r:.0f}" for r in curves.curve(g, a.key)["return_mean"]),
+                          "never" if band is None else show(band[0]) if band[0] == band[1]
+                          else f"{show(band[0])} – {show(band[1])}"]
             table.add_row(g, *cells)
         (console or Console()).print(table)
         faults = [line for p in curves.points for line in p.faults]
@@ -122,23 +125,24 @@ class RobustnessKind(StepKind[RobustnessSettings, RobustnessSummary]):
         return f"robustness of {', '.join(settings.policies)} to {', '.join(v.split('=')[0] for v in settings.vary)}"
 
     def headline(self, s: RobustnessSummary) -> dict[str, Any]:
-        return {k: v for k, v in s.keys().items() if k.endswith(".holds_to")}
+        return {k: v for k, v in s.keys().items() if k.endswith((".holds_from", ".holds_to"))}
 
     def metric(self, key: str) -> Metric:
-        if key.endswith(".holds_to"):
-            policy, disturbance, _ = key.rsplit(".", 2)
-            return Metric(key, f"{policy}: holds up to {VARIABLES.get(disturbance, disturbance)}")
+        if key.endswith((".holds_from", ".holds_to")):
+            policy, disturbance, end = key.rsplit(".", 2)
+            what = VARIABLES.get(disturbance, disturbance)
+            return Metric(key, f"{policy}: holds {'from' if end == 'holds_from' else 'up to'} {what}")
         return super().metric(key)
 
     def numbers(self, settings: RobustnessSettings, h: dict[str, Any]) -> list[Number]:
-        return [n for k in h if k.endswith(".holds_to") and (n := self.metric(k).number(h))]
+        return [n for k in h if k.endswith((".holds_from", ".holds_to")) and (n := self.metric(k).number(h))]
 
     def default_findings(self, settings: RobustnessSettings, h: dict[str, Any]) -> list[str]:
         return [k for k in h if k.endswith(".holds_to")]
 
     def notes(self, settings: RobustnessSettings, h: dict[str, Any]) -> str:
         return (f"{settings.episodes} episodes per point; holds: >= 90% of episodes succeed (or do not fall) "
-                "at every grid value up to it")
+                "over a range of grid values (null: at none)")
 
 
 ROBUSTNESS = RobustnessKind()
