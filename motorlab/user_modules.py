@@ -40,7 +40,10 @@ def import_modules(names: list[str] | tuple[str, ...], why: str = "") -> None:
     """
     for name in names:
         name = name.strip()
-        if not name or name in _registered:
+        if not name:
+            continue
+        if name in _registered:  # imported once; still passed on (the variable may have been reset since)
+            _pass_on(name)
             continue
         import gymnasium as gym  # here: the CLI imports this module when it starts
 

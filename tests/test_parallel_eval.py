@@ -275,6 +275,20 @@ class LocalEnv(gym.Env):
         return np.zeros(2, np.float32), 1.0, True, False, {}
 
 
+def test_workers_fork_only_from_a_process_running_one_thread():
+    import threading
+
+    assert pool._context().get_start_method() == ("fork" if threading.active_count() == 1 else "forkserver")
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        assert pool._context().get_start_method() == "forkserver"
+    finally:
+        stop.set()
+        other.join()
+
+
 def test_auto_falls_back_to_this_process_for_an_env_only_it_knows(monkeypatch):
     """An env registered in this process only (not by a module workers import) still evaluates:
     forked workers (this process runs one thread) inherit the registration; workers from the fork
@@ -282,9 +296,9 @@ def test_auto_falls_back_to_this_process_for_an_env_only_it_knows(monkeypatch):
     gym.register("PoolLocal-v0", entry_point=LocalEnv)
     monkeypatch.setattr(pool, "CROSSOVER_S", 0.0)  # auto would use every core
     monkeypatch.setattr(pool, "available_cores", lambda: 2)
-    assert pool._context().get_start_method() == "fork"
+    fork, forkserver = mp.get_context("fork"), mp.get_context("forkserver")
+    monkeypatch.setattr(pool, "_context", lambda: fork)
     assert list(evaluate(Drifting(), EnvConfig(id="PoolLocal-v0"), 4, seed=0, workers=2).returns) == [1.0] * 4
-    forkserver = mp.get_context("forkserver")
     monkeypatch.setattr(pool, "_context", lambda: forkserver)
     result = evaluate(Drifting(), EnvConfig(id="PoolLocal-v0"), 4, seed=0)
     assert list(result.returns) == [1.0] * 4

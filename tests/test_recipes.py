@@ -30,9 +30,13 @@ def test_pendulum_recipe_parses():
     # Every [[steps]] table became one validated step, in order, of the kind it names.
     assert [(s.name, s.kind.name) for s in recipe.steps] == [(r["name"], r["kind"]) for r in raw["steps"]]
     kinds = {s.kind.name for s in recipe.steps}
-    assert kinds == {"train", "evaluate"}
+    assert kinds == {"train", "evaluate", "robustness"}
     by_name = {s.name: s for s in recipe.steps}
     for r, step in zip(raw["steps"], recipe.steps):
+        if step.kind.name == "robustness":  # its env is what it sets on top of each policy's own
+            assert step.settings.env == {"id": raw["defaults"]["env"]} and step.settings.episodes == r["episodes"]
+            assert {"ppo", "ppo-delay-history", "fast-delay"} <= set(step.inputs())
+            continue
         # [defaults] reach every step unless the step sets the field itself.
         env = step.settings.env
         assert env.id == r.get("env", raw["defaults"]["env"])
