@@ -245,6 +245,7 @@ T = TrainConfig
 
 @command(TRAIN, epilog="Examples:\n\n  motorlab train InvertedPendulum-v5 --until-solved --out runs/ppo\n\n"
                        "  motorlab train InvertedPendulum-v5 --preset fast --delay 0.2 --until-solved\n\n"
+                       "  motorlab train InvertedPendulum-v5 --preset-file runs/tune/best.toml --seed 7\n\n"
                        "  motorlab train InvertedPendulum-v5 --algo ppo --lr linear:3e-4,0 --clip-range linear:0.3,0.1 "
                        "--history 10 --delay 0.2\n\n"
                        "  motorlab train Upkie-PyBullet-Pendulum --n-envs 2 --timesteps 150000 "
@@ -267,6 +268,9 @@ def train(
              "sar-sac-fast (the reference SAC with 4 env processes and 1 gradient step per 25 env steps: "
              "~18x faster on 2 cores), upkie-balancer (Upkie's ppo_balancer: randomized action lag, "
              "action and observation noise, random initial state, history 10). Flags override it.")] = None,
+    preset_file: Annotated[Optional[Path], typer.Option(
+        "--preset-file", help="A TOML file of training settings (e.g. best.toml of motorlab tune), applied over "
+                              "--preset and under the flags given here.")] = None,
     timesteps: Annotated[Optional[int], opt(T, "--timesteps")] = None,
     seed: Annotated[Optional[int], opt(T, "--seed", min=0)] = None,
     out: Out = None,
@@ -299,7 +303,8 @@ def train(
     summary.json with steps_to_success (null if the budget ran out first) and wall_seconds.
     """
     settings = {
-        "algo": algo, "preset": preset, "timesteps": timesteps, "seed": seed, "lr": lr, "clip_range": clip_range,
+        "algo": algo, "preset": preset, "preset_file": str(preset_file.resolve()) if preset_file else None,
+        "timesteps": timesteps, "seed": seed, "lr": lr, "clip_range": clip_range,
         "until_solved": until_solved or None, "solve_episodes": solve_episodes, "solve_return": solve_return,
         "eval_every": eval_every, "n_envs": n_envs, "normalize": normalize, "device": device, "progress": progress,
         "checkpoint_every": checkpoint_every,
@@ -708,6 +713,61 @@ def sweep(
                         commands=typer.main.get_command(app))
     stdout.print(f"\n[bold]Results:[/bold] {summary['sweep_dir']}  (report.html, table.txt, summary.json, "
                  "aggregate.json, plots/*.png, <setting>/seed<k>/)")
+
+
+@app.command(epilog="Examples:\n\n"
+                    "  motorlab tune \"train InvertedPendulum-v5 --algo ppo --timesteps 50000 --until-solved\" "
+                    "--space lr=loguniform:1e-5,1e-2 --space n_steps=choice:256,512,1024 --trials 40 --seeds 3 "
+                    "--objective steps_to_success --out runs/tune-ppo\n\n"
+                    "  motorlab tune pendulum --space ppo.timesteps=int:20000,100000 --trials 10 --seeds 2 "
+                    "--objective ppo.final_return   # a whole study per seed\n\n"
+                    "  motorlab train InvertedPendulum-v5 --preset-file runs/tune-ppo/best.toml --seed 7\n\n"
+                    "Run the same command again (same --out) to resume; several processes with the same --out "
+                    "(or --storage) share one search.")
+def tune(
+    target: Annotated[str, typer.Argument(
+        help="A motorlab command line in quotes (train ...) or a recipe; each trial adds --seed and --out.")],
+    space: Annotated[Optional[list[str]], typer.Option(
+        "--space", help="KEY=DIST, repeatable: loguniform:LOW,HIGH, uniform:LOW,HIGH, int:LOW,HIGH or choice:A,B,C. "
+                        "KEY: an option (lr, n_envs, delay), a recipe FIELD or STEP.FIELD, or an SB3 "
+                        "hyperparameter (set.KEY, or any KEY that is not an option: --set KEY=VALUE).")] = None,
+    trials: Annotated[int, typer.Option("--trials", help="Trials in all (COMPLETE and PRUNED), over every "
+                                                         "process sharing the study.")] = 20,
+    seeds: Annotated[int, typer.Option("--seeds", help="Seeds per trial (0..K-1); its value is their IQM.")] = 3,
+    objective: Annotated[str, typer.Option(
+        "--objective", help="steps_to_success (unsolved counts as the budget), final_return, success_rate, or "
+                            "any number in the runs' summary.json (a study's: STEP.METRIC).")] = "steps_to_success",
+    direction: Annotated[Optional[str], typer.Option(
+        help="max or min (default: min for steps_to_success, else max).")] = None,
+    storage: Annotated[Optional[str], typer.Option(
+        help="Database URL of the study (default sqlite:///OUT/study.db); any URL Optuna accepts.")] = None,
+    study_name: Annotated[Optional[str], typer.Option(
+        help="Study name in the database (default: derived from the target, space, objective and seeds).")] = None,
+    sampler: Annotated[str, typer.Option(help="tpe | random | cmaes")] = "tpe",
+    pruner: Annotated[str, typer.Option(help="median | hyperband | none")] = "median",
+    prune_startup: Annotated[int, typer.Option(
+        help="Finished trials before the median pruner prunes.")] = 5,
+    report_every: Annotated[int, typer.Option(
+        help="Env steps between the intermediate numbers reported to the pruner.")] = 1000,
+    fresh_seeds: Annotated[Optional[int], typer.Option(
+        help="Seeds the best settings are re-run on after the search (default: --seeds; 0: none).")] = None,
+    max_parallel: Annotated[Optional[int], typer.Option(
+        help="Seed processes at once (default: one per core).")] = None,
+    out: Out = None,
+):
+    """Search settings with Optuna, judging each trial by the IQM of its objective over several seeds.
+
+    Writes study.db, trials.csv, table.txt, best.toml (a preset file for train --preset-file),
+    plots/ and summary.json (with the best settings' numbers on fresh seeds) in the folder, and
+    each trial's run folders under trials/<number>/seed<k>/.
+    """
+    from motorlab.tuning.tune import make_spec, run_tune
+
+    spec = make_spec(target, space, trials, seeds, objective, direction, out, storage, study_name, sampler, pruner,
+                     prune_startup, report_every, max_parallel, fresh_seeds)
+    summary = run_tune(spec, console=stdout, commands=typer.main.get_command(app))
+    stdout.print(f"\n[bold]Results:[/bold] {summary['tune_dir']}  (best.toml, trials.csv, table.txt, summary.json, "
+                 "plots/*.png, study.db)")
 
 
 @app.command(epilog="Examples:\n\n  motorlab export runs/ppo --out share/ppo          # only the files safe to send\n\n"

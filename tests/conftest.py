@@ -54,7 +54,7 @@ SECONDS = {
     "tests/test_safe_loading.py": 55, "tests/test_dynamics_cli.py": 50, "tests/test_report.py": 45,
     "tests/test_cli_errors.py": 45, "tests/test_fuzz.py": 45, "tests/test_synergy_signals.py": 35,
     "tests/test_reacher_study.py": 30, "tests/test_onnx_export.py": 30, "tests/test_robustness.py": 25,
-    "tests/test_parallel_eval.py": 12,
+    "tests/test_parallel_eval.py": 12, "tests/test_tune.py": 80,
     "tests/test_disturbances.py": 8, "tests/test_resume.py": 25, "tests/test_recipes.py": 18,
     "tests/test_extras.py": 16, "tests/test_dynamics.py": 14, "tests/test_plots.py": 13, "tests/test_myosuite.py": 12,
     "tests/test_steps_to_success.py": 8, "tests/test_synergy_wrapper.py": 7, "tests/test_sar_formats.py": 6,

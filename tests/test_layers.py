@@ -22,7 +22,7 @@ GROUND_FLOOR = {"motorlab.runs", "motorlab.errors", "motorlab.faults", "motorlab
 def layer(module: str) -> int:
     if module in ("motorlab.cli", "motorlab.__main__"):
         return CLI
-    if module.startswith(("motorlab.studies", "motorlab.sweeps")) or module == "motorlab.recipes":
+    if module.startswith(("motorlab.studies", "motorlab.sweeps", "motorlab.tuning")) or module == "motorlab.recipes":
         return STUDIES
     if module == "motorlab.kinds":
         return KIND_REGISTRY

@@ -6,6 +6,8 @@ fields) win over the preset's.
 
 from __future__ import annotations
 
+import tomllib
+from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import Field, field_validator, model_validator
@@ -45,6 +47,8 @@ class TrainConfig(EnvSettings):
     algo: Algo = Field("ppo", description="ppo | sac | td3 (Stable-Baselines3) | lqr (model-based: linear model + "
                        "LQR)")
     preset: str | None = Field(None, description="named settings under the given ones (see PRESETS)")
+    preset_file: str | None = Field(None, description="TOML file of these fields (e.g. best.toml of motorlab tune), "
+                                    "applied over the named preset and under the given settings")
     timesteps: int = Field(100_000, gt=0, description="Env-step budget")
     seed: int = Field(0, ge=0, description="Random seed (training, env resets, evaluation)")
     lr: str | None = Field(None, description="Learning-rate schedule: 3e-4 (constant) or linear:START,END (over "
@@ -121,24 +125,45 @@ PRESETS["upkie-balancer"] = {
 
 
 def resolve(settings: dict[str, Any]) -> TrainConfig:
-    """Apply the named preset (if any) under the given settings and validate.
+    """Apply the named preset (if any), then the preset file (if any), under the given settings,
+    and validate. The file may name a preset itself; a preset given explicitly wins over its.
 
     Raises:
-        MotorlabError: unknown preset; pydantic.ValidationError for bad fields.
+        MotorlabError: unknown preset, unreadable preset file; pydantic.ValidationError for bad fields.
     """
-    preset = settings.get("preset")
+    from_file = read_preset_file(settings["preset_file"]) if settings.get("preset_file") else {}
+    preset = settings.get("preset", from_file.get("preset"))
     merged: dict[str, Any] = {}
     if preset is not None:
         if preset not in PRESETS:
             raise MotorlabError(f"unknown preset {preset!r}{did_you_mean(preset, PRESETS)}; presets: {', '.join(PRESETS)}.")
         merged = fold_env(PRESETS[preset]) if "env" in PRESETS[preset] else dict(PRESETS[preset])
+    if preset is not None or from_file:
         settings = fold_env(settings)  # a recipe's flat env fields (delay = 0.2) meet the preset's env
-    for key, value in settings.items():
-        if isinstance(value, dict) and isinstance(merged.get(key), dict):
-            merged[key] = _merged(merged[key], value)
-        else:
-            merged[key] = value
+    for layer in (fold_env(from_file) if from_file else {}, settings):
+        for key, value in layer.items():
+            if isinstance(value, dict) and isinstance(merged.get(key), dict):
+                merged[key] = _merged(merged[key], value)
+            else:
+                merged[key] = value
     return TrainConfig.model_validate(merged)
+
+
+def read_preset_file(path: str | Path) -> dict[str, Any]:
+    """A preset file's fields (TrainConfig fields; env fields flat or in an [env] table).
+
+    Raises:
+        MotorlabError: the file is missing or not TOML, or it names another preset file.
+    """
+    try:
+        data = tomllib.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError) as e:
+        raise MotorlabError(f"cannot read preset file {path}: {getattr(e, 'strerror', None) or e}.") from None
+    except tomllib.TOMLDecodeError as e:
+        raise MotorlabError(f"preset file {path} is not valid TOML: {e}.") from None
+    if "preset_file" in data:
+        raise MotorlabError(f"preset file {path} names another preset file; write its fields in {path} instead.")
+    return data
 
 
 def _merged(base: dict[str, Any], given: dict[str, Any]) -> dict[str, Any]:

@@ -125,20 +125,32 @@ class RobustnessKind(StepKind[RobustnessSettings, RobustnessSummary]):
         return f"robustness of {', '.join(settings.policies)} to {', '.join(v.split('=')[0] for v in settings.vary)}"
 
     def headline(self, s: RobustnessSummary) -> dict[str, Any]:
-        return {k: v for k, v in s.keys().items() if k.endswith((".holds_from", ".holds_to"))}
+        """Per policy and disturbance, the band it holds over as text ("0.15 – 0.25", "never"), and
+        its ends as numbers."""
+        keys = s.keys()
+        ends = {k: v for k, v in keys.items() if k.endswith((".holds_from", ".holds_to"))}
+        bands = {}
+        for key in ends:
+            if key.endswith(".holds_from"):
+                base = key[: -len(".holds_from")]
+                low, high = ends[key], ends[f"{base}.holds_to"]
+                bands[f"{base}.holds"] = ("never" if low is None else show(low) if low == high
+                                          else f"{show(low)} – {show(high)}")
+        return {**bands, **ends}
 
     def metric(self, key: str) -> Metric:
-        if key.endswith((".holds_from", ".holds_to")):
+        if key.endswith((".holds", ".holds_from", ".holds_to")):
             policy, disturbance, end = key.rsplit(".", 2)
             what = VARIABLES.get(disturbance, disturbance)
-            return Metric(key, f"{policy}: holds {'from' if end == 'holds_from' else 'up to'} {what}")
+            word = {"holds": "holds over", "holds_from": "holds from", "holds_to": "holds up to"}[end]
+            return Metric(key, f"{policy}: {word} {what}", "text" if end == "holds" else "number")
         return super().metric(key)
 
     def numbers(self, settings: RobustnessSettings, h: dict[str, Any]) -> list[Number]:
-        return [n for k in h if k.endswith((".holds_from", ".holds_to")) and (n := self.metric(k).number(h))]
+        return [n for k in h if k.endswith(".holds") and (n := self.metric(k).number(h))]
 
     def default_findings(self, settings: RobustnessSettings, h: dict[str, Any]) -> list[str]:
-        return [k for k in h if k.endswith(".holds_to")]
+        return [k for k in h if k.endswith(".holds")]
 
     def notes(self, settings: RobustnessSettings, h: dict[str, Any]) -> str:
         return (f"{settings.episodes} episodes per point; holds: >= 90% of episodes succeed (or do not fall) "

@@ -1,0 +1,10 @@
+"""`motorlab tune`: an Optuna search over a command's or recipe's settings, each trial judged
+by the IQM over several seeds, with pruning, a resumable shared study, and a fresh-seed check.
+
+    space.py      --space KEY=DIST: loguniform, uniform, int, choice
+    objective.py  the number per seed (summary.json) and the intermediate numbers (metrics.csv)
+    trials.py     a trial's seeds as the sweep's trial processes, watched while they run
+    search.py     the study (storage, sampler, pruner) and the trial loop
+    outputs.py    trials.csv, the table, best.toml, plots
+    tune.py       motorlab tune: the above, then the best settings on fresh seeds
+"""

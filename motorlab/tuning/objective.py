@@ -1,0 +1,119 @@
+"""The number a tuning trial is judged by: one per seed from its run's summary.json, and,
+while the seeds still train, the intermediate numbers a pruner compares.
+
+Intermediate numbers are reported at fixed env steps (every `report_every`), never at
+whatever step a poll happened to see, so that a pruner compares trials at the same step:
+
+- steps_to_success (minimized): at step t, each seed's lower bound, t if it has not solved
+  by t, else its steps-to-success. A trial that solved early keeps its value for every later
+  step, so a slower trial is compared against it there.
+- final_return, success_rate: the latest evaluation's return (success rate) at or before t,
+  from metrics.csv (the evaluations training already makes); a finished seed keeps its last.
+- any other key: no intermediate numbers (nothing to prune on).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from motorlab.errors import MotorlabError
+from motorlab.runs import SUMMARY, is_complete, last_timesteps, read_config, read_json, read_metrics
+from motorlab.stats import DIRECTION, trial_scores
+
+EVAL_COLUMN = {"final_return": "eval_return_mean", "success_rate": "eval_success_rate"}
+
+
+def _base(key: str) -> str:
+    return key.rpartition(".")[2]
+
+
+@dataclass(frozen=True)
+class Objective:
+    """What a trial's seeds are scored by, and which way is better."""
+
+    key: str
+    maximize: bool
+
+    @classmethod
+    def make(cls, key: str, direction: str | None) -> Objective:
+        """`direction` max or min; None: the metric's own (steps down, returns and success up; up otherwise).
+
+        Raises:
+            MotorlabError: a direction other than max or min.
+        """
+        if direction is None:
+            return cls(key, DIRECTION.get(_base(key), True))
+        if direction not in ("max", "min"):
+            raise MotorlabError(f"--direction {direction!r}: give max or min.")
+        return cls(key, direction == "max")
+
+    @property
+    def direction(self) -> str:
+        return "maximize" if self.maximize else "minimize"
+
+    @property
+    def prunable(self) -> bool:
+        """Training reports numbers this objective can be judged by before the end."""
+        return _base(self.key) in (*EVAL_COLUMN, "steps_to_success")
+
+    def value(self, summary: dict[str, Any]) -> float:
+        """One seed's number. steps_to_success of a run that never solved is its budget.
+
+        Raises:
+            MotorlabError: the summary has no such number (one line listing the keys it has).
+        """
+        scores = trial_scores(summary)
+        if self.key in scores:
+            if _base(self.key) == "steps_to_success" and scores[self.key][1]:
+                prefix = self.key[: -len("steps_to_success")]
+                budget = summary.get(f"{prefix}budget")
+                if isinstance(budget, (int, float)):
+                    return float(budget)
+            return scores[self.key][0]
+        value = summary.get(self.key)
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        keys = sorted({*scores, *(k for k, v in summary.items() if isinstance(v, (int, float))
+                                  and not isinstance(v, bool))})
+        raise MotorlabError(f"--objective {self.key}: the runs' summary.json has no number {self.key!r}; "
+                            f"numbers it has: {', '.join(keys)}.")
+
+    def progress(self, run_dir: Path, step: int) -> float | None:
+        """One seed's intermediate number at env step `step`, or None when it is not known yet
+        (the seed has not got that far, or has not evaluated yet)."""
+        done = is_complete(run_dir)
+        if not done and last_timesteps(run_dir) < step:
+            return None
+        base = _base(self.key)
+        if base == "steps_to_success":
+            return float(min(step, self.value(read_json(Path(run_dir) / SUMMARY)))) if done else float(step)
+        column = EVAL_COLUMN.get(base)
+        if column is None:
+            return None
+        if done:
+            last_step = last_timesteps(run_dir)
+            if step >= last_step:
+                return self.value(read_json(Path(run_dir) / SUMMARY))
+        try:
+            rows = read_metrics(run_dir)
+        except MotorlabError:
+            return None
+        seen = [r[column] for r in rows if r.get("timesteps", math.inf) <= step and not math.isnan(r.get(column, math.nan))]
+        return seen[-1] if seen else None
+
+
+def budget_of(run_dir: Path) -> int | None:
+    """The env-step budget a run was started with (its config.toml, written when it starts)."""
+    try:
+        value = read_config(run_dir).get("timesteps")
+    except (MotorlabError, OSError):
+        return None
+    return int(value) if isinstance(value, (int, float)) else None
+
+
+def steps_run(run_dir: Path) -> int:
+    """Env steps a run has trained so far (all of them once it finished)."""
+    return last_timesteps(run_dir)

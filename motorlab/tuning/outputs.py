@@ -1,0 +1,152 @@
+"""What a search leaves in its folder: trials.csv, the table, best.toml, plots and summary.json."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import shlex
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, get_args
+
+import optuna
+import tomli_w
+from optuna.trial import FrozenTrial, TrialState
+
+from motorlab.rl.config import TrainConfig
+from motorlab.runs import atomic_write_text, write_summary
+from motorlab.tuning.space import Dist
+
+
+@dataclass(frozen=True)
+class Fresh:
+    """The best settings re-run on seeds the search never used."""
+
+    seeds: list[int]
+    values: list[float]
+    iqm: float
+    ci: tuple[float, float]
+
+
+def shown_trials(study: optuna.Study) -> list[FrozenTrial]:
+    """Every trial but those that gave way to another process before running anything."""
+    return [t for t in study.get_trials(deepcopy=False) if not t.user_attrs.get("gave_way")]
+
+
+def write_trials_csv(trials: list[FrozenTrial], space: dict[str, Dist], path: Path) -> None:
+    buf = io.StringIO()
+    writer = csv.writer(buf)
+    writer.writerow(["number", "state", *space, "value", "seed_values", "env_steps", "env_steps_saved"])
+    for t in trials:
+        writer.writerow([t.number, t.state.name, *(t.params.get(k, "") for k in space),
+                         "" if t.value is None else t.value, " ".join(f"{v:g}" for v in t.user_attrs.get("seed_values", [])),
+                         t.user_attrs.get("env_steps", ""), t.user_attrs.get("env_steps_saved", "")])
+    atomic_write_text(path, buf.getvalue())
+
+
+COLUMNS = ["trial", "state", "settings", "value (IQM)", "per seed", "env steps"]
+
+
+def table_rows(trials: list[FrozenTrial], space: dict[str, Dist], best: FrozenTrial | None,
+               fresh: Fresh | None) -> list[list[str]]:
+    rows = []
+    for t in trials:
+        settings = ", ".join(f"{k}={t.params[k]:.4g}" if isinstance(t.params.get(k), float) else f"{k}={t.params.get(k)}"
+                             for k in space if k in t.params)
+        mark = " (best)" if best is not None and t.number == best.number else ""
+        rows.append([f"{t.number}{mark}", t.state.name.lower(), settings,
+                     "" if t.value is None else f"{t.value:,.4g}",
+                     " ".join(f"{v:,.4g}" for v in t.user_attrs.get("seed_values", [])),
+                     f"{t.user_attrs.get('env_steps', 0):,}"])
+    if best is not None and fresh is not None:
+        rows.append([f"{best.number} on fresh seeds", "complete", f"seeds {fresh.seeds[0]}..{fresh.seeds[-1]}",
+                     f"{fresh.iqm:,.4g} [{fresh.ci[0]:,.4g}, {fresh.ci[1]:,.4g}]",
+                     " ".join(f"{v:,.4g}" for v in fresh.values), ""])
+    return rows
+
+
+def preset_fields(settings: dict[str, str], space: dict[str, Dist], options: set[str] | None) -> dict[str, Any]:
+    """The best settings as TrainConfig fields (a preset file): options by their field names,
+    `--set` hyperparameters in [hyperparams]; with `options` None (a recipe) STEP.FIELD keys
+    in a table per step."""
+    out: dict[str, Any] = {}
+    for key, text in settings.items():
+        value = _value(text)
+        dist = space[key]
+        if options is None:
+            step, dot, name = key.rpartition(".")
+            (out.setdefault(step, {}) if dot else out)[name] = value
+        elif dist.is_hyperparam or dist.name.replace("_", "-") not in options:
+            out.setdefault("hyperparams", {})[dist.name] = value
+        else:
+            name = dist.name.replace("-", "_")
+            out[name] = text if _text_field(name) else value  # lr = "3e-4": a schedule, written as text
+    return out
+
+
+def _text_field(name: str) -> bool:
+    """A TrainConfig field that holds text only (schedules such as lr and clip_range)."""
+    field = TrainConfig.model_fields.get(name)
+    return field is not None and set(get_args(field.annotation)) <= {str, type(None)} and field.annotation is not None \
+        and str in get_args(field.annotation)
+
+
+def _value(text: str) -> Any:
+    """A sampled value as TOML should hold it: JSON numbers, booleans, lists; else the text."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        return text
+    return value if value is not None else text
+
+
+def write_best_toml(path: Path, fields: dict[str, Any], header: list[str]) -> None:
+    atomic_write_text(path, "".join(f"# {line}\n" for line in header) + tomli_w.dumps(fields))
+
+
+def reproduce_line(target: str, best_toml: Path, seed: int) -> str:
+    return f"motorlab {target} --preset-file {shlex.quote(str(best_toml))} --seed {seed}"
+
+
+def write_plots(study: optuna.Study, space: dict[str, Dist], plots: Path, title: str) -> list[Path]:
+    """Optimization history, parameter importances (two or more keys, enough trials) and one
+    slice plot per key, each with its caption inside the PNG (motorlab's save_figure)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from optuna.visualization import matplotlib as ovm
+
+    from motorlab.report.plots import save_figure
+
+    warnings.filterwarnings("ignore", category=UserWarning, module="optuna")  # flat axes of one-valued keys
+    done = [t for t in study.get_trials(deepcopy=False) if t.state == TrialState.COMPLETE]
+    if not done:
+        return []
+    written = []
+
+    def save(ax_or_axes, name: str, caption: str) -> None:
+        ax = ax_or_axes.ravel()[0] if hasattr(ax_or_axes, "ravel") else ax_or_axes
+        fig = ax.figure
+        fig.suptitle(title, fontsize=9)
+        if (p := save_figure(fig, plots / name, caption)) is not None:
+            written.append(p)
+        plt.close("all")
+
+    save(ovm.plot_optimization_history(study), "history.png", "Objective of each trial and the best so far")
+    if len(space) >= 2 and len(done) >= 4:
+        try:
+            save(ovm.plot_param_importances(study), "importances.png", "How much each setting explains the objective "
+                 "(fANOVA)")
+        except (RuntimeError, ValueError, ZeroDivisionError):
+            plt.close("all")  # too few distinct values to rank the settings
+    for key in space:
+        safe = "".join(c if c.isalnum() or c in "._-" else "_" for c in key)
+        save(ovm.plot_slice(study, params=[key]), f"slice-{safe}.png", f"Objective against {key}, one dot per trial")
+    return written
+
+
+def write_tune_summary(out: Path, summary: dict[str, Any]) -> None:
+    write_summary(out, summary)

@@ -1,0 +1,340 @@
+"""`motorlab tune`: the Optuna search over a command's (or recipe's) settings, judged on several seeds.
+
+Each Optuna trial samples settings, runs K seeds of them as processes (the sweep's trials),
+reports intermediate numbers while they train (see objective.py) so a pruner can stop a
+hopeless trial, and scores the trial by the IQM over its seeds.
+
+The study lives in a database (SQLite DIR/study.db by default), under a name derived from
+what is searched, so the same command resumes it and several processes (or machines sharing
+the database) work on one search:
+
+- `--trials N` counts COMPLETE and PRUNED trials over every process. A process starts a trial
+  only while fewer than N trials are finished or running, and a trial that finds N trials ahead
+  of it (two processes asked at once) gives way at once, before it runs anything.
+- A trial whose process was killed stays RUNNING until its heartbeat is stale, then Optuna
+  marks it FAIL and RetryHeartbeatStaleTrialCallback queues its settings again; a trial stopped with
+  Ctrl-C is marked FAIL at once and queued again by the next `motorlab tune` of the study.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import os
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import optuna
+from optuna.pruners import BasePruner, HyperbandPruner, MedianPruner, NopPruner
+from optuna.storages import RDBStorage, RetryHeartbeatStaleTrialCallback
+from optuna.trial import FrozenTrial, TrialState
+from scipy.stats import trim_mean
+
+from motorlab.errors import MotorlabError
+from motorlab.runs import SUMMARY, is_complete, read_json
+from motorlab.stats import iqm_with_ci
+from motorlab.tuning.objective import Objective, budget_of, steps_run
+from motorlab.tuning.space import Dist
+from motorlab.tuning.trials import Planner, SeedRuns, run_dirs
+
+if TYPE_CHECKING:
+    from rich.console import Console
+
+POLL_SECONDS = 1.0
+HEARTBEAT_SECONDS = 10  # a killed process's trial is marked failed (and retried) after GRACE_SECONDS
+GRACE_SECONDS = 30
+MAX_RETRIES = 2
+MAX_FAILURES_IN_A_ROW = 3  # trials whose processes fail; then the search stops with the cause
+MAX_FILL_REPORTS = 200  # numbers a finished trial reports for the steps after its end (one DB write each)
+SAMPLERS = ("tpe", "random", "cmaes")
+PRUNERS = ("median", "hyperband", "none")
+COUNTED = (TrialState.COMPLETE, TrialState.PRUNED)
+
+
+@dataclass(frozen=True)
+class TuneSpec:
+    """One search, as the command line gives it."""
+
+    target: str
+    space: dict[str, Dist]
+    objective: Objective
+    trials: int
+    seeds: int
+    out: Path
+    storage: str
+    study_name: str
+    sampler: str = "tpe"
+    pruner: str = "median"
+    prune_startup: int = 5
+    report_every: int = 1000
+    max_parallel: int = 1
+    fresh_seeds: int = 0
+
+    @property
+    def seed_list(self) -> list[int]:
+        return list(range(self.seeds))
+
+
+def study_name(target: str, space: dict[str, Dist], objective: Objective, seeds: int) -> str:
+    """A name derived from what is searched: the same command finds its study again; a search of
+    other keys, another objective or other seeds in the same database gets a study of its own."""
+    text = json.dumps({"target": target, "space": {k: d.describe() for k, d in space.items()},
+                       "objective": objective.key, "direction": objective.direction, "seeds": seeds}, sort_keys=True)
+    return "motorlab-tune-" + hashlib.sha256(text.encode()).hexdigest()[:10]
+
+
+class LatestMedianPruner(MedianPruner):
+    """Optuna's median rule on the trial's latest number rather than its best so far.
+
+    MedianPruner compares a trial's best intermediate value over all steps; a steps-to-success
+    lower bound only grows, so its best is its first and it would never be pruned. The latest
+    number is the one that says how far behind the trial is at this step."""
+
+    def prune(self, study: optuna.Study, trial: FrozenTrial) -> bool:
+        step = trial.last_step
+        if step is None:
+            return False
+        latest = copy.copy(trial)  # shallow: the new dict leaves the trial's own values alone
+        latest.intermediate_values = {step: trial.intermediate_values[step]}
+        return super().prune(study, latest)
+
+
+def make_pruner(spec: TuneSpec) -> BasePruner:
+    if spec.pruner == "median":
+        return LatestMedianPruner(n_startup_trials=spec.prune_startup, n_warmup_steps=0)
+    if spec.pruner == "hyperband":
+        return HyperbandPruner(min_resource=spec.report_every, max_resource="auto", reduction_factor=3)
+    return NopPruner()
+
+
+def make_sampler(name: str) -> optuna.samplers.BaseSampler:
+    """Raises: MotorlabError for an unknown sampler, or cmaes without its package."""
+    if name == "tpe":
+        return optuna.samplers.TPESampler()
+    if name == "random":
+        return optuna.samplers.RandomSampler()
+    if name == "cmaes":
+        try:
+            import cmaes  # noqa: F401 - Optuna's CMA-ES sampler needs it
+        except ImportError:
+            raise MotorlabError("--sampler cmaes needs the cmaes package: pip install cmaes") from None
+        return optuna.samplers.CmaEsSampler(warn_independent_sampling=False)
+    raise MotorlabError(f"--sampler {name!r}: choose one of {', '.join(SAMPLERS)}.")
+
+
+def open_study(spec: TuneSpec) -> optuna.Study:
+    """Create the study, or load it when it exists (resume; another process's search).
+
+    Raises:
+        MotorlabError: the storage URL cannot be opened (one line).
+    """
+    if spec.pruner not in PRUNERS:
+        raise MotorlabError(f"--pruner {spec.pruner!r}: choose one of {', '.join(PRUNERS)}.")
+    sampler = make_sampler(spec.sampler)
+    optuna.logging.set_verbosity(optuna.logging.ERROR)  # motorlab says what happened
+    warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
+    # several processes on one SQLite file wait for each other's writes instead of failing at once
+    engine = {"connect_args": {"timeout": 60}} if spec.storage.startswith("sqlite") else None
+    try:
+        storage = RDBStorage(spec.storage, engine_kwargs=engine, heartbeat_interval=HEARTBEAT_SECONDS,
+                             grace_period=GRACE_SECONDS,
+                             heartbeat_stale_trial_callback=RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRIES))
+        return optuna.create_study(storage=storage, study_name=spec.study_name, direction=spec.objective.direction,
+                                   sampler=sampler, pruner=make_pruner(spec), load_if_exists=True)
+    except (ImportError, ValueError) as e:
+        raise MotorlabError(f"--storage {spec.storage}: {_first_line(e)} (give a database URL such as "
+                            "sqlite:///runs/tune/study.db or postgresql://user@host/db, with its driver installed).") from None
+    except Exception as e:  # noqa: BLE001 - SQLAlchemy's connection errors have no common public base here
+        raise MotorlabError(f"cannot open the study storage {spec.storage}: {_first_line(e)}") from None
+
+
+def _first_line(e: BaseException) -> str:
+    text = str(getattr(e, "orig", None) or e).strip()
+    return text.splitlines()[0] if text else type(e).__name__
+
+
+class TrialFailed(MotorlabError):
+    """A trial's seed processes failed; the search goes on (a few in a row stop it)."""
+
+
+class GiveWay(Exception):
+    """This trial found `--trials` trials ahead of it: another process asked at the same time."""
+
+
+@dataclass
+class Counters:
+    """What this process's trials did, for its messages."""
+
+    failures_in_a_row: int = 0
+    done: list[int] = field(default_factory=list)
+
+
+def _ahead(study: optuna.Study, number: int) -> int:
+    states = (*COUNTED, TrialState.RUNNING)
+    return sum(t.number < number for t in study.get_trials(deepcopy=False, states=states))
+
+
+def counted(study: optuna.Study) -> int:
+    return len(study.get_trials(deepcopy=False, states=COUNTED))
+
+
+def retry_interrupted(study: optuna.Study) -> int:
+    """Queue again the settings of trials a Ctrl-C stopped (marked FAIL, "interrupted") that no
+    trial retries yet; returns how many."""
+    trials = study.get_trials(deepcopy=False)
+    retried = {n for t in trials for n in t.system_attrs.get("retry_history", [])}
+    queued = 0
+    for t in trials:
+        if t.state == TrialState.FAIL and t.user_attrs.get("interrupted") and t.number not in retried:
+            RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRIES)(study, t)
+            queued += 1
+    return queued
+
+
+class Search:
+    """The objective Optuna calls, one trial at a time, in this process."""
+
+    def __init__(self, spec: TuneSpec, planner: Planner, console: Console):
+        self.spec = spec
+        self.planner = planner
+        self.console = console
+        self.counters = Counters()
+
+    def __call__(self, trial: optuna.Trial) -> float:
+        study = trial.study
+        if _ahead(study, trial.number) >= self.spec.trials:
+            trial.set_user_attr("gave_way", True)
+            study.stop()
+            raise GiveWay
+        trial.set_user_attr("interrupted", False)
+        values = {k: d.suggest(trial) for k, d in self.spec.space.items()}
+        runs = self.planner.plan(values, self.spec.seed_list, self.spec.out / "trials" / str(trial.number))
+        dirs = run_dirs(runs)
+        trial.set_user_attr("run_dirs", [str(d) for d in dirs])
+        trial.set_user_attr("settings", values)
+        shown = ", ".join(f"{k}={v}" for k, v in values.items())
+        self.console.print(f"  trial {trial.number}: {shown} ({len(runs)} seeds)")
+        seeds = SeedRuns(runs, self.spec.max_parallel).start()
+        reporter = Reporter(self.spec, dirs)
+        try:
+            while seeds.running():
+                time.sleep(POLL_SECONDS)
+                if reporter.report(trial) and trial.should_prune():
+                    seeds.stop()
+                    self._pruned(trial, dirs, reporter.last_step)
+            seeds.wait()
+        except KeyboardInterrupt:
+            seeds.stop()
+            trial.set_user_attr("interrupted", True)
+            raise
+        failed = seeds.failures()
+        if failed:
+            self.counters.failures_in_a_row += 1
+            trial.set_user_attr("error", failed[0])
+            message = f"trial {trial.number} failed: {failed[0]}"
+            self.console.print(f"  [red]✗[/red] {message}")
+            if self.counters.failures_in_a_row >= MAX_FAILURES_IN_A_ROW:
+                raise MotorlabError(f"{MAX_FAILURES_IN_A_ROW} trials in a row failed; the last: {message}")
+            raise TrialFailed(message)
+        self.counters.failures_in_a_row = 0
+        per_seed = [self.spec.objective.value(read_json(d / SUMMARY)) for d in dirs]
+        reporter.fill(trial, horizon=max(budget_of(d) or steps_run(d) for d in dirs))
+        value = iqm_with_ci(per_seed)[0]
+        trial.set_user_attr("seed_values", per_seed)
+        trial.set_user_attr("env_steps", sum(steps_run(d) for d in dirs))
+        self.counters.done.append(trial.number)
+        self.console.print(f"  [green]✓[/green] trial {trial.number}: {self.spec.objective.key} IQM {value:,.4g} "
+                           f"(seeds: {', '.join(f'{v:,.4g}' for v in per_seed)})")
+        return value
+
+    def _pruned(self, trial: optuna.Trial, dirs: list[Path], step: int) -> None:
+        run = sum(steps_run(d) for d in dirs)
+        budget = sum(budget_of(d) or 0 for d in dirs)
+        trial.set_user_attr("env_steps", run)
+        trial.set_user_attr("env_steps_saved", max(0, budget - run))
+        self.console.print(f"  [yellow]✂[/yellow] trial {trial.number} pruned at step {step:,} "
+                           f"({max(0, budget - run):,} env steps saved)")
+        raise optuna.TrialPruned
+
+
+class Reporter:
+    """Reports a trial's intermediate number (IQM over its seeds) at each multiple of
+    `report_every` env steps that every seed has reached."""
+
+    def __init__(self, spec: TuneSpec, dirs: list[Path]):
+        self.objective = spec.objective
+        self.every = spec.report_every
+        self.dirs = dirs
+        self.last_step = 0
+
+    def _at(self, step: int) -> float | None:
+        values = [self.objective.progress(d, step) for d in self.dirs]
+        if any(v is None for v in values):
+            return None
+        return float(trim_mean(np.asarray(values, dtype=float), 0.25))  # rliable's IQM
+
+    def report(self, trial: optuna.Trial) -> bool:
+        """Report every step reached since the last call; True when one was reported."""
+        if not self.objective.prunable:
+            return False
+        reported = False
+        reached = max(steps_run(d) for d in self.dirs)  # a finished seed knows every later step: stop at the front
+        while self.last_step + self.every <= reached and (value := self._at(self.last_step + self.every)) is not None:
+            self.last_step += self.every
+            trial.report(value, self.last_step)
+            reported = True
+        return reported
+
+    def fill(self, trial: optuna.Trial, horizon: int) -> None:
+        """A finished trial's numbers for the remaining steps up to its budget, so trials still
+        running are compared against it there (each is final: the runs have ended)."""
+        if not self.objective.prunable or not all(is_complete(d) for d in self.dirs):
+            return
+        for _ in range(MAX_FILL_REPORTS):
+            step = self.last_step + self.every
+            if step > horizon:
+                break
+            value = self._at(step)
+            if value is None:
+                break
+            trial.report(value, step)
+            self.last_step = step
+
+
+def default_parallel(max_parallel: int | None) -> int:
+    if max_parallel is not None and max_parallel < 1:
+        raise MotorlabError(f"--max-parallel {max_parallel}: give at least 1.")
+    return max_parallel or os.cpu_count() or 1
+
+
+def run_search(spec: TuneSpec, planner: Planner, console: Console) -> optuna.Study:
+    """Open (or resume) the study and run trials until `spec.trials` are COMPLETE or PRUNED
+    over every process sharing it. Returns the study."""
+    study = open_study(spec)
+    queued = retry_interrupted(study)
+    have = counted(study)
+    running = len(study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)))
+    console.print(f"tune: study {spec.study_name} in {spec.storage}: {have} of {spec.trials} trials finished"
+                  + (f", {running} running elsewhere" if running else "")
+                  + (f", {queued} interrupted trial{'s' * (queued > 1)} queued again" if queued else ""))
+    if have + running >= spec.trials:
+        return study
+    search = Search(spec, planner, console)
+
+    def enough(study: optuna.Study, _trial: FrozenTrial) -> None:
+        # this process's trial has ended: the RUNNING ones are other processes', which count too
+        if counted(study) + len(study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))) >= spec.trials:
+            study.stop()
+
+    try:
+        study.optimize(search, n_trials=None, callbacks=[enough], catch=(TrialFailed, GiveWay),
+                       gc_after_trial=False, show_progress_bar=False)
+    except KeyboardInterrupt:
+        console.print("tune interrupted: finished trials are kept; run the same command again to resume.")
+        raise
+    return study

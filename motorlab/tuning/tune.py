@@ -1,0 +1,164 @@
+"""`motorlab tune TARGET --space KEY=DIST ... --trials N --seeds K --objective METRIC`: the search,
+then its outputs, then the best settings on K fresh seeds.
+
+    DIR/study.db                 the Optuna study (SQLite, unless --storage names another database)
+    DIR/trials/<n>/seed<k>/      each trial's run folders; DIR/trials/<n>/logs/ their output
+    DIR/fresh/seed<k>/           the best settings re-run on seeds the search never used
+    DIR/trials.csv, best.toml, plots/*.png, summary.json, config.toml
+
+The fresh seeds' numbers sit beside the search's in summary.json and the table: the winner's
+search number is the best of many and so flatters it; the fresh one does not.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import optuna
+from optuna.trial import TrialState
+from rich.console import Console
+
+from motorlab.errors import MotorlabError
+from motorlab.report.tables import plain_table, rich_table
+from motorlab.runs import SUMMARY, read_json, run_path, write_config
+from motorlab.stats import iqm_with_ci
+from motorlab.sweeps.sweep import MAX_SEEDS
+from motorlab.sweeps.trials import is_finished
+from motorlab.tuning import outputs
+from motorlab.tuning.objective import Objective, steps_run
+from motorlab.tuning.search import TuneSpec, default_parallel, run_search, study_name
+from motorlab.tuning.space import parse_space
+from motorlab.tuning.trials import Planner, SeedRuns, require_target
+
+if TYPE_CHECKING:
+    from typer.core import TyperGroup
+
+FRESH_SEED = 1000  # the fresh seeds are FRESH_SEED.. (or K.. when K is larger): never a search seed
+
+
+def make_spec(target: str, space: list[str] | None, trials: int, seeds: int, objective: str, direction: str | None,
+              out: Path | None, storage: str | None, name: str | None, sampler: str, pruner: str, prune_startup: int,
+              report_every: int, max_parallel: int | None, fresh_seeds: int | None) -> TuneSpec:
+    """The search's settings, checked.
+
+    Raises:
+        MotorlabError: bad spaces, counts or directions (before anything is written).
+    """
+    require_target(target)
+    parsed = parse_space(space)
+    if trials < 1:
+        raise MotorlabError(f"--trials {trials}: give at least 1.")
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise MotorlabError(f"--seeds {seeds}: give between 1 and {MAX_SEEDS:,} seeds (seeds 0..K-1).")
+    if report_every < 1:
+        raise MotorlabError(f"--report-every {report_every}: give at least 1 env step.")
+    if prune_startup < 0:
+        raise MotorlabError(f"--prune-startup {prune_startup}: give 0 or more.")
+    if fresh_seeds is not None and fresh_seeds < 0:
+        raise MotorlabError(f"--fresh-seeds {fresh_seeds}: give 0 (no re-evaluation) or more.")
+    goal = Objective.make(objective, direction)
+    folder = run_path(out, "tune").resolve()
+    return TuneSpec(target=target, space=parsed, objective=goal, trials=trials, seeds=seeds, out=folder,
+                    storage=storage or f"sqlite:///{folder / 'study.db'}",
+                    study_name=name or study_name(target, parsed, goal, seeds), sampler=sampler, pruner=pruner,
+                    prune_startup=prune_startup, report_every=report_every,
+                    max_parallel=default_parallel(max_parallel), fresh_seeds=seeds if fresh_seeds is None else fresh_seeds)
+
+
+def run_tune(spec: TuneSpec, console: Console | None = None, commands: TyperGroup | None = None) -> dict[str, Any]:
+    """Search, write the outputs, re-run the best on fresh seeds. Returns the summary (also summary.json).
+
+    Raises:
+        MotorlabError: a key the target does not have, an unreachable storage, an objective the
+            runs' summary.json lacks, trials that keep failing.
+    """
+    console = console or Console(stderr=True)
+    threads = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if spec.max_parallel != 1 else {}
+    planner = Planner(spec.target, spec.space, commands, threads)
+    planner.check()
+    if spec.storage.startswith("sqlite:///") and spec.storage == f"sqlite:///{spec.out / 'study.db'}":
+        spec.out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    study = run_search(spec, planner, console)
+    spec.out.mkdir(parents=True, exist_ok=True)
+    write_config(spec.out, {"tune": spec.target, "space": {k: d.describe() for k, d in spec.space.items()},
+                            "objective": spec.objective.key, "direction": spec.objective.direction,
+                            "trials": spec.trials, "seeds": spec.seeds, "storage": spec.storage,
+                            "study_name": spec.study_name, "sampler": spec.sampler, "pruner": spec.pruner})
+    return write_results(spec, study, planner, console, time.perf_counter() - t0)
+
+
+def _best(study: optuna.Study) -> optuna.trial.FrozenTrial | None:
+    return study.best_trial if study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)) else None
+
+
+def fresh_evaluation(spec: TuneSpec, planner: Planner, settings: dict[str, str], console: Console) -> outputs.Fresh | None:
+    """The best settings on `spec.fresh_seeds` seeds the search never used (kept when already run
+    with the same command lines). Only one process sharing the folder runs it (a file lock)."""
+    if spec.fresh_seeds == 0:
+        return None
+    first = max(FRESH_SEED, spec.seeds)
+    seeds = list(range(first, first + spec.fresh_seeds))
+    runs = planner.plan(settings, seeds, spec.out / "fresh")
+    lock_path = spec.out / "fresh.lock"
+    lock_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(lock_path, "w") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            console.print("fresh seeds: another process re-evaluates the best settings; see its summary.json.")
+            return None
+        todo = [t for t in runs if not is_finished(t)]
+        if todo:
+            console.print(f"fresh seeds: the best settings on seeds {seeds[0]}..{seeds[-1]}")
+            group = SeedRuns(todo, spec.max_parallel).start()
+            group.wait()
+            if failed := group.failures():
+                raise MotorlabError(f"the re-evaluation on fresh seeds failed: {failed[0]}")
+    values = [spec.objective.value(read_json(Path(t["run_dir"]) / SUMMARY)) for t in runs]
+    iqm, low, high = iqm_with_ci(values)
+    return outputs.Fresh(seeds, values, iqm, (low, high))
+
+
+
+def write_results(spec: TuneSpec, study: optuna.Study, planner: Planner, console: Console, wall: float) -> dict[str, Any]:
+    trials = outputs.shown_trials(study)
+    best = _best(study)
+    fresh = None
+    if best is not None:
+        settings = best.user_attrs.get("settings") or {k: str(v) for k, v in best.params.items()}
+        fresh = fresh_evaluation(spec, planner, settings, console)
+        fields = outputs.preset_fields(settings, spec.space, None if planner.recipe else planner.options)
+        best_toml = spec.out / "best.toml"
+        header = [f"best settings of motorlab tune ({spec.study_name}), trial {best.number}: "
+                  f"{spec.objective.key} IQM {best.value:,.6g} over seeds {', '.join(map(str, spec.seed_list))}"]
+        if not planner.recipe:
+            header.append("reproduce a seed: " + outputs.reproduce_line(spec.target, best_toml, 0))
+        outputs.write_best_toml(best_toml, fields, header)
+    outputs.write_trials_csv(trials, spec.space, spec.out / "trials.csv")
+    rows = outputs.table_rows(trials, spec.space, best, fresh)
+    title = f"tune {spec.objective.key} ({spec.objective.direction}) over {spec.seeds} seeds"
+    (spec.out / "table.txt").write_text(plain_table(outputs.COLUMNS, rows))
+    console.print(rich_table(title, outputs.COLUMNS, rows, left=("trial", "state", "settings", "per seed")))
+    outputs.write_plots(study, spec.space, spec.out / "plots", title)
+    by_state = {s.name.lower(): sum(t.state == s for t in trials) for s in TrialState}
+    saved = sum(t.user_attrs.get("env_steps_saved", 0) for t in trials)
+    steps = sum(t.user_attrs.get("env_steps", 0) for t in trials)
+    summary: dict[str, Any] = {
+        "tune": spec.target, "objective": spec.objective.key, "direction": spec.objective.direction,
+        "study_name": spec.study_name, "storage": spec.storage, "trials": spec.trials, "seeds": spec.seed_list,
+        "n_trials": {k: v for k, v in by_state.items() if v}, "best_trial": best.number if best else None,
+        "best_value": best.value if best else None, "best_params": best.params if best else None,
+        "best_seed_values": best.user_attrs.get("seed_values") if best else None,
+        "env_steps_run": steps + (sum(steps_run(spec.out / "fresh" / f"seed{s}") for s in fresh.seeds) if fresh else 0),
+        "env_steps_saved_by_pruning": saved, "wall_seconds": round(wall, 2),
+    }
+    if fresh is not None:
+        summary.update({"fresh_seeds": fresh.seeds, "fresh_values": fresh.values, "fresh_iqm": fresh.iqm,
+                        "fresh_iqm_ci_low": fresh.ci[0], "fresh_iqm_ci_high": fresh.ci[1]})
+    outputs.write_tune_summary(spec.out, summary)
+    summary["tune_dir"] = str(spec.out)
+    return summary
