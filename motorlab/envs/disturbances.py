@@ -76,10 +76,6 @@ def span_text(value: Any) -> Any:
     return value
 
 
-def is_range(value: Any) -> bool:
-    return isinstance(value, str) and SPAN in value
-
-
 class EpisodeRandom(gym.Wrapper):
     """A wrapper that draws from its own generator, seeded from each reset seed (see the module doc).
 
@@ -107,7 +103,7 @@ class EpisodeRandom(gym.Wrapper):
         return float(self.rng.integers(int(low), int(high) + 1)) if integer else float(self.rng.uniform(low, high))
 
 
-def _record(info: dict, **drawn: Any) -> dict:
+def record_draws(info: dict, **drawn: Any) -> dict:
     """The episode's drawn amounts in the reset info (under "disturbances"), for logs and tests."""
     info.setdefault("disturbances", {}).update(drawn)
     return info
@@ -162,7 +158,7 @@ class GaussianNoise(EpisodeRandom, gym.utils.RecordConstructorArgs):
         if self.action_std is not None:
             self._act_now = self._episode_std(self.action_std)
             drawn["action_noise"] = self._act_now
-        return self._noisy(obs), _record(info, **drawn)
+        return self._noisy(obs), record_draws(info, **drawn)
 
     def _noisy(self, obs):
         if self.obs_std is None:
@@ -213,7 +209,7 @@ class Latency(EpisodeRandom, gym.utils.RecordConstructorArgs):
         self.k = int(self.draw(self.steps, integer=True))
         self._actions = deque([self._rest.copy() for _ in range(self.k)])
         self._observations = deque([np.array(obs, copy=True) for _ in range(self.k)])
-        return obs, _record(info, latency=self.k)
+        return obs, record_draws(info, latency=self.k)
 
     def step(self, action):
         if self.on in ("action", "both"):
@@ -352,7 +348,7 @@ class MotorNoise(EpisodeRandom, gym.utils.RecordConstructorArgs):
         scale = self.draw(self.scale)
         self.env.set_motor_noise({"signal_dependent_std": VAN_BEERS[0] * scale, "constant_std": VAN_BEERS[1] * scale})
         obs, info = self.env.reset(**kwargs)
-        return obs, _record(info, motor_noise=scale)
+        return obs, record_draws(info, motor_noise=scale)
 
 
 def muscle_fatigue(env: gym.Env, mode: Fatigue) -> gym.Env:

@@ -12,7 +12,7 @@ from typing import Any, Literal
 import gymnasium as gym
 import numpy as np
 
-from motorlab.envs.disturbances import EpisodeRandom, env_dt_of, parse_span
+from motorlab.envs.disturbances import EpisodeRandom, env_dt_of, parse_span, record_draws
 from motorlab.errors import MotorlabError
 from motorlab.faults import FAULT_KEY
 
@@ -96,7 +96,7 @@ class LowPassDelay(EpisodeRandom, gym.utils.RecordConstructorArgs):
         if self.span[0] != self.span[1]:
             self.time_constant = self.draw(self.span)
             self.alpha = self._alpha(self.time_constant)
-            info.setdefault("disturbances", {})["delay"] = self.time_constant
+            record_draws(info, delay=self.time_constant)
         self._action = self._action_rest.copy()
         self._obs = np.array(obs, copy=True)
         return self._obs.copy(), info

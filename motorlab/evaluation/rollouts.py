@@ -191,7 +191,7 @@ class Evaluator:
         done = np.zeros(n, dtype=bool)
         outcome = EpisodeSuccess(rows, self.target, success_mode(self.env_cfg))
         falls = 0
-        fault_log: list[str] = []
+        faults: list[tuple[int, str]] = []  # (episode, faults.log line): listed in episode order
         traces_o: list[list] = [[] for _ in range(n)] if record else []
         traces_a: list[list] = [[] for _ in range(n)] if record else []
         if record:
@@ -217,11 +217,11 @@ class Evaluator:
                 success[i] = bool(outcome.end(r, returns[i]))
                 fault = steps.fault.get(int(r))
                 if fault:
-                    fault_log.append(fault_line(first + i, lengths[i], fault))
+                    faults.append((i, fault_line(first + i, lengths[i], fault)))
                 falls += bool(steps.terminated[j]) and not fault
                 if stop_below is not None and returns[i] < stop_below:
                     return Rollouts(returns[done], lengths[done], success[done], aborted=True,
-                                    falls=falls, fault_log=fault_log, dt=self.dt)
+                                    falls=falls, fault_log=[line for _, line in sorted(faults)], dt=self.dt)
                 if steps.restarted[j]:
                     episode[r] = following[r]
                     obs[r] = steps.first_obs[j]
@@ -231,7 +231,7 @@ class Evaluator:
                 else:
                     active[r] = False
         return Rollouts(
-            returns, lengths, success, falls=falls, fault_log=sorted(fault_log, key=_seed_of), dt=self.dt,
+            returns, lengths, success, falls=falls, fault_log=[line for _, line in sorted(faults)], dt=self.dt,
             observations=[np.array(t) for t in traces_o], actions=[np.array(t) for t in traces_a],
         )
 
@@ -257,10 +257,8 @@ def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, recor
     same batches either way, so the results are the same, number for number.
 
     Raises:
-        MotorlabError: workers < 1; an env worker that failed or died (one line).
+        MotorlabError: workers < 1 (from Evaluator); an env worker that failed or died (one line).
     """
-    if workers is not None and workers < 1:
-        raise MotorlabError(f"--workers must be at least 1, got {workers}.")
     size = min(batch, episodes)
     n = auto_workers(env_cfg, episodes, size) if workers is None else workers
     try:
@@ -284,11 +282,6 @@ def join_rollouts(parts: list[Rollouts]) -> Rollouts:
                     falls=sum(p.falls for p in parts), fault_log=[line for p in parts for line in p.fault_log],
                     observations=[o for p in parts for o in p.observations],
                     actions=[a for p in parts for a in p.actions], dt=parts[0].dt)
-
-
-def _seed_of(line: str) -> int:
-    """faults.log lines in episode order ("seed=12 length=...")."""
-    return int(line.split()[0].removeprefix("seed="))
 
 
 def trained_env_settings(run_dir: Path) -> dict:

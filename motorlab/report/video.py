@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from motorlab.envs import EnvConfig, env_dt, make_env
+from motorlab.envs.disturbances import mujoco_model_data
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import trained_env_settings
 from motorlab.policies import load_policy
@@ -24,23 +25,13 @@ from motorlab.runs import atomic_path, read_config, require_run_dir, write_json
 MAX_FPS = 50  # browsers and players want at most this; faster envs are subsampled
 
 
-def _mujoco_parts(env):
-    """(model, data) of a MuJoCo env, else (None, None)."""
-    import mujoco
-
-    base = env.unwrapped
-    model = getattr(base, "mj_model", None) or getattr(base, "model", None)
-    data = getattr(base, "mj_data", None) or getattr(base, "data", None)
-    return (model, data) if isinstance(model, mujoco.MjModel) else (None, None)
-
-
 class MujocoCamera:
     """Frames from MuJoCo's offscreen renderer on the env's own model and data."""
 
     def __init__(self, env, width: int, height: int, camera: str | int | None):
         import mujoco
 
-        model, self.data = _mujoco_parts(env)
+        model, self.data = mujoco_model_data(env)
         model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
         model.vis.global_.offheight = max(model.vis.global_.offheight, height)
         if camera is None:
@@ -87,7 +78,7 @@ def make_video_env(env_cfg: EnvConfig):
     """The env for recording: MuJoCo envs as they are (motorlab renders their model
     itself), any other env asked to render rgb_array frames."""
     env = make_env(env_cfg, shaped=False)
-    if _mujoco_parts(env)[0] is None:
+    if mujoco_model_data(env)[0] is None:
         env.close()
         env = make_env(env_cfg, shaped=False, render_mode="rgb_array")
     return env
@@ -155,7 +146,7 @@ def filming(env, width: int, height: int, camera):
 
 def video_settings(env, width: int, height: int, camera):
     """(camera, every, fps) for recording env at most MAX_FPS frames per second."""
-    cam = MujocoCamera(env, width, height, camera) if _mujoco_parts(env)[0] is not None else EnvCamera(env)
+    cam = MujocoCamera(env, width, height, camera) if mujoco_model_data(env)[0] is not None else EnvCamera(env)
     dt = env_dt(env) or 1.0 / MAX_FPS
     every = max(1, math.ceil((1.0 / dt) / MAX_FPS))
     return cam, every, (1.0 / dt) / every

@@ -141,11 +141,7 @@ def resolve(settings: dict[str, Any]) -> TrainConfig:
     if preset is not None or from_file:
         settings = fold_env(settings)  # a recipe's flat env fields (delay = 0.2) meet the preset's env
     for layer in (fold_env(from_file) if from_file else {}, settings):
-        for key, value in layer.items():
-            if isinstance(value, dict) and isinstance(merged.get(key), dict):
-                merged[key] = _merged(merged[key], value)
-            else:
-                merged[key] = value
+        merged = _merged(merged, layer)
     return TrainConfig.model_validate(merged)
 
 
