@@ -34,6 +34,7 @@ from optuna.pruners import BasePruner, HyperbandPruner, MedianPruner, NopPruner
 from optuna.storages import RDBStorage, RetryHeartbeatStaleTrialCallback
 from optuna.trial import FrozenTrial, TrialState
 from scipy.stats import trim_mean
+from sqlalchemy.exc import IntegrityError
 
 from motorlab.errors import MotorlabError
 from motorlab.runs import SUMMARY, is_complete, read_json
@@ -49,6 +50,7 @@ POLL_SECONDS = 1.0
 HEARTBEAT_SECONDS = 10  # a killed process's trial is marked failed (and retried) after GRACE_SECONDS
 GRACE_SECONDS = 30
 MAX_RETRIES = 2
+SCHEMA_ATTEMPTS = 3  # opening a new database that another process is creating at the same moment
 MAX_FAILURES_IN_A_ROW = 3  # trials whose processes fail; then the search stops with the cause
 MAX_FILL_REPORTS = 200  # numbers a finished trial reports for the steps after its end (one DB write each)
 SAMPLERS = ("tpe", "random", "cmaes")
@@ -141,9 +143,18 @@ def open_study(spec: TuneSpec) -> optuna.Study:
     # several processes on one SQLite file wait for each other's writes instead of failing at once
     engine = {"connect_args": {"timeout": 60}} if spec.storage.startswith("sqlite") else None
     try:
-        storage = RDBStorage(spec.storage, engine_kwargs=engine, heartbeat_interval=HEARTBEAT_SECONDS,
-                             grace_period=GRACE_SECONDS,
-                             heartbeat_stale_trial_callback=RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRIES))
+        for attempt in range(SCHEMA_ATTEMPTS):
+            try:
+                storage = RDBStorage(spec.storage, engine_kwargs=engine, heartbeat_interval=HEARTBEAT_SECONDS,
+                                     grace_period=GRACE_SECONDS, heartbeat_stale_trial_callback=(
+                                         RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRIES)))
+                break
+            except IntegrityError:
+                # two processes creating a new database at once: both write its schema version, one
+                # loses the race; the schema is there now, so opening it again succeeds
+                if attempt == SCHEMA_ATTEMPTS - 1:
+                    raise
+                time.sleep(0.5)
         return optuna.create_study(storage=storage, study_name=spec.study_name, direction=spec.objective.direction,
                                    sampler=sampler, pruner=make_pruner(spec), load_if_exists=True)
     except (ImportError, ValueError) as e:
