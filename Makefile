@@ -60,6 +60,7 @@ bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/mbrl.py --sac-steps 12000
 	$(VENV)/bin/python benchmarks/upkie_fps.py
 	$(VENV)/bin/python benchmarks/evaluate_parallel.py --repeats 3
+	$(VENV)/bin/python benchmarks/tune.py --out runs/bench-tune
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

@@ -12,6 +12,7 @@ import functools
 import inspect
 import json
 import os
+import shlex
 import sys
 import tomllib
 from pathlib import Path
@@ -26,6 +27,7 @@ from rich.console import Console  # noqa: E402
 from rich.markup import escape  # noqa: E402
 from rich.table import Table  # noqa: E402
 
+from motorlab import trackers  # noqa: E402
 from motorlab.control.steps import MBRL, MPC  # noqa: E402
 from motorlab.dynamics.steps import (  # noqa: E402
     DYNAMICS_CHECK,
@@ -103,10 +105,11 @@ def arg(model: type, field: str) -> Any:
 
 
 def kind_command(kind: StepKind, argument: str, epilog: str = "", flags: dict[str, tuple[str, ...]] | None = None,
-                 out_help: str = "Run folder to write (default: runs/<step>-<timestamp>)."):
+                 out_help: str = "Run folder to write (default: runs/<step>-<timestamp>).", track: bool = False):
     """Register a command whose options are `kind`'s settings, one per field (`argument` is the
     positional one): their types, defaults and help come from the settings model, nothing is
-    written twice. The decorated function reports the summary: `report(summary, settings)`."""
+    written twice. The decorated function reports the summary: `report(summary, settings)`.
+    `track`: the command takes --track (experiment tracking)."""
     flags = flags or {}
 
     def register(report):
@@ -136,10 +139,13 @@ def kind_command(kind: StepKind, argument: str, epilog: str = "", flags: dict[st
                                             annotation=annotation))
         params.append(inspect.Parameter("out", inspect.Parameter.KEYWORD_ONLY, default=None, annotation=Annotated[
             Optional[Path], typer.Option("--out", help=out_help)]))
+        if track:
+            params.append(inspect.Parameter("track", inspect.Parameter.KEYWORD_ONLY, default=None, annotation=Track))
 
         def run_command(**given: Any) -> None:
-            out = given.pop("out")
+            out, tracked = given.pop("out"), given.pop("track", None)
             settings = kind.make(**{k: convert[k](v) for k, v in given.items() if v is not None})
+            trackers.enable(tracked)
             report(kind.run(settings, out), settings)
 
         run_command.__signature__ = inspect.Signature(params)
@@ -175,6 +181,19 @@ def _cli_type(annotation: Any, flag: str) -> tuple[type, Any]:
 
 Out = Annotated[Optional[Path], typer.Option("--out", help="Run folder to write (default: runs/<step>-<timestamp>).")]
 Seed = Annotated[Optional[int], typer.Option("--seed", min=0, help="Random seed (default 0).")]
+Track = Annotated[Optional[list[str]], typer.Option(
+    "--track", help="Also log the run, live, to an experiment tracker (repeatable): mlflow (a SQLite store: "
+                    "$MLFLOW_TRACKING_URI, else ./mlflow.db), mlflow=URI (sqlite:///PATH, file:///PATH, "
+                    "http://HOST:PORT), wandb (Weights & Biases, offline without an API key: `wandb sync` uploads "
+                    "it later) or wandb=PROJECT. Settings, TensorBoard's scalars, summary and plots; a sweep's, "
+                    "study's or tune's runs nest under theirs. Needs pip install 'motorlab\\[mlflow]' or "
+                    "'motorlab\\[wandb]'.")]
+# where sweep's and tune's trials run (motorlab.sweeps.backends)
+Backend = Annotated[str, typer.Option(
+    help="local: a pool of processes on this machine; ray: Ray Tune on a cluster (--address) or a Ray "
+         "instance started here.")]
+RayAddress = Annotated[Optional[str], typer.Option(
+    help="Ray cluster address HOST:PORT (from `ray start --head`); every node must see --out at the same path.")]
 Delay = Annotated[Optional[str], opt(EnvConfig, "--delay")]
 DelayOn = Annotated[Optional[str], opt(EnvConfig, "--delay-on")]
 History = Annotated[Optional[int], opt(EnvConfig, "--history")]
@@ -294,6 +313,7 @@ def train(
     env_arg: EnvArgs = None,
     success: Success = None,
     progress: Annotated[bool, opt(T, "--progress/--no-progress")] = True,
+    track: Track = None,
     disturbances: dict[str, Any] | None = None,
 ):
     """Train a policy on ENV_ID and write a run folder.
@@ -314,13 +334,14 @@ def train(
         settings["hyperparams"] = _parse_sets(hp)
     settings = {k: v for k, v in settings.items() if v is not None}
     if resume is not None:
-        _resume_run(resume, settings, config, out)
+        _resume_run(resume, settings, config, out, track)
         return
     if config is not None:
         settings = _merge_config(config, settings)
     elif env_id is None:
         raise MotorlabError("give an env id (motorlab train InvertedPendulum-v5) or --config RUN/config.toml.")
     cfg = TRAIN.make(**settings)
+    trackers.enable(track)
     s = TRAIN.run(cfg, out)
     sts = s.steps_to_success
     stdout.print(f"[green]done[/green] {s.run_dir}: "
@@ -330,7 +351,8 @@ def train(
     _warn_faults(s)
 
 
-def _resume_run(run_dir: Path, settings: dict, config: Path | None, out: Path | None) -> None:
+def _resume_run(run_dir: Path, settings: dict, config: Path | None, out: Path | None,
+                track: list[str] | None = None) -> None:
     given = [k for k, v in settings.items() if k not in ("progress", "env") or (k == "env" and v)]
     if given or config is not None or out is not None:
         raise MotorlabError(f"--resume continues {run_dir} with the settings in its config.toml; "
@@ -341,6 +363,7 @@ def _resume_run(run_dir: Path, settings: dict, config: Path | None, out: Path | 
     if is_complete(run_dir):
         raise MotorlabError(f"{run_dir} finished already (it has summary.json); there is nothing to resume.")
     cfg = TRAIN.make(**{**_merge_config(run_dir / "config.toml", {}), "progress": settings.get("progress", True)})
+    trackers.enable(track)
     s = TRAIN.run(cfg, run_dir, resume=True)
     start = s.resumed_from
     stdout.print(f"[green]done[/green] {s.run_dir}: "
@@ -569,7 +592,7 @@ def dynamics_collect(s, settings) -> None:
     _warn_faults(s)
 
 
-@kind_command(DYNAMICS_FIT, "transitions", epilog="Examples:\n\n  motorlab dynamics fit runs/reacher-data "
+@kind_command(DYNAMICS_FIT, "transitions", track=True, epilog="Examples:\n\n  motorlab dynamics fit runs/reacher-data "
                                                   "--out runs/reacher-model\n\n"
                                                   "  motorlab dynamics fit runs/reacher-data/transitions.npz "
                                                   "--hidden 128,128 --ensemble 5 --patience 5")
@@ -591,7 +614,7 @@ def dynamics_check(s, settings) -> None:
                  "error_by_dimension.png, traces.png")
 
 
-@kind_command(MPC, "env", epilog="Examples:\n\n  motorlab mpc Reacher-v5 --model runs/reacher-model --episodes 50\n\n"
+@kind_command(MPC, "env", track=True, epilog="Examples:\n\n  motorlab mpc Reacher-v5 --model runs/reacher-model --episodes 50\n\n"
                                  "  motorlab mpc Reacher-v5 --model runs/reacher-model --optimizer evotorch --horizon 4 "
                                  "--population 250 --iterations 20 --episodes 5")
 def mpc(s, settings) -> None:
@@ -602,7 +625,7 @@ def mpc(s, settings) -> None:
     _warn_faults(s)
 
 
-@kind_command(MBRL, "env", epilog="Examples:\n\n  motorlab mbrl InvertedPendulum-v5 --rounds 5 --out runs/ip-mbrl\n\n"
+@kind_command(MBRL, "env", track=True, epilog="Examples:\n\n  motorlab mbrl InvertedPendulum-v5 --rounds 5 --out runs/ip-mbrl\n\n"
                                   "  motorlab mbrl Pusher-v5 --rounds 20 --particles 20 --out runs/pusher-pets\n\n"
                                   "  motorlab mbrl Pusher-v5 --rounds 20 --no-probabilistic --propagation mean   "
                                   "# deterministic members\n\n"
@@ -655,6 +678,7 @@ def run(
         help="Train steps that need nothing from each other (e.g. SAR-RL's chain and RL-E2E) run at once, "
              "each its own process, at most this many (default: the recipe's parallel_steps, else 1).")] = None,
     check: Annotated[bool, typer.Option("--check", help="Only validate the recipe and list its steps; run nothing.")] = False,
+    track: Track = None,
 ):
     """Run a study from a TOML recipe: its steps, a printed table, summary.json and plots.
 
@@ -669,6 +693,7 @@ def run(
         stdout.print(f"{study.source}: valid, {len(study.steps)} steps: "
                      + ", ".join(f"{st.name} ({st.kind.name})" for st in study.steps))
         return
+    trackers.enable(track)
     summary = run_study(study, out, console=stdout,
                         execution=Execution(backend, address, max_parallel, parallel_steps))
     stdout.print(f"\n[bold]Results:[/bold] {summary['study_dir']}  (report.html, table.txt, summary.json, plots/*.png, "
@@ -691,14 +716,12 @@ def sweep(
         "--grid", help="KEY=V1,V2 (repeatable; every combination runs). Commands: KEY is an option (lr, n_envs, "
                        "delay, normalize=true,false). Recipes: FIELD for every step that has it, or STEP.FIELD. "
                        "Values holding commas: separate them with |, e.g. lr='linear:1e-3,0|3e-4'.")] = None,
-    backend: Annotated[str, typer.Option(
-        help="local: a pool of processes on this machine; ray: Ray Tune on a cluster (--address) or a Ray "
-             "instance started here.")] = "local",
-    address: Annotated[Optional[str], typer.Option(
-        help="Ray cluster address HOST:PORT (from `ray start --head`); every node must see --out at the same path.")] = None,
+    backend: Backend = "local",
+    address: RayAddress = None,
     max_parallel: Annotated[Optional[int], typer.Option(
         help="Trials at once (default: one per core locally; as many as the cluster's CPUs fit with ray).")] = None,
     out: Out = None,
+    track: Track = None,
 ):
     """Run a command or a study for several seeds (and settings), then aggregate across seeds.
 
@@ -709,6 +732,7 @@ def sweep(
     """
     from motorlab.sweeps.sweep import run_sweep
 
+    trackers.enable(track)
     summary = run_sweep(target, seeds, grid, backend, address, max_parallel, out, console=stdout,
                         commands=typer.main.get_command(app))
     stdout.print(f"\n[bold]Results:[/bold] {summary['sweep_dir']}  (report.html, table.txt, summary.json, "
@@ -722,6 +746,9 @@ def sweep(
                     "  motorlab tune pendulum --space ppo.timesteps=int:20000,100000 --trials 10 --seeds 2 "
                     "--objective ppo.final_return   # a whole study per seed\n\n"
                     "  motorlab train InvertedPendulum-v5 --preset-file runs/tune-ppo/best.toml --seed 7\n\n"
+                    "  motorlab tune \"train Reacher-v5 --algo sac --timesteps 100000\" --space lr=loguniform:1e-4,1e-3 "
+                    "--trials 50 --seeds 3 --objective final_return --backend ray --address 10.0.0.5:6379   "
+                    "# Ray Tune: OptunaSearch and ASHA\n\n"
                     "Run the same command again (same --out) to resume; several processes with the same --out "
                     "(or --storage) share one search.")
 def tune(
@@ -744,7 +771,12 @@ def tune(
     study_name: Annotated[Optional[str], typer.Option(
         help="Study name in the database (default: derived from the target, space, objective and seeds).")] = None,
     sampler: Annotated[str, typer.Option(help="tpe | random | cmaes")] = "tpe",
-    pruner: Annotated[str, typer.Option(help="median | hyperband | none")] = "median",
+    sampler_seed: Annotated[Optional[int], typer.Option(
+        help="Seed of the sampler: the same command samples the same settings (a resumed search goes on from "
+             "where it was). Several processes sharing one search: leave it out or give each its own.")] = None,
+    pruner: Annotated[str, typer.Option(
+        help="median | hyperband | none (with --backend ray, Tune's schedulers: ASHA, ASHA with 3 brackets, "
+             "none).")] = "median",
     prune_startup: Annotated[int, typer.Option(
         help="Finished trials before the median pruner prunes.")] = 5,
     report_every: Annotated[int, typer.Option(
@@ -752,22 +784,31 @@ def tune(
     fresh_seeds: Annotated[Optional[int], typer.Option(
         help="Seeds the best settings are re-run on after the search (default: --seeds; 0: none).")] = None,
     max_parallel: Annotated[Optional[int], typer.Option(
-        help="Seed processes at once (default: one per core).")] = None,
+        help="Seed processes at once (default: one per core; with ray, as many as the cluster's CPUs fit).")] = None,
+    backend: Backend = "local",
+    address: RayAddress = None,
     out: Out = None,
+    track: Track = None,
 ):
     """Search settings with Optuna, judging each trial by the IQM of its objective over several seeds.
 
     Writes study.db, trials.csv, table.txt, best.toml (a preset file for train --preset-file),
-    plots/ and summary.json (with the best settings' numbers on fresh seeds) in the folder, and
+    plots/, summary.json (with the best settings' numbers on fresh seeds) and report.html in the folder, and
     each trial's run folders under trials/<number>/seed<k>/.
     """
     from motorlab.tuning.tune import make_spec, run_tune
 
     spec = make_spec(target, space, trials, seeds, objective, direction, out, storage, study_name, sampler, pruner,
-                     prune_startup, report_every, max_parallel, fresh_seeds)
-    summary = run_tune(spec, console=stdout, commands=typer.main.get_command(app))
+                     prune_startup, report_every, max_parallel, fresh_seeds, backend=backend,
+                     address=address, sampler_seed=sampler_seed)
+    trackers.enable(track)
+    # --track: the search is a parent run, each seed's run nests under it; run_tune logs its outputs at the end
+    with trackers.parent("tune", spec.out, {"tune": target, "space": space or [], "trials": trials, "seeds": seeds,
+                                            "objective": objective, "sampler": sampler, "pruner": pruner}):
+        summary = run_tune(spec, console=stdout, commands=typer.main.get_command(app))
     stdout.print(f"\n[bold]Results:[/bold] {summary['tune_dir']}  (best.toml, trials.csv, table.txt, summary.json, "
-                 "plots/*.png, study.db)")
+                 "plots/*.png, report.html, study.db)")
+    stdout.print(f"The study in a browser: optuna-dashboard {shlex.quote(spec.storage)}")
 
 
 @app.command(epilog="Examples:\n\n  motorlab export runs/ppo --out share/ppo          # only the files safe to send\n\n"

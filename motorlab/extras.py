@@ -1,7 +1,8 @@
 """The optional stacks (pip extras) and the one-line error when one is missing.
 
-The core install runs the pendulum and Reacher workflows; MyoSuite, Upkie, Ray Tune and
-EvoTorch come with `pip install 'motorlab[EXTRA]'` (`motorlab[all]`: all four). A module
+The core install runs the pendulum and Reacher workflows; MyoSuite, Upkie, Ray Tune,
+EvoTorch, ONNX export and the experiment trackers (MLflow, W&B: `--track`) come with
+`pip install 'motorlab[EXTRA]'` (`motorlab[all]`: all of them). A module
 that needs one imports it through `require`, which turns a missing stack into a
 `MotorlabError` naming the pip command. Ground floor: imports nothing of motorlab's but
 `motorlab.errors`.
@@ -22,6 +23,8 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "ray": ("ray[tune]==2.60.0",),
     "evotorch": ("evotorch==0.6.1",),
     "onnx": ("onnx==1.23.2", "onnxruntime==1.20.1"),
+    "mlflow": ("mlflow-skinny==3.17.2",),
+    "wandb": ("wandb==0.31.0",),
 }
 
 

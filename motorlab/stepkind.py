@@ -18,10 +18,17 @@ Python API all go through these objects, so adding a capability is one new file.
 A kind's module imports its settings' needs at the top and the domain code that runs it (torch,
 matplotlib, rollouts) inside `run` and the other methods that use it: the CLI reads every
 kind's settings when it starts, and should start in a fraction of a second.
+
+Experiment tracking (motorlab.trackers, `--track`): every kind's `run` is wrapped, once, where
+the subclass defines it, so that a run is one tracked run whoever calls it (the CLI, a study, a
+sweep trial, a script) and no kind has to say so. The tracked run starts when the run folder is
+made (`start`, or the train kind's own folder), gets the scalars its TensorBoard writers get,
+then its summary and files when `run` returns; it ends FAILED when `run` raises.
 """
 
 from __future__ import annotations
 
+import functools
 import statistics
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +37,7 @@ from typing import Any, ClassVar, Generic, TypeVar, get_args, get_origin
 from pydantic import ValidationError
 from rich.console import Console
 
+from motorlab import trackers
 from motorlab.envs import early_end_label
 from motorlab.errors import MotorlabError
 from motorlab.faults import write_faults_log
@@ -111,6 +119,8 @@ class StepKind(Generic[S, R]):
                 cls.settings, cls.summary = get_args(base)
         if "command" not in cls.__dict__ and "name" in cls.__dict__:
             cls.command = cls.name.replace("-", " ")
+        if "run" in cls.__dict__:
+            cls.run = _tracked(cls.__dict__["run"])
 
     def run(self, settings: S, out: Path | None = None, console: Console | None = None, progress: bool = True) -> R:
         """Run the step into the run folder `out` (default: runs/<kind>-<time>); `console` gets its
@@ -206,8 +216,11 @@ class StepKind(Generic[S, R]):
     # ---- the ending every run shares ------------------------------------------------------
 
     def start(self, out: Path | None) -> Path:
-        """The run folder, created and marked unfinished (call once the settings are checked)."""
-        return prepare_run_dir(out, self.name)
+        """The run folder, created and marked unfinished (call once the settings are checked); a
+        tracked run starts here."""
+        run_dir = prepare_run_dir(out, self.name)
+        trackers.folder_ready(run_dir)
+        return run_dir
 
     def finish(self, run_dir: Path, settings: S, summary: R, faults: list[str] | None = None) -> R:
         """config.toml, faults.log (where episodes ran), results.json and summary.json, the last file written."""
@@ -218,6 +231,24 @@ class StepKind(Generic[S, R]):
         write_summary(run_dir, summary.keys())
         summary.run_dir = Path(run_dir)
         return summary
+
+
+def _tracked(run):
+    """A kind's `run` as one tracked run, when tracking is on (motorlab.trackers; else `run` itself
+    does all, at the cost of one look at the environment)."""
+    if getattr(run, "_motorlab_tracked", False):
+        return run
+
+    @functools.wraps(run)
+    def tracked_run(self, settings, out=None, *args, **kwargs):
+        with trackers.step(self.name, settings) as tracked:
+            summary = run(self, settings, out, *args, **kwargs)
+            if tracked:
+                tracked.done(summary.run_dir, summary.keys())
+        return summary
+
+    tracked_run._motorlab_tracked = True
+    return tracked_run
 
 
 def option_error(e: ValidationError) -> str:

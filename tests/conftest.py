@@ -44,17 +44,19 @@ SHARED = {
     # hand_play_run and hand_activations: SAC on the MyoSuite hand, and activations collected from it
     "test_collect.py": "hand", "test_sar_cli.py": "hand", "test_determinism.py": "hand",
     "test_zeroshot_video_compare.py": "hand",
+    # a local Ray head each, stopped with `ray stop --force`, which stops every Ray on the machine: one at a time
+    "test_sweep.py": "ray", "test_tune_ray.py": "ray",
 }
 # 2. Units start longest first (xdist would start the files with the most tests first), so the
 # last to start are short and both workers finish together. About how many seconds each unit
 # takes in `make test`; a file not listed here starts first (it may be long).
 SECONDS = {
-    "tests/test_sweep.py": 270, "sar-hand-quick": 180, "hand": 160, "tests/test_parallel_steps.py": 120,
+    "ray": 360, "sar-hand-quick": 180, "hand": 160, "tests/test_parallel_steps.py": 120,
     "tests/test_user_env.py": 90, "tests/test_upkie.py": 100, "tests/test_train_evaluate.py": 60,
     "tests/test_safe_loading.py": 55, "tests/test_dynamics_cli.py": 50, "tests/test_report.py": 45,
     "tests/test_cli_errors.py": 45, "tests/test_fuzz.py": 45, "tests/test_synergy_signals.py": 35,
     "tests/test_reacher_study.py": 30, "tests/test_onnx_export.py": 30, "tests/test_robustness.py": 25,
-    "tests/test_parallel_eval.py": 12, "tests/test_tune.py": 80,
+    "tests/test_parallel_eval.py": 12, "tests/test_tune.py": 190, "tests/test_tracking.py": 100,
     "tests/test_disturbances.py": 8, "tests/test_resume.py": 25, "tests/test_recipes.py": 18,
     "tests/test_extras.py": 16, "tests/test_dynamics.py": 14, "tests/test_plots.py": 13, "tests/test_myosuite.py": 12,
     "tests/test_steps_to_success.py": 8, "tests/test_synergy_wrapper.py": 7, "tests/test_sar_formats.py": 6,

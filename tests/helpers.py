@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -15,6 +16,30 @@ TINY_PPO = ["--algo", "ppo", "--timesteps", "256", "--set", "n_steps=128", "--se
 
 
 USER_PACKAGES = str(Path(__file__).parent)  # tests/userpkg: a user's own env package (test_user_env.py)
+
+
+def ray_head(port: int) -> None:
+    """Start a local Ray head (2 CPUs) at 127.0.0.1:`port`, as a user's `ray start --head` would;
+    stop it with `ray_stop()` (in a finally)."""
+    # the cluster can import the user's env package (as if installed on its nodes), but is never
+    # told to: only motorlab's runtime_env passes the modules on (test_ray_workers_import_the_users_env_module)
+    env = {k: v for k, v in os.environ.items() if k != "MOTORLAB_IMPORTS"}
+    env.update(RAY_USAGE_STATS_ENABLED="0", PYTHONPATH=os.pathsep.join(
+        p for p in (USER_PACKAGES, os.environ.get("PYTHONPATH")) if p))
+    ray = str(Path(sys.executable).with_name("ray"))
+    subprocess.run([ray, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", "--num-cpus=2",
+                    "--include-dashboard=false", "--disable-usage-stats"], check=True, capture_output=True,
+                   env=env, timeout=120)
+
+
+def ray_stop() -> None:
+    subprocess.run([str(Path(sys.executable).with_name("ray")), "stop", "--force"], capture_output=True, timeout=120)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def run_cli(*args: str | os.PathLike, cwd: Path | None = None, timeout: float = 300,

@@ -215,8 +215,9 @@ def test_every_module_but_the_ray_callback_imports_without_the_stacks():
     proc = python(code)
     assert proc.returncode == 0, proc.stderr
     failed = json.loads(proc.stdout.strip().splitlines()[-1])
-    # ray_progress is Ray Tune's callback, imported only inside run_ray (after its check)
-    assert set(failed) == {"motorlab.sweeps.ray_progress"}, failed
+    # Ray Tune's classes, imported only after backends.init_ray's check: the sweep's callback
+    # (ray_progress), tune's searcher and scheduler (ray_study) and trainable (ray_trial)
+    assert set(failed) == {"motorlab.sweeps.ray_progress", "motorlab.tuning.ray_study", "motorlab.tuning.ray_trial"}, failed
 
 
 def test_pendulum_trains_without_the_stacks(tmp_path):

@@ -28,7 +28,7 @@ def layer(module: str) -> int:
         return KIND_REGISTRY
     if module == "motorlab.stepkind" or module.endswith(".steps"):
         return STEP_KINDS
-    if module in GROUND_FLOOR:
+    if module in GROUND_FLOOR or module.startswith("motorlab.trackers"):  # trackers: motorlab.trackers.*
         return GROUND
     return DOMAIN
 

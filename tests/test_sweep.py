@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -15,7 +14,19 @@ import numpy as np
 import pytest
 import typer
 
-from helpers import ENV_ID, TINY_PPO, USER_PACKAGES, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli
+from helpers import (
+    ENV_ID,
+    TINY_PPO,
+    USER_PACKAGES,
+    assert_ok,
+    assert_one_line_error,
+    assert_png,
+    free_port,
+    ray_head,
+    ray_stop,
+    read_summary,
+    run_cli,
+)
 from motorlab.cli import app
 from motorlab.errors import MotorlabError
 from motorlab.stats import aggregate, trial_scores
@@ -79,27 +90,9 @@ def test_local_sweep_aggregates_with_rliable(local_sweep):
     assert 'data-key="lr=3e-4.final_return_iqm"' in html
 
 
-def _ray_head(port: int) -> None:
-    # the cluster can import the user's env package (as if installed on its nodes), but is never
-    # told to: only motorlab's runtime_env passes the modules on (test_ray_workers_import_the_users_env_module)
-    env = {k: v for k, v in os.environ.items() if k != "MOTORLAB_IMPORTS"}
-    env.update(RAY_USAGE_STATS_ENABLED="0", PYTHONPATH=os.pathsep.join(
-        p for p in (USER_PACKAGES, os.environ.get("PYTHONPATH")) if p))
-    ray = str(Path(sys.executable).with_name("ray"))
-    subprocess.run([ray, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", "--num-cpus=2",
-                    "--include-dashboard=false", "--disable-usage-stats"], check=True, capture_output=True,
-                   env=env, timeout=120)
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def test_ray_backend_gives_the_same_folders_and_aggregate(local_sweep, tmp_path):
-    port = _free_port()
-    _ray_head(port)
+    port = free_port()
+    ray_head(port)
     try:
         out = tmp_path / "ray"
         proc = run_cli("sweep", TINY, "--seeds", "2", *GRID, "--backend", "ray", "--address", f"127.0.0.1:{port}",
@@ -112,8 +105,7 @@ def test_ray_backend_gives_the_same_folders_and_aggregate(local_sweep, tmp_path)
                        "--out", tmp_path / "user", env={"PYTHONPATH": USER_PACKAGES})
         assert_ok(user)
     finally:
-        subprocess.run([str(Path(sys.executable).with_name("ray")), "stop", "--force"], capture_output=True,
-                       timeout=120)
+        ray_stop()
     assert _run_folders(out) == _run_folders(local_sweep)
     assert (out / "ray").is_dir()  # Ray Tune ran the trials
     ray_summary, local_summary = read_summary(out), read_summary(local_sweep)
@@ -186,7 +178,7 @@ def test_bad_target_gives_one_clear_line(tmp_path, target, fragment):
 
 def test_unreachable_ray_cluster_fails_fast(tmp_path):
     t0 = time.monotonic()
-    proc = run_cli("sweep", TINY, "--backend", "ray", "--address", f"127.0.0.1:{_free_port()}", "--out", tmp_path / "x")
+    proc = run_cli("sweep", TINY, "--backend", "ray", "--address", f"127.0.0.1:{free_port()}", "--out", tmp_path / "x")
     assert_one_line_error(proc, "no Ray cluster answers")
     assert time.monotonic() - t0 < 60 and not (tmp_path / "x").exists()
     assert_one_line_error(run_cli("sweep", TINY, "--address", "h:1"), "add --backend ray")

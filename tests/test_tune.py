@@ -55,6 +55,139 @@ def test_tiny_search_prunes_writes_best_toml_and_reproduces(tmp_path):
     again = json.loads((tmp_path / "again" / "summary.json").read_text())
     trial_run = json.loads((out / "trials" / str(best) / "seed0" / "summary.json").read_text())
     assert again["steps_to_success"] == trial_run["steps_to_success"]
+    _check_report(out, summary)
+
+
+def _check_report(out, summary) -> None:
+    """report.html opens in Chromium with nothing broken: the findings hold the best trial's and the
+    fresh seeds' numbers, one row per trial, every figure loads, every internal link has a target."""
+    from playwright.sync_api import sync_playwright
+    from test_report import CHROMIUM, Opened, _check_page
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=["--headless", "--no-sandbox", "--disable-gpu"])
+        try:
+            opened = Opened(browser, out / "report.html")
+            _check_page(opened)
+            page = opened.page
+            findings = page.eval_on_selector_all("table.findings tbody tr", "rs => rs.map(r => [r.dataset.step, "
+                                                 "Number(r.querySelector('td.value').dataset.value)])")
+            assert findings == [[f"trial-{summary['best_trial']}", pytest.approx(summary["best_value"])],
+                                ["fresh", pytest.approx(summary["fresh_iqm"])]]
+            rows = page.eval_on_selector_all("table.study tbody tr", "rs => rs.length")
+            assert rows == sum(summary["n_trials"].values())
+            broken = page.evaluate("() => Array.from(document.querySelectorAll('a[href^=\"#\"]'))"
+                                   ".map(a => a.getAttribute('href').slice(1)).filter(id => !document.getElementById(id))")
+            assert broken == []
+            names = {p.name for p in (out / "plots").glob("*.png")}
+            assert {"history.png", "slice-delay.png"} <= names
+        finally:
+            browser.close()
+
+
+def _study(out):
+    import optuna
+
+    summary = json.loads((out / "summary.json").read_text())
+    return optuna.load_study(study_name=summary["study_name"], storage=summary["storage"])
+
+
+def test_pruning_stops_a_hopeless_trial(tmp_path):
+    """solve_return 5000 can never be reached (the maximum return is 1000). --sampler-seed 6 samples
+    1000, 1000, 5000: the third trial lags the median steps-to-success of the first two (solved in
+    ~100 steps) from step 200 on, and is pruned long before its budget, its run left unfinished."""
+    import optuna
+
+    out = tmp_path / "t"
+    proc = run_cli("tune", "train InvertedPendulum-v5 --preset fast --until-solved --timesteps 3000",
+                   "--space", "solve_return=choice:1000,5000", "--trials", "3", "--seeds", "1", "--sampler", "random",
+                   "--sampler-seed", "6", "--prune-startup", "1", "--report-every", "100", "--fresh-seeds", "0",
+                   "--out", out)
+    assert proc.returncode == 0, proc.stderr + proc.stdout
+    trials = _study(out).trials
+    assert [t.params["solve_return"] for t in trials] == ["1000", "1000", "5000"]  # the seed's samples
+    states = [t.state for t in trials]
+    assert states == [optuna.trial.TrialState.COMPLETE] * 2 + [optuna.trial.TrialState.PRUNED]
+    hopeless = trials[2]
+    run = out / "trials" / "2" / "seed0"
+    assert not (run / "summary.json").exists()  # stopped, not finished
+    assert 0 < hopeless.user_attrs["env_steps"] < 3000
+    assert hopeless.user_attrs["env_steps_saved"] == 3000 - hopeless.user_attrs["env_steps"]
+    assert max(hopeless.intermediate_values) < 3000  # reported while it ran
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["env_steps_saved_by_pruning"] == hopeless.user_attrs["env_steps_saved"]
+    assert summary["best_trial"] in (0, 1)
+    _check_dashboard(summary["storage"], summary["study_name"])
+
+
+def _check_dashboard(storage: str, name: str) -> None:
+    """`optuna-dashboard STORAGE` (the line tune prints) serves the study."""
+    import subprocess
+    import sys
+    import time
+    import urllib.request
+    from pathlib import Path
+
+    from helpers import free_port
+
+    port = free_port()
+    dashboard = str(Path(sys.executable).with_name("optuna-dashboard"))
+    proc = subprocess.Popen([dashboard, storage, "--port", str(port), "--host", "127.0.0.1", "--quiet"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.time() + 60
+        while True:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/studies", timeout=5) as r:
+                    studies = json.loads(r.read())["study_summaries"]
+                break
+            except OSError:
+                assert proc.poll() is None and time.time() < deadline, proc.stderr.read().decode()
+                time.sleep(0.5)
+        assert [s["study_name"] for s in studies] == [name]
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+RECIPE = """name = "tiny"
+description = "LQR balancing, one step"
+
+[defaults]
+env = "InvertedPendulum-v5"
+
+[[steps]]
+name = "lqr"
+kind = "train"
+preset = "fast"
+timesteps = 1500
+until_solved = true
+"""
+
+
+def test_a_recipe_is_tuned_by_its_step_fields_and_the_best_runs_as_a_recipe(tmp_path):
+    recipe = tmp_path / "tiny.toml"
+    recipe.write_text(RECIPE)
+    out = tmp_path / "t"
+    proc = run_cli("tune", recipe, "--space", "lqr.delay=uniform:0.05,0.25", "--trials", "1", "--seeds", "1",
+                   "--objective", "lqr.return_mean", "--pruner", "none", "--fresh-seeds", "0",
+                   "--sampler-seed", "0", "--out", out)
+    assert proc.returncode == 0, proc.stderr + proc.stdout
+    study = _study(out)
+    for t in study.trials:  # each trial ran the whole study; its value is the study's number
+        trial_summary = json.loads((out / "trials" / str(t.number) / "seed0" / "summary.json").read_text())
+        assert t.value == pytest.approx(trial_summary["lqr.return_mean"])
+        recipe_run = (out / "trials" / str(t.number) / "seed0" / "lqr" / "config.toml").read_text()
+        assert f"delay = {float(t.params['lqr.delay'])!r}" in recipe_run
+    best = json.loads((out / "summary.json").read_text())["best_trial"]
+    import tomllib
+
+    assert tomllib.loads((out / "best.toml").read_text()) == {"lqr": {"delay": float(
+        study.trials[best].params["lqr.delay"])}}
+    again = run_cli("run", out / "best_recipe.toml", "--out", tmp_path / "again")
+    assert again.returncode == 0, again.stderr
+    rerun = json.loads((tmp_path / "again" / "summary.json").read_text())
+    assert rerun["lqr.return_mean"] == pytest.approx(study.trials[best].value)
 
 
 SEARCH = ["--space", "delay=uniform:0.05,0.2", "--seeds", "1", "--sampler", "random", "--pruner", "none",
@@ -83,7 +216,9 @@ def test_two_processes_share_one_study_without_duplicates(tmp_path):
         assert p.returncode == 0, stderr
     n, numbers = counted(out)
     assert n == 3 and len(numbers) == len(set(numbers))  # three trials in all, none run twice
-    assert len(list((out / "trials").iterdir())) == len(numbers)
+    # a trial that found three ahead of it (both processes asked at once) gave way before running anything
+    ran = [t.number for t in _study(out).trials if not t.user_attrs.get("gave_way")]
+    assert sorted(int(d.name) for d in (out / "trials").iterdir()) == ran
 
 
 def test_an_interrupted_search_resumes_with_its_finished_trials(tmp_path):

@@ -28,6 +28,7 @@ import numpy as np
 import torch
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from motorlab import trackers
 from motorlab.control.mpc_episodes import build_policy, run_episodes
 from motorlab.dynamics.collect import collect_transitions, episode_arrays
 from motorlab.dynamics.model import MODEL_JSON, ForwardModel, load_model
@@ -263,6 +264,9 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                         "held_out_episodes": valid.tolist()})
                 records.append(record)
                 curve.write(asdict(record))
+                # the tracked run (--track), live: curve.csv's row, against the env steps collected so far
+                trackers.scalars({f"round/{k}": v for k, v in asdict(record).items() if k != "env_steps"},
+                                 record.env_steps)
                 shown = f"return {record.eval_return_mean:.1f}" if record.eval_return_mean is not None else ""
                 bar.update(task, advance=1, status=f"{record.env_steps:,} steps, {shown}")
                 if (plan.until_return is not None and record.eval_return_mean is not None

@@ -10,6 +10,7 @@ import numpy as np
 from pydantic import Field
 from rich.console import Console
 
+from motorlab import trackers
 from motorlab.dynamics.steps import ModelSettings
 from motorlab.envs import EnvConfig, check_env_id, make_env
 from motorlab.errors import MotorlabError
@@ -143,6 +144,8 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
         metrics = MetricsWriter(run_dir / "metrics.csv", ["episode", "return", "final_distance"])
         for i, (r, d) in enumerate(zip(returns, final, strict=True)):
             metrics.write({"episode": i, "return": r, "final_distance": d})
+            # mpc writes no TensorBoard scalars: the tracked run (--track) gets metrics.csv's rows, by episode
+            trackers.scalars({"episode/return": r, "episode/final_distance": d if np.isfinite(d) else None}, i)
         metrics.close()
         # the ensemble's disagreement on each action taken, one entry per env per control step
         spread = np.concatenate(policy.disagreements) if policy.disagreements else np.zeros(0)

@@ -23,6 +23,7 @@ import torch
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from torch.nn import functional as F
 
+from motorlab import trackers
 from motorlab.dynamics.model import ForwardModel
 from motorlab.dynamics.transitions import Transitions
 from motorlab.errors import MotorlabError
@@ -169,7 +170,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
     if run_dir is not None:
         from torch.utils.tensorboard import SummaryWriter
 
-        writer = SummaryWriter(str(Path(run_dir) / "tensorboard" / "motorlab"))
+        writer = trackers.mirror(SummaryWriter(str(Path(run_dir) / "tensorboard" / "motorlab")))  # and the tracker's
         metrics = MetricsWriter(Path(run_dir) / "metrics.csv", ["epoch", "train_loss", "train_mse", "valid_mse", "lr",
                                                                 "seconds"])
     generator = torch.Generator().manual_seed(seed)

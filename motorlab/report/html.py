@@ -19,6 +19,7 @@ summary.json (motorlab.report.results); folders without one show their summary.j
 from __future__ import annotations
 
 import base64
+import csv
 import datetime
 import os
 import tomllib
@@ -113,6 +114,7 @@ class StudyView:
     table_text: str | None
     findings: list[Finding] = field(default_factory=list)
     results: list[StepResults] | None = None  # each step's numbers as shown, where the study wrote them
+    linked: set[str] | None = None  # rows whose runs the page shows (None: every row's)
 
 
 def _scalar(v: Any) -> bool:
@@ -209,6 +211,50 @@ class _Collector:
                          table_text=table.read_text() if table.is_file() else None,
                          findings=results.findings if results else [], results=results.steps if results else None)
 
+    def tune(self, path: Path) -> StudyView:
+        """A `motorlab tune` folder: the best settings and their numbers on the search's seeds and on
+        fresh ones (the findings), the search's plots, one row per trial, and the runs of the best
+        trial and of the fresh seeds (the other trials' run folders stay on disk, not in the page)."""
+        config = tomllib.loads((path / CONFIG).read_text())
+        summary = read_json(path / SUMMARY)
+        objective, best = summary.get("objective", ""), summary.get("best_trial")
+        with open(path / "trials.csv", newline="") as f:
+            trials = list(csv.DictReader(f))
+        space = list(config.get("space", {}))
+        columns = ["state", *space, "value", "per seed", "env steps", "env steps saved"]
+        rows = []
+        for t in trials:
+            values = [t["state"].lower(), *(_parsed(t.get(k, "")) for k in space), _parsed(t["value"]), t["seed_values"],
+                      _parsed(t["env_steps"]), _parsed(t["env_steps_saved"])]
+            rows.append((f"trial-{t['number']}", [Cell(c, v) for c, v in zip(columns, values)]))
+        findings = []
+        if best is not None:
+            seeds = [f"seed{s}" for s in summary.get("seeds", [])]
+            findings.append(_finding(f"{objective}, best trial ({best}) on the search's seeds", f"trial-{best}",
+                                     objective, summary["best_value"], seeds, summary.get("best_seed_values") or []))
+        if summary.get("fresh_values"):
+            findings.append(_finding(f"{objective}, the best settings on fresh seeds", "fresh", objective,
+                                     summary["fresh_iqm"], [f"seed{s}" for s in summary["fresh_seeds"]],
+                                     summary["fresh_values"], (summary["fresh_iqm_ci_low"], summary["fresh_iqm_ci_high"])))
+        runs = []
+        for label, folder in ((f"trial-{best}", path / "trials" / str(best)), ("fresh", path / "fresh")):
+            if best is not None and folder.is_dir():
+                runs += [self.run(d, f"{label}/{d.name}") for d in sorted(folder.glob("seed*")) if (d / SUMMARY).is_file()]
+        counts = ", ".join(f"{n} {state}" for state, n in (summary.get("n_trials") or {}).items())
+        best_params = ", ".join(f"{k}={fmt(v)}" for k, v in (summary.get("best_params") or {}).items())
+        description = (f"Optuna search ({config.get('sampler', 'tpe')} sampler, {config.get('pruner', 'median')} "
+                       f"pruning), {summary.get('direction', '')} {objective}: each trial is the IQM over seeds "
+                       f"{', '.join(map(str, summary.get('seeds', [])))}. Trials: {counts}. "
+                       + (f"Best: trial {best}, {best_params}. best.toml holds it as a preset file "
+                          "(motorlab train --preset-file best.toml). " if best is not None else "")
+                       + f"Pruning saved {fmt(summary.get('env_steps_saved_by_pruning', 0))} env steps "
+                         f"of {fmt(summary.get('env_steps_run', 0))} run.")
+        table = path / "table.txt"
+        return StudyView(name=f"tune of {config.get('tune', path.name)}", path=path, description=description,
+                         steps=[r[0] for r in rows], columns=columns, rows=rows,
+                         plots=[_figure(p, p.name) for p in sorted((path / "plots").glob("*.png"))], runs=runs,
+                         table_text=table.read_text() if table.is_file() else None, findings=findings,
+                         linked={r.label.split("/")[0] for r in runs})
 
 def _figure(path: Path, name: str) -> Media:
     """A PNG with its caption (the file name where it carries none: written by something else)."""
@@ -224,12 +270,31 @@ def _video_captions(path: Path, summary: dict[str, Any]) -> dict[str, str]:
             for i, (v, r) in enumerate(zip(videos, returns))}
 
 
-def _is_study(path: Path) -> bool:
+def _finding(label: str, step: str, key: str, iqm: float, seeds: list[str], values: list[float],
+             ci: tuple[float, float] | None = None) -> Finding:
+    """A tuning number: the IQM over seeds (with its CI where known) and each seed's value."""
+    return Finding(label=label, step=step, key=key, text=fmt(iqm), value=iqm, seeds=seeds,
+                   values=[fmt(v) for v in values], iqm=fmt(iqm), ci=f"[{fmt(ci[0])}, {fmt(ci[1])}]" if ci else "")
+
+
+def _parsed(text: str) -> Any:
+    """A trials.csv cell as a number where it is one."""
+    try:
+        return int(text)
+    except ValueError:
+        try:
+            return float(text)
+        except ValueError:
+            return text or None
+
+
+def _kind(path: Path) -> str | None:
+    """"study", "sweep" or "tune" for those folders (their config.toml says which), else None."""
     try:
         config = tomllib.loads((path / CONFIG).read_text())
-        return "recipe" in config or "sweep" in config
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
-        return False
+        return None
+    return next((k for k, key in (("study", "recipe"), ("sweep", "sweep"), ("tune", "tune")) if key in config), None)
 
 
 def _check_path(path: Path) -> Path:
@@ -309,7 +374,9 @@ def build_report(paths: list[Path], out: Path | None = None) -> Path:
     collector = _Collector(out.parent)
     studies, runs = [], []
     for p in paths:
-        if _is_study(p):
+        if _kind(p) == "tune":
+            studies.append(collector.tune(p))
+        elif _kind(p) is not None:
             studies.append(collector.study(p))
         else:
             runs.append(collector.run(p, p.name))

@@ -14,8 +14,10 @@ from stable_baselines3 import PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.logger import TensorBoardOutputFormat
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
+from motorlab import trackers
 from motorlab.envs import make_env
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.evaluation import EpisodeSuccess, success_mode
@@ -49,6 +51,9 @@ class TrackingCallback(BaseCallback):
     def _on_training_start(self) -> None:
         self.outcome = EpisodeSuccess(self.training_env.num_envs, self.tracker.solve_return,
                                       success_mode(self.tracker.cfg.env))
+        for output in self.logger.output_formats:  # SB3's TensorBoard scalars also go to the tracked run, if any
+            if isinstance(output, TensorBoardOutputFormat):
+                trackers.mirror(output.writer)
 
     def policy_now(self) -> SB3Policy:
         # SB3Policy switches the network to eval mode; SB3 switches it back in train().

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from torch.utils.tensorboard import SummaryWriter
 
+from motorlab import trackers
 from motorlab.evaluation import Evaluator
 from motorlab.faults import FAULT_KEY, FAULTS_LOG
 from motorlab.policies import Policy
@@ -44,7 +45,8 @@ class Tracker:
         self.faults_log = Path(run_dir) / FAULTS_LOG
         if resume is None:
             self.faults_log.unlink(missing_ok=True)
-        self.tb = SummaryWriter(str(Path(run_dir) / "tensorboard" / "motorlab"))
+        # its scalars also go to the tracked run, if any (--track; motorlab.trackers)
+        self.tb = trackers.mirror(SummaryWriter(str(Path(run_dir) / "tensorboard" / "motorlab")))
         self.t0 = time.perf_counter()
         self.recent = deque(maxlen=100)
         self.recent_success: deque[bool] = deque(maxlen=100)

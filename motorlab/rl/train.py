@@ -20,6 +20,7 @@ from typing import Any
 import torch
 from rich.progress import Progress
 
+from motorlab import trackers
 from motorlab.control.lqr import learn_lqr
 from motorlab.envs import make_env, max_return
 from motorlab.errors import MotorlabError
@@ -87,6 +88,7 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
         if has_checkpoint(run_dir):
             record = load_checkpoint(run_dir, model)
     prepare_run_dir(run_dir, f"train-{cfg.algo}")
+    trackers.folder_ready(run_dir)  # a tracked run (--track) starts now, before the first scalar
     if record is None:
         shutil.rmtree(run_dir / "checkpoint", ignore_errors=True)  # another run's, not to be resumed into this one
     write_config(run_dir, cfg.model_dump())

@@ -26,6 +26,7 @@ from typing import Any
 
 from rich.console import Console
 
+from motorlab import trackers
 from motorlab.errors import MotorlabError
 from motorlab.recipes import FindingSpec, Recipe, Step, refs_in
 from motorlab.report.html import build_report
@@ -198,7 +199,7 @@ def _run_processes(step: Step, todo: list[tuple[Path, Settings]], execution: Exe
         write_toml(settings_file, settings.config())
         trials.append(trial(f"{step.name}/{run_dir.name}", step.name, getattr(settings, "seed", 0),
                             k.process_argv(settings_file.resolve(), run_dir), run_dir, logs / f"{run_dir.name}.log",
-                            threads, resume_argv=k.resume_argv(run_dir)))
+                            {**threads, **trackers.child_env()}, resume_argv=k.resume_argv(run_dir)))
     where = execution.backend + (f" at {execution.address}" if execution.address else "")
     if len(trials) == 1:
         console.print(f"      {step.name}: one process, log {trials[0]['log']}")
@@ -258,7 +259,18 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
                       f"--backend {execution.backend} its steps run one after another")
         parallel_steps = 1
     study_dir = prepare_run_dir(out, recipe.name)
-    write_config(study_dir, {"recipe": recipe.name, "source": recipe.source, "steps": [s.name for s in recipe.steps]})
+    config = {"recipe": recipe.name, "source": recipe.source, "steps": [s.name for s in recipe.steps]}
+    write_config(study_dir, config)
+    # --track: the study is a parent run; each step's run (here, or in its own process) nests under it
+    with trackers.parent("study", study_dir, config):
+        summary = _run_steps(recipe, study_dir, console, execution, parallel_steps)
+        trackers.outputs(study_dir, summary)  # summary.json, results.json, table.txt, plots, report.html
+    return summary
+
+
+def _run_steps(recipe: Recipe, study_dir: Path, console: Console, execution: Execution,
+               parallel_steps: int) -> dict[str, Any]:
+    """The study's steps, then its table, findings, figures, summary.json and report (see run_study)."""
     t0 = time.perf_counter()
     outputs = _Outputs(recipe.steps)
     overlaps = Overlaps()

@@ -6,6 +6,9 @@ folder and log, so the two backends differ only in who starts the processes:
            trials are Tune trials (grid_search over them), each starting the same process
            on whichever node Tune places it. Run folders are written by absolute path, so
            every node must see the sweep folder at the same path (a shared file system).
+
+`init_ray` (connecting, the auth token, the user's modules in the runtime_env) is shared with
+`motorlab tune --backend ray` (motorlab/tuning/ray_search.py).
 """
 
 from __future__ import annotations
@@ -20,7 +23,9 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from motorlab import trackers
 from motorlab.errors import MotorlabError
+from motorlab.extras import missing
 from motorlab.sweeps.trials import launch_argv, mark_finished, mark_started
 from motorlab.user_modules import ENV_VAR, imported_names
 
@@ -149,12 +154,13 @@ def _ray_trial(config: dict[str, Any]) -> None:
     tune.report({"returncode": rc, "seconds": time.perf_counter() - t0})
 
 
-def run_ray(trials: list[dict[str, Any]], address: str | None, max_parallel: int | None, cpus_per_trial: float,
-            storage: Path, on_done: OnDone) -> None:
-    """Every trial as one Ray Tune trial (grid_search over the trial list).
+def init_ray(address: str | None) -> Any:
+    """Connect to the Ray cluster at `address`, or start a Ray instance here (None); the user's
+    env modules reach every worker. Returns the `ray` module (`ray.shutdown()` when done). Shared by
+    the sweep's (and a study's) ray backend and `motorlab tune --backend ray`.
 
     Raises:
-        MotorlabError: Ray is not installed, or no cluster answers at `address`.
+        MotorlabError: Ray Tune is not installed, or no cluster answers at `address`.
     """
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     os.environ.setdefault("TUNE_DISABLE_AUTO_CALLBACK_LOGGERS", "1")  # run folders already hold the results
@@ -165,17 +171,16 @@ def run_ray(trials: list[dict[str, Any]], address: str | None, max_parallel: int
         os.environ["RAY_AUTH_MODE"] = "token"
     try:
         import ray
-        from ray import tune
-
-        from motorlab.sweeps.ray_progress import Reporter
+        from ray import tune  # noqa: F401 - the extra that is missing when only ray's core is installed
     except ImportError:
-        raise MotorlabError("the ray backend needs Ray Tune, which is not installed: pip install 'motorlab[ray]' "
-                            "(or: pip install 'ray[tune]==2.60.0')") from None
+        raise missing("the ray backend needs Ray Tune", "ray") from None
 
-    # the user's env modules (--import, MODULE:ID, a recipe's imports) reach the workers' trial processes,
-    # on this machine and on a cluster's other nodes (where the modules must be installed too)
+    # the user's env modules (--import, MODULE:ID, a recipe's imports) and the tracking setting (--track)
+    # reach the workers' trial processes, on this machine and on a cluster's other nodes (where the
+    # modules must be installed too)
     modules = imported_names()
-    runtime_env = {"env_vars": {ENV_VAR: ",".join(modules)}} if modules else None
+    env_vars = {**({ENV_VAR: ",".join(modules)} if modules else {}), **trackers.child_env()}
+    runtime_env = {"env_vars": env_vars} if env_vars else None
     try:
         if address:
             ray.init(address=address, logging_level="ERROR", log_to_driver=False, runtime_env=runtime_env)
@@ -185,6 +190,21 @@ def run_ray(trials: list[dict[str, Any]], address: str | None, max_parallel: int
     except (ConnectionError, RuntimeError, ValueError) as e:
         raise MotorlabError(f"cannot reach a Ray cluster at {address}: {str(e).splitlines()[0]} "
                             "Start one with `ray start --head` or check --address (HOST:PORT).") from None
+    return ray
+
+
+def run_ray(trials: list[dict[str, Any]], address: str | None, max_parallel: int | None, cpus_per_trial: float,
+            storage: Path, on_done: OnDone) -> None:
+    """Every trial as one Ray Tune trial (grid_search over the trial list).
+
+    Raises:
+        MotorlabError: Ray is not installed, or no cluster answers at `address`.
+    """
+    ray = init_ray(address)
+    from ray import tune
+
+    from motorlab.sweeps.ray_progress import Reporter
+
     try:
         tuner = tune.Tuner(
             tune.with_resources(_ray_trial, {"cpu": cpus_per_trial}),

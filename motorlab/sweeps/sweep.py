@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+from motorlab import trackers
 from motorlab.errors import MotorlabError
 from motorlab.recipes import bundled, find_recipe
 from motorlab.report import sweep_plots
@@ -95,8 +96,9 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
     sweep_dir = run_path(out, "sweep")
     trials = plan(target, seeds, grid, sweep_dir, threads, commands)
     labels = list(dict.fromkeys(t["setting"] for t in trials))
-    write_config(sweep_dir, {"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [],
-                             "settings": labels, "backend": backend, "address": address, "max_parallel": max_parallel})
+    config = {"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [], "settings": labels,
+              "backend": backend, "address": address, "max_parallel": max_parallel}
+    write_config(sweep_dir, config)
     (sweep_dir / "summary.json").unlink(missing_ok=True)  # unfinished until the aggregate is written
     todo = [t for t in trials if not is_finished(t)]
     kept = len(trials) - len(todo)
@@ -104,37 +106,44 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
                   f"{len(trials) // len(labels)} seeds)" + (f", {kept} already finished, kept" if kept else "")
                   + (f"; running {len(todo)} on {backend}" + (f" ({parallel} at a time)" if parallel else "")
                      if todo else ""))
-    t0 = time.perf_counter()
-    if todo:
-        with Progress(TextColumn("[bold]sweep[/bold]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      console=console, transient=True) as bar:
-            task = bar.add_task("trials", total=len(todo))
+    # --track: the sweep is a parent run; each trial's run (its own process) nests under it
+    with trackers.parent("sweep", sweep_dir, config):
+        for t in todo:
+            t["env"].update(trackers.child_env())  # Ray workers on other machines get it too
+        t0 = time.perf_counter()
+        if todo:
+            with Progress(TextColumn("[bold]sweep[/bold]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                          console=console, transient=True) as bar:
+                task = bar.add_task("trials", total=len(todo))
 
-            def on_done(t: dict[str, Any], rc: int, seconds: float) -> None:
-                bar.advance(task)
-                if rc == 0:
-                    scores = trial_scores(read_json(Path(t["run_dir"]) / "summary.json"))
-                    ret = scores.get("final_return")
-                    console.print(f"  [green]✓[/green] {t['name']}" + (f": final return {ret[0]:,.1f}" if ret else "")
-                                  + f" ({seconds:.0f} s)")
-                else:
-                    console.print(f"  [red]✗[/red] {t['name']} failed (exit {rc}): {backends.last_line(t['log'])}")
+                def on_done(t: dict[str, Any], rc: int, seconds: float) -> None:
+                    bar.advance(task)
+                    if rc == 0:
+                        scores = trial_scores(read_json(Path(t["run_dir"]) / "summary.json"))
+                        ret = scores.get("final_return")
+                        shown = f": final return {ret[0]:,.1f}" if ret else ""
+                        console.print(f"  [green]✓[/green] {t['name']}{shown} ({seconds:.0f} s)")
+                    else:
+                        console.print(f"  [red]✗[/red] {t['name']} failed (exit {rc}): "
+                                      f"{backends.last_line(t['log'])}")
 
-            try:
-                if backend == "local":
-                    backends.run_local(todo, parallel, on_done)
-                else:
-                    backends.run_ray(todo, address, max_parallel, 1, sweep_dir / "ray", on_done)
-            except KeyboardInterrupt:
-                console.print("sweep interrupted: finished trials are kept; run the same command again to resume.")
-                raise
-    done = [t for t in trials if is_finished(t)]
-    failed = [t for t in trials if not is_finished(t)]  # also those a Ray worker lost without reporting
-    summary = _write_results(target, trials, done, sweep_dir, time.perf_counter() - t0, console)
-    if failed:
-        raise MotorlabError(f"{len(failed)} of {len(trials)} trials failed ({', '.join(t['name'] for t in failed)}); "
-                            f"see {Path(failed[0]['log'])}. Fix the cause and run the same command again: "
-                            "finished trials are kept.")
+                try:
+                    if backend == "local":
+                        backends.run_local(todo, parallel, on_done)
+                    else:
+                        backends.run_ray(todo, address, max_parallel, 1, sweep_dir / "ray", on_done)
+                except KeyboardInterrupt:
+                    console.print("sweep interrupted: finished trials are kept; run the same command again to resume.")
+                    raise
+        done = [t for t in trials if is_finished(t)]
+        failed = [t for t in trials if not is_finished(t)]  # also those a Ray worker lost without reporting
+        summary = _write_results(target, trials, done, sweep_dir, time.perf_counter() - t0, console)
+        trackers.outputs(sweep_dir, summary)  # summary.json, table.txt, plots, report.html
+        if failed:
+            names = ", ".join(t["name"] for t in failed)
+            raise MotorlabError(f"{len(failed)} of {len(trials)} trials failed ({names}); "
+                                f"see {Path(failed[0]['log'])}. Fix the cause and run the same command again: "
+                                "finished trials are kept.")
     return summary
 
 

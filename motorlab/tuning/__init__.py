@@ -5,6 +5,8 @@ by the IQM over several seeds, with pruning, a resumable shared study, and a fre
     objective.py  the number per seed (summary.json) and the intermediate numbers (metrics.csv)
     trials.py     a trial's seeds as the sweep's trial processes, watched while they run
     search.py     the study (storage, sampler, pruner) and the trial loop
+    ray_search.py --backend ray: the same search through Ray Tune (OptunaSearch, ASHA) on a cluster;
+                  ray_study.py its searcher and scheduler (driver), ray_trial.py its trainable (workers)
     outputs.py    trials.csv, the table, best.toml, plots
     tune.py       motorlab tune: the above, then the best settings on fresh seeds
 """

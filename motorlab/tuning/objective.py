@@ -19,6 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from motorlab.errors import MotorlabError
 from motorlab.runs import SUMMARY, is_complete, last_timesteps, read_config, read_json, read_metrics
 from motorlab.stats import DIRECTION, trial_scores
@@ -117,3 +119,65 @@ def budget_of(run_dir: Path) -> int | None:
 def steps_run(run_dir: Path) -> int:
     """Env steps a run has trained so far (all of them once it finished)."""
     return last_timesteps(run_dir)
+
+
+MAX_FILL_REPORTS = 200  # numbers a finished trial reports for the steps after its end (one DB write each)
+
+
+def iqm(values: list[float]) -> float:
+    """rliable's interquartile mean, scipy.stats.trim_mean(values, 0.25), without importing scipy
+    (a Ray worker imports this module for every trial)."""
+    a = np.sort(np.asarray(values, dtype=float))
+    cut = int(0.25 * a.size)
+    return float(a[cut:a.size - cut].mean())
+
+
+def trial_horizon(dirs: list[Path]) -> int:
+    """The env steps a trial's seeds were to train (their budget; what they ran when it is unknown)."""
+    return max(budget_of(d) or steps_run(d) for d in dirs)
+
+
+class Reporter:
+    """A trial's intermediate numbers (IQM over its seeds) at each multiple of `every` env steps
+    that every seed has reached, read from their run folders. Both backends report them: the local
+    one to its Optuna trial (for the pruner), the ray one to Ray Tune (for its scheduler, ASHA)."""
+
+    def __init__(self, objective: Objective, every: int, dirs: list[Path]):
+        self.objective = objective
+        self.every = every
+        self.dirs = dirs
+        self.last_step = 0
+
+    def _at(self, step: int) -> float | None:
+        values = [self.objective.progress(d, step) for d in self.dirs]
+        if any(v is None for v in values):
+            return None
+        return iqm(values)
+
+    def reached(self) -> list[tuple[int, float]]:
+        """(step, number) for every step reached since the last call, in order."""
+        if not self.objective.prunable:
+            return []
+        numbers = []
+        reached = max(steps_run(d) for d in self.dirs)  # a finished seed knows every later step: stop at the front
+        while self.last_step + self.every <= reached and (value := self._at(self.last_step + self.every)) is not None:
+            self.last_step += self.every
+            numbers.append((self.last_step, value))
+        return numbers
+
+    def filled(self, horizon: int) -> list[tuple[int, float]]:
+        """A finished trial's numbers for the remaining steps up to `horizon` (its budget), so that
+        trials still running are compared against it there (each is final: the runs have ended)."""
+        if not self.objective.prunable or not all(is_complete(d) for d in self.dirs):
+            return []
+        numbers = []
+        for _ in range(MAX_FILL_REPORTS):
+            step = self.last_step + self.every
+            if step > horizon:
+                break
+            value = self._at(step)
+            if value is None:
+                break
+            numbers.append((step, value))
+            self.last_step = step
+        return numbers

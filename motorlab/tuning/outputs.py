@@ -49,6 +49,11 @@ def write_trials_csv(trials: list[FrozenTrial], space: dict[str, Dist], path: Pa
 COLUMNS = ["trial", "state", "settings", "value (IQM)", "per seed", "env steps"]
 
 
+def number(v: float) -> str:
+    """An objective's value as people read it: 16,384 (not 1.638e+04), 812.3, 0.9667."""
+    return f"{v:,.0f}" if abs(v) >= 1000 else f"{v:.4g}"
+
+
 def table_rows(trials: list[FrozenTrial], space: dict[str, Dist], best: FrozenTrial | None,
                fresh: Fresh | None) -> list[list[str]]:
     rows = []
@@ -57,13 +62,13 @@ def table_rows(trials: list[FrozenTrial], space: dict[str, Dist], best: FrozenTr
                              for k in space if k in t.params)
         mark = " (best)" if best is not None and t.number == best.number else ""
         rows.append([f"{t.number}{mark}", t.state.name.lower(), settings,
-                     "" if t.value is None else f"{t.value:,.4g}",
-                     " ".join(f"{v:,.4g}" for v in t.user_attrs.get("seed_values", [])),
+                     "" if t.value is None else number(t.value),
+                     " ".join(map(number, t.user_attrs.get("seed_values", []))),
                      f"{t.user_attrs.get('env_steps', 0):,}"])
     if best is not None and fresh is not None:
         rows.append([f"{best.number} on fresh seeds", "complete", f"seeds {fresh.seeds[0]}..{fresh.seeds[-1]}",
-                     f"{fresh.iqm:,.4g} [{fresh.ci[0]:,.4g}, {fresh.ci[1]:,.4g}]",
-                     " ".join(f"{v:,.4g}" for v in fresh.values), ""])
+                     f"{number(fresh.iqm)} [{number(fresh.ci[0])}, {number(fresh.ci[1])}]",
+                     " ".join(map(number, fresh.values)), ""])
     return rows
 
 
@@ -104,6 +109,14 @@ def _value(text: str) -> Any:
 
 def write_best_toml(path: Path, fields: dict[str, Any], header: list[str]) -> None:
     atomic_write_text(path, "".join(f"# {line}\n" for line in header) + tomli_w.dumps(fields))
+
+
+def write_best_recipe(path: Path, trial_dir: Path, header: list[str]) -> None:
+    """The recipe variant the best trial ran for its first seed (its settings applied, every step's
+    seed that seed), with the header and how to run it."""
+    first = min((trial_dir / "recipes").glob("*-seed*.toml"), key=lambda p: int(p.stem.rpartition("-seed")[2]))
+    lines = [*header, f"the recipe as trial {trial_dir.name} ran it on its first seed: motorlab run {path.name}"]
+    atomic_write_text(path, "".join(f"# {line}\n" for line in lines) + first.read_text())
 
 
 def reproduce_line(target: str, best_toml: Path, seed: int) -> str:

@@ -28,18 +28,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
 import optuna
 from optuna.pruners import BasePruner, HyperbandPruner, MedianPruner, NopPruner
 from optuna.storages import RDBStorage, RetryHeartbeatStaleTrialCallback
 from optuna.trial import FrozenTrial, TrialState
-from scipy.stats import trim_mean
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy.exc import IntegrityError, OperationalError
 
 from motorlab.errors import MotorlabError
-from motorlab.runs import SUMMARY, is_complete, read_json
+from motorlab.runs import SUMMARY, read_json
 from motorlab.stats import iqm_with_ci
-from motorlab.tuning.objective import Objective, budget_of, steps_run
+from motorlab.tuning.objective import Objective, Reporter, budget_of, steps_run, trial_horizon
+from motorlab.tuning.outputs import number
 from motorlab.tuning.space import Dist
 from motorlab.tuning.trials import Planner, SeedRuns, run_dirs
 
@@ -52,7 +51,6 @@ GRACE_SECONDS = 30
 MAX_RETRIES = 2
 SCHEMA_ATTEMPTS = 3  # opening a new database that another process is creating at the same moment
 MAX_FAILURES_IN_A_ROW = 3  # trials whose processes fail; then the search stops with the cause
-MAX_FILL_REPORTS = 200  # numbers a finished trial reports for the steps after its end (one DB write each)
 SAMPLERS = ("tpe", "random", "cmaes")
 PRUNERS = ("median", "hyperband", "none")
 COUNTED = (TrialState.COMPLETE, TrialState.PRUNED)
@@ -71,11 +69,15 @@ class TuneSpec:
     storage: str
     study_name: str
     sampler: str = "tpe"
+    sampler_seed: int | None = None  # the sampler's random seed: the same search samples the same settings
     pruner: str = "median"
     prune_startup: int = 5
     report_every: int = 1000
     max_parallel: int = 1
     fresh_seeds: int = 0
+    backend: str = "local"  # or "ray": Ray Tune (ray_search.py), on the cluster at `address` or a Ray started here
+    address: str | None = None
+    cluster_parallel: int | None = None  # ray: seed processes at once on the cluster (None: as many as its CPUs fit)
 
     @property
     def seed_list(self) -> list[int]:
@@ -114,18 +116,18 @@ def make_pruner(spec: TuneSpec) -> BasePruner:
     return NopPruner()
 
 
-def make_sampler(name: str) -> optuna.samplers.BaseSampler:
+def make_sampler(name: str, seed: int | None = None) -> optuna.samplers.BaseSampler:
     """Raises: MotorlabError for an unknown sampler, or cmaes without its package."""
     if name == "tpe":
-        return optuna.samplers.TPESampler()
+        return optuna.samplers.TPESampler(seed=seed)
     if name == "random":
-        return optuna.samplers.RandomSampler()
+        return optuna.samplers.RandomSampler(seed=seed)
     if name == "cmaes":
         try:
             import cmaes  # noqa: F401 - Optuna's CMA-ES sampler needs it
         except ImportError:
             raise MotorlabError("--sampler cmaes needs the cmaes package: pip install cmaes") from None
-        return optuna.samplers.CmaEsSampler(warn_independent_sampling=False)
+        return optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
     raise MotorlabError(f"--sampler {name!r}: choose one of {', '.join(SAMPLERS)}.")
 
 
@@ -137,31 +139,42 @@ def open_study(spec: TuneSpec) -> optuna.Study:
     """
     if spec.pruner not in PRUNERS:
         raise MotorlabError(f"--pruner {spec.pruner!r}: choose one of {', '.join(PRUNERS)}.")
-    sampler = make_sampler(spec.sampler)
+    sampler = make_sampler(spec.sampler, spec.sampler_seed)
     optuna.logging.set_verbosity(optuna.logging.ERROR)  # motorlab says what happened
     warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
-    # several processes on one SQLite file wait for each other's writes instead of failing at once
-    engine = {"connect_args": {"timeout": 60}} if spec.storage.startswith("sqlite") else None
     try:
-        for attempt in range(SCHEMA_ATTEMPTS):
-            try:
-                storage = RDBStorage(spec.storage, engine_kwargs=engine, heartbeat_interval=HEARTBEAT_SECONDS,
-                                     grace_period=GRACE_SECONDS, heartbeat_stale_trial_callback=(
-                                         RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRIES)))
-                break
-            except IntegrityError:
-                # two processes creating a new database at once: both write its schema version, one
-                # loses the race; the schema is there now, so opening it again succeeds
-                if attempt == SCHEMA_ATTEMPTS - 1:
-                    raise
-                time.sleep(0.5)
-        return optuna.create_study(storage=storage, study_name=spec.study_name, direction=spec.objective.direction,
-                                   sampler=sampler, pruner=make_pruner(spec), load_if_exists=True)
+        study = optuna.create_study(storage=open_storage(spec), study_name=spec.study_name,
+                                    direction=spec.objective.direction, sampler=sampler, pruner=make_pruner(spec),
+                                    load_if_exists=True)
+        if spec.sampler_seed is not None and (n := len(study.get_trials(deepcopy=False))):
+            # a resumed seeded search goes on from where its sampler was, not from its first samples again
+            study.sampler = make_sampler(spec.sampler, spec.sampler_seed + n)
+        return study
     except (ImportError, ValueError) as e:
         raise MotorlabError(f"--storage {spec.storage}: {_first_line(e)} (give a database URL such as "
                             "sqlite:///runs/tune/study.db or postgresql://user@host/db, with its driver installed).") from None
     except Exception as e:  # noqa: BLE001 - SQLAlchemy's connection errors have no common public base here
         raise MotorlabError(f"cannot open the study storage {spec.storage}: {_first_line(e)}") from None
+
+
+def open_storage(spec: TuneSpec) -> RDBStorage:
+    """The study's database, with heartbeats: a trial whose process died is failed and retried."""
+    # several processes on one SQLite file wait for each other's writes instead of failing at once
+    engine = {"connect_args": {"timeout": 60}} if spec.storage.startswith("sqlite") else None
+    for attempt in range(SCHEMA_ATTEMPTS):
+        try:
+            return RDBStorage(spec.storage, engine_kwargs=engine, heartbeat_interval=HEARTBEAT_SECONDS,
+                              grace_period=GRACE_SECONDS,
+                              heartbeat_stale_trial_callback=RetryHeartbeatStaleTrialCallback(max_retry=MAX_RETRIES))
+        except (IntegrityError, OperationalError) as e:
+            # two processes creating a new database at once: both create its tables and write its
+            # schema version, one loses the race ("UNIQUE constraint failed", "table ... already
+            # exists"); the schema is there now, so opening it again succeeds
+            racing = isinstance(e, IntegrityError) or "already exists" in str(e)
+            if not racing or attempt == SCHEMA_ATTEMPTS - 1:
+                raise
+            time.sleep(0.5)
+    raise AssertionError("unreachable")
 
 
 def _first_line(e: BaseException) -> str:
@@ -229,13 +242,13 @@ class Search:
         trial.set_user_attr("run_dirs", [str(d) for d in dirs])
         trial.set_user_attr("settings", values)
         shown = ", ".join(f"{k}={v}" for k, v in values.items())
-        self.console.print(f"  trial {trial.number}: {shown} ({len(runs)} seeds)")
+        self.console.print(f"  trial {trial.number}: {shown} ({len(runs)} seed{'s' * (len(runs) != 1)})")
         seeds = SeedRuns(runs, self.spec.max_parallel).start()
-        reporter = Reporter(self.spec, dirs)
+        reporter = Reporter(self.spec.objective, self.spec.report_every, dirs)
         try:
             while seeds.running():
                 time.sleep(POLL_SECONDS)
-                if reporter.report(trial) and trial.should_prune():
+                if _report(trial, reporter.reached()) and trial.should_prune():
                     seeds.stop()
                     self._pruned(trial, dirs, reporter.last_step)
             seeds.wait()
@@ -254,13 +267,13 @@ class Search:
             raise TrialFailed(message)
         self.counters.failures_in_a_row = 0
         per_seed = [self.spec.objective.value(read_json(d / SUMMARY)) for d in dirs]
-        reporter.fill(trial, horizon=max(budget_of(d) or steps_run(d) for d in dirs))
+        _report(trial, reporter.filled(trial_horizon(dirs)))
         value = iqm_with_ci(per_seed)[0]
         trial.set_user_attr("seed_values", per_seed)
         trial.set_user_attr("env_steps", sum(steps_run(d) for d in dirs))
         self.counters.done.append(trial.number)
-        self.console.print(f"  [green]✓[/green] trial {trial.number}: {self.spec.objective.key} IQM {value:,.4g} "
-                           f"(seeds: {', '.join(f'{v:,.4g}' for v in per_seed)})")
+        self.console.print(f"  [green]✓[/green] trial {trial.number}: {self.spec.objective.key} IQM {number(value)} "
+                           f"(seeds: {', '.join(map(number, per_seed))})")
         return value
 
     def _pruned(self, trial: optuna.Trial, dirs: list[Path], step: int) -> None:
@@ -273,48 +286,10 @@ class Search:
         raise optuna.TrialPruned
 
 
-class Reporter:
-    """Reports a trial's intermediate number (IQM over its seeds) at each multiple of
-    `report_every` env steps that every seed has reached."""
-
-    def __init__(self, spec: TuneSpec, dirs: list[Path]):
-        self.objective = spec.objective
-        self.every = spec.report_every
-        self.dirs = dirs
-        self.last_step = 0
-
-    def _at(self, step: int) -> float | None:
-        values = [self.objective.progress(d, step) for d in self.dirs]
-        if any(v is None for v in values):
-            return None
-        return float(trim_mean(np.asarray(values, dtype=float), 0.25))  # rliable's IQM
-
-    def report(self, trial: optuna.Trial) -> bool:
-        """Report every step reached since the last call; True when one was reported."""
-        if not self.objective.prunable:
-            return False
-        reported = False
-        reached = max(steps_run(d) for d in self.dirs)  # a finished seed knows every later step: stop at the front
-        while self.last_step + self.every <= reached and (value := self._at(self.last_step + self.every)) is not None:
-            self.last_step += self.every
-            trial.report(value, self.last_step)
-            reported = True
-        return reported
-
-    def fill(self, trial: optuna.Trial, horizon: int) -> None:
-        """A finished trial's numbers for the remaining steps up to its budget, so trials still
-        running are compared against it there (each is final: the runs have ended)."""
-        if not self.objective.prunable or not all(is_complete(d) for d in self.dirs):
-            return
-        for _ in range(MAX_FILL_REPORTS):
-            step = self.last_step + self.every
-            if step > horizon:
-                break
-            value = self._at(step)
-            if value is None:
-                break
-            trial.report(value, step)
-            self.last_step = step
+def _report(trial: optuna.Trial, numbers: list[tuple[int, float]]) -> bool:
+    for step, value in numbers:
+        trial.report(value, step)
+    return bool(numbers)
 
 
 def default_parallel(max_parallel: int | None) -> int:
@@ -323,17 +298,25 @@ def default_parallel(max_parallel: int | None) -> int:
     return max_parallel or os.cpu_count() or 1
 
 
-def run_search(spec: TuneSpec, planner: Planner, console: Console) -> optuna.Study:
-    """Open (or resume) the study and run trials until `spec.trials` are COMPLETE or PRUNED
-    over every process sharing it. Returns the study."""
+def resume_study(spec: TuneSpec, console: Console) -> tuple[optuna.Study, bool]:
+    """Open (or resume) the study, queue its interrupted trials again and say where it stands.
+    Returns the study and whether trials are left to start (fewer than `spec.trials` finished or running)."""
     study = open_study(spec)
+    optuna.storages.fail_stale_trials(study)  # trials of a process that died: failed, and queued again
     queued = retry_interrupted(study)
     have = counted(study)
     running = len(study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)))
     console.print(f"tune: study {spec.study_name} in {spec.storage}: {have} of {spec.trials} trials finished"
                   + (f", {running} running elsewhere" if running else "")
                   + (f", {queued} interrupted trial{'s' * (queued > 1)} queued again" if queued else ""))
-    if have + running >= spec.trials:
+    return study, have + running < spec.trials
+
+
+def run_search(spec: TuneSpec, planner: Planner, console: Console) -> optuna.Study:
+    """Open (or resume) the study and run trials until `spec.trials` are COMPLETE or PRUNED
+    over every process sharing it. Returns the study."""
+    study, todo = resume_study(spec, console)
+    if not todo:
         return study
     search = Search(spec, planner, console)
 

@@ -51,10 +51,27 @@ class Dist:
     def suggest(self, trial: optuna.Trial) -> str:
         """Sample (or, for an enqueued or retried trial, read back) this key's value, as text."""
         if self.kind == "choice":
-            return str(trial.suggest_categorical(self.key, list(self.choices)))
+            return self.text(trial.suggest_categorical(self.key, list(self.choices)))
         if self.kind == "int":
-            return str(trial.suggest_int(self.key, int(self.low), int(self.high)))
-        return repr(trial.suggest_float(self.key, self.low, self.high, log=self.kind == "loguniform"))
+            return self.text(trial.suggest_int(self.key, int(self.low), int(self.high)))
+        return self.text(trial.suggest_float(self.key, self.low, self.high, log=self.kind == "loguniform"))
+
+    def distribution(self) -> optuna.distributions.BaseDistribution:
+        """The same distribution as Optuna's object (what `suggest` samples from), for samplers that
+        take the space up front (Ray Tune's OptunaSearch)."""
+        if self.kind == "choice":
+            return optuna.distributions.CategoricalDistribution(list(self.choices))
+        if self.kind == "int":
+            return optuna.distributions.IntDistribution(int(self.low), int(self.high))
+        return optuna.distributions.FloatDistribution(self.low, self.high, log=self.kind == "loguniform")
+
+    def text(self, value: object) -> str:
+        """A sampled value as the trial's command line (or recipe) gets it."""
+        if self.kind == "choice":
+            return str(value)
+        if self.kind == "int":
+            return str(int(value))  # type: ignore[call-overload]
+        return repr(float(value))  # type: ignore[arg-type]
 
     def describe(self) -> str:
         return f"{self.kind}:{','.join(self.choices)}" if self.kind == "choice" else f"{self.kind}:{self.low:g},{self.high:g}"

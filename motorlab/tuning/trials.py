@@ -43,12 +43,18 @@ class Planner:
         self.options = set() if self.recipe else _options(commands, target)
 
     def check(self) -> None:
-        """Plan (not run) one trial with every key at an example value, so that a key the command
-        or recipe does not have fails before the search starts."""
-        example = {k: d.choices[0] if d.kind == "choice" else str(int(d.low) if d.kind == "int" else d.low)
-                   for k, d in self.space.items()}
+        """Plan (not run) trials with every choice and both bounds of every key, so that a key the
+        command or recipe does not have, or a value its command line cannot parse (a word for an
+        integer option), fails before the search starts rather than as failed trials. (Values the
+        command parses but its settings refuse, such as history 0, fail in the trial.)"""
+        edges = {k: list(d.choices) if d.kind == "choice" else
+                 [str(int(v)) if d.kind == "int" else repr(v) for v in (d.low, d.high)] for k, d in self.space.items()}
         with tempfile.TemporaryDirectory() as scratch:
-            self.plan(example, [0], Path(scratch))
+            base = {k: values[0] for k, values in edges.items()}
+            self.plan(base, [0], Path(scratch))
+            for key, values in edges.items():
+                for value in values[1:]:
+                    self.plan({**base, key: value}, [0], Path(scratch))
 
     def plan(self, values: dict[str, str], seeds: list[int], trial_dir: Path) -> list[dict[str, Any]]:
         """One sweep trial per seed, with run folders trial_dir/seed<k>/.

@@ -4,7 +4,8 @@ then its outputs, then the best settings on K fresh seeds.
     DIR/study.db                 the Optuna study (SQLite, unless --storage names another database)
     DIR/trials/<n>/seed<k>/      each trial's run folders; DIR/trials/<n>/logs/ their output
     DIR/fresh/seed<k>/           the best settings re-run on seeds the search never used
-    DIR/trials.csv, best.toml, plots/*.png, summary.json, config.toml
+    DIR/trials.csv, best.toml, plots/*.png, summary.json, config.toml, report.html
+    DIR/best_recipe.toml         a recipe target: the recipe with the best settings (motorlab run FILE)
 
 The fresh seeds' numbers sit beside the search's in summary.json and the table: the winner's
 search number is the best of many and so flatters it; the fresh one does not.
@@ -21,10 +22,13 @@ import optuna
 from optuna.trial import TrialState
 from rich.console import Console
 
+from motorlab import trackers
 from motorlab.errors import MotorlabError
+from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import SUMMARY, read_json, run_path, write_config
 from motorlab.stats import iqm_with_ci
+from motorlab.sweeps import backends
 from motorlab.sweeps.sweep import MAX_SEEDS
 from motorlab.sweeps.trials import is_finished
 from motorlab.tuning import outputs
@@ -41,11 +45,13 @@ FRESH_SEED = 1000  # the fresh seeds are FRESH_SEED.. (or K.. when K is larger):
 
 def make_spec(target: str, space: list[str] | None, trials: int, seeds: int, objective: str, direction: str | None,
               out: Path | None, storage: str | None, name: str | None, sampler: str, pruner: str, prune_startup: int,
-              report_every: int, max_parallel: int | None, fresh_seeds: int | None) -> TuneSpec:
+              report_every: int, max_parallel: int | None, fresh_seeds: int | None, backend: str = "local",
+              address: str | None = None, sampler_seed: int | None = None) -> TuneSpec:
     """The search's settings, checked.
 
     Raises:
-        MotorlabError: bad spaces, counts or directions (before anything is written).
+        MotorlabError: bad spaces, counts or directions, --address without --backend ray, no Ray
+            cluster at --address (before anything is written).
     """
     require_target(target)
     parsed = parse_space(space)
@@ -60,12 +66,15 @@ def make_spec(target: str, space: list[str] | None, trials: int, seeds: int, obj
     if fresh_seeds is not None and fresh_seeds < 0:
         raise MotorlabError(f"--fresh-seeds {fresh_seeds}: give 0 (no re-evaluation) or more.")
     goal = Objective.make(objective, direction)
+    backends.check_execution(backend, address, max_parallel)  # last: it may try to reach the cluster
     folder = run_path(out, "tune").resolve()
     return TuneSpec(target=target, space=parsed, objective=goal, trials=trials, seeds=seeds, out=folder,
                     storage=storage or f"sqlite:///{folder / 'study.db'}",
-                    study_name=name or study_name(target, parsed, goal, seeds), sampler=sampler, pruner=pruner,
+                    study_name=name or study_name(target, parsed, goal, seeds), sampler=sampler,
+                    sampler_seed=sampler_seed, pruner=pruner,
                     prune_startup=prune_startup, report_every=report_every,
-                    max_parallel=default_parallel(max_parallel), fresh_seeds=seeds if fresh_seeds is None else fresh_seeds)
+                    max_parallel=default_parallel(max_parallel), fresh_seeds=seeds if fresh_seeds is None else fresh_seeds,
+                    backend=backend, address=address, cluster_parallel=max_parallel if backend == "ray" else None)
 
 
 def run_tune(spec: TuneSpec, console: Console | None = None, commands: TyperGroup | None = None) -> dict[str, Any]:
@@ -76,19 +85,28 @@ def run_tune(spec: TuneSpec, console: Console | None = None, commands: TyperGrou
             runs' summary.json lacks, trials that keep failing.
     """
     console = console or Console(stderr=True)
-    threads = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if spec.max_parallel != 1 else {}
+    threads = ({"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if spec.max_parallel != 1 or spec.backend == "ray"
+               else {})
     planner = Planner(spec.target, spec.space, commands, threads)
     planner.check()
     if spec.storage.startswith("sqlite:///") and spec.storage == f"sqlite:///{spec.out / 'study.db'}":
         spec.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    study = run_search(spec, planner, console)
+    if spec.backend == "ray":
+        from motorlab.tuning.ray_search import run_ray_search  # Ray, imported only when asked for
+
+        study = run_ray_search(spec, planner, console)
+    else:
+        study = run_search(spec, planner, console)
     spec.out.mkdir(parents=True, exist_ok=True)
     write_config(spec.out, {"tune": spec.target, "space": {k: d.describe() for k, d in spec.space.items()},
                             "objective": spec.objective.key, "direction": spec.objective.direction,
                             "trials": spec.trials, "seeds": spec.seeds, "storage": spec.storage,
-                            "study_name": spec.study_name, "sampler": spec.sampler, "pruner": spec.pruner})
-    return write_results(spec, study, planner, console, time.perf_counter() - t0)
+                            "study_name": spec.study_name, "sampler": spec.sampler, "pruner": spec.pruner,
+                            **({"sampler_seed": spec.sampler_seed} if spec.sampler_seed is not None else {})})
+    summary = write_results(spec, study, planner, console, time.perf_counter() - t0)
+    trackers.outputs(spec.out, summary)  # --track: the tune's parent run gets trials.csv, best.toml, plots, ...
+    return summary
 
 
 def _best(study: optuna.Study) -> optuna.trial.FrozenTrial | None:
@@ -134,10 +152,12 @@ def write_results(spec: TuneSpec, study: optuna.Study, planner: Planner, console
         fields = outputs.preset_fields(settings, spec.space, None if planner.recipe else planner.options)
         best_toml = spec.out / "best.toml"
         header = [f"best settings of motorlab tune ({spec.study_name}), trial {best.number}: "
-                  f"{spec.objective.key} IQM {best.value:,.6g} over seeds {', '.join(map(str, spec.seed_list))}"]
+                  f"{spec.objective.key} IQM {outputs.number(best.value)} over seeds {', '.join(map(str, spec.seed_list))}"]
         if not planner.recipe:
             header.append("reproduce a seed: " + outputs.reproduce_line(spec.target, best_toml, 0))
         outputs.write_best_toml(best_toml, fields, header)
+        if planner.recipe:  # a recipe's best settings as a recipe: the best trial's own, at its seed 0
+            outputs.write_best_recipe(spec.out / "best_recipe.toml", spec.out / "trials" / str(best.number), header)
     outputs.write_trials_csv(trials, spec.space, spec.out / "trials.csv")
     rows = outputs.table_rows(trials, spec.space, best, fresh)
     title = f"tune {spec.objective.key} ({spec.objective.direction}) over {spec.seeds} seeds"
@@ -160,5 +180,6 @@ def write_results(spec: TuneSpec, study: optuna.Study, planner: Planner, console
         summary.update({"fresh_seeds": fresh.seeds, "fresh_values": fresh.values, "fresh_iqm": fresh.iqm,
                         "fresh_iqm_ci_low": fresh.ci[0], "fresh_iqm_ci_high": fresh.ci[1]})
     outputs.write_tune_summary(spec.out, summary)
+    build_report([spec.out], spec.out / "report.html")
     summary["tune_dir"] = str(spec.out)
     return summary

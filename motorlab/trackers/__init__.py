@@ -1,0 +1,576 @@
+"""Experiment tracking: each run mirrored to MLflow or Weights & Biases (`--track mlflow[=URI]`,
+`--track wandb[=PROJECT]`, on train, mpc, mbrl, dynamics fit, sweep, tune and run).
+
+A tracked run holds what its run folder holds, minus the models: the resolved settings
+(MLflow params, W&B config), the scalars TensorBoard gets with their tags and steps, the
+numbers of summary.json, and the files people read (config.toml, summary.json, results.json,
+metrics.csv, table.txt, report.html, plots/*.png, videos/*.mp4; never model.zip, policy or model
+weights, checkpoint/, tensorboard/ or data such as transitions.npz).
+
+Live, and where TensorBoard writes. Training scalars reach the tracker as they are written, so a
+researcher can watch MLflow's UI while a run trains. They are caught at the one place that
+defines them: `mirror(writer)` wraps a TensorBoard SummaryWriter's add_scalar (motorlab's own
+writers in rl/tracking.py and dynamics/train.py, and the writer of SB3's TensorBoard output
+format, wrapped by the training callback), so the tracker gets exactly the tags, values and steps
+TensorBoard got, and no list of tags is kept twice. Tailing the event files after training
+(tensorboard's EventAccumulator) would be simpler, but nothing would show until the end. Kinds
+that write no TensorBoard scalars report theirs with `scalars` (mpc: one row per episode; mbrl:
+one per round, against env steps).
+
+Robust: training never waits on a tracker. A scalar is appended to a buffer; one background
+thread per process starts and ends the tracked runs, sends the buffer every FLUSH_SECONDS
+(MLflow's log_batch, W&B's log) and uploads the files. A failure there (a server that went
+down, a store that cannot be written) prints one warning line and turns that tracker off for
+the rest of the process; the run itself goes on and its folder is complete. The end of a run
+waits for the thread at most CLOSE_SECONDS. What can be checked before a run starts is checked
+by `enable` (the CLI's --track): the package is installed (else the pip line), a tracking server
+answers within seconds (MLflow's own client would retry for minutes), a local store can be
+written. Each is one error line, before anything is written.
+
+Processes: `enable` puts the setting, resolved (an absolute store path, W&B's mode), in the
+environment variable MOTORLAB_TRACK, which every process motorlab starts inherits (sweep and tune
+trials, a study's training processes; the sweep and study runners also put it in each trial's
+environment, for Ray workers on other machines). A script can set MOTORLAB_TRACK itself or call
+`enable`. A sweep, study or tune folder is a parent run: `parent` puts its identity in
+MOTORLAB_TRACK_PARENT, and each run started under it, in its process or in a child process,
+nests under it (MLflow: one experiment, `mlflow.parentRunId`; W&B: one group), named by its folder
+inside the parent's ("lr=0.001/seed2", "trials/3/seed0", "ppo") and tagged with its kind and seed.
+
+A step kind's run is one tracked run (see StepKind in motorlab/stepkind.py: `step` opens it
+around `run`, `folder_ready` starts it once the run folder exists, so a mistake caught before
+that leaves no run in the tracker; `step.done` logs the summary and the files).
+
+Ground floor: imports nothing of motorlab's but errors and extras; mlflow and wandb are imported
+only when a run is tracked (motorlab/trackers/mlflow.py, motorlab/trackers/wandb.py).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import json
+import math
+import os
+import queue
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator
+
+from motorlab.errors import MotorlabError
+from motorlab.extras import require
+
+ENV_VAR = "MOTORLAB_TRACK"  # the trackers, e.g. "mlflow=sqlite:////home/me/mlflow.db wandb"
+PARENT_VAR = "MOTORLAB_TRACK_PARENT"  # JSON: the sweep, study or tune run that runs started now nest under
+BACKENDS = ("mlflow", "wandb")
+FLUSH_SECONDS = 2.0  # buffered scalars go to the trackers this often
+CLOSE_SECONDS = 60.0  # the longest the end of a run (or a parent's start) waits for its trackers
+
+# The files of a run folder a tracked run gets: at the top, by suffix; under these folders, all of them
+FILE_SUFFIXES = (".json", ".toml", ".csv", ".txt", ".html", ".log", ".png", ".mp4")
+FILE_FOLDERS = ("plots", "videos")
+MODEL_PREFIXES = ("policy.", "model.")  # weights and their descriptions are the run folder's, not the tracker's
+
+
+@dataclass(frozen=True)
+class Target:
+    """One tracker: `backend` (mlflow or wandb) and `where` (MLflow's tracking URI, W&B's project)."""
+
+    backend: str
+    where: str | None = None
+
+    def text(self) -> str:
+        return self.backend + (f"={self.where}" if self.where else "")
+
+
+def parse(values: list[str] | tuple[str, ...] | str | None) -> list[Target]:
+    """`--track` values (or MOTORLAB_TRACK's, separated by spaces) as targets.
+
+    Raises:
+        MotorlabError: an unknown tracker, or one named twice.
+    """
+    if isinstance(values, str):
+        values = values.split()
+    targets: dict[str, Target] = {}
+    for value in values or ():
+        backend, sep, where = value.strip().partition("=")
+        backend = backend.lower()
+        if backend not in BACKENDS or (sep and not where):
+            raise MotorlabError(f"--track {value!r}: choose mlflow, mlflow=URI (sqlite:///PATH, file:///PATH, "
+                                "http://HOST:PORT), wandb or wandb=PROJECT.")
+        if backend in targets:
+            raise MotorlabError(f"--track {backend} is given twice; give each tracker once.")
+        targets[backend] = Target(backend, where or None)
+    return list(targets.values())
+
+
+def _module(backend: str):
+    return importlib.import_module(f"motorlab.trackers.{backend}")
+
+
+def enable(values: list[str] | tuple[str, ...] | str | None) -> list[Target]:
+    """Track the runs this process starts, and those of the processes it starts (the CLI's
+    --track; a script may call it too). Checks each tracker first: its package, a server that
+    answers, a store that can be written. Nothing given: nothing changes.
+
+    Returns:
+        The trackers, resolved (as MOTORLAB_TRACK now holds them).
+
+    Raises:
+        MotorlabError: one line: an unknown tracker, a missing package (with the pip command), an
+            unreachable server or an unwritable store.
+    """
+    targets = parse(values)
+    if not targets:
+        return []
+    resolved = []
+    for t in targets:
+        require(t.backend, t.backend, f"--track {t.backend} needs {_module(t.backend).LABEL}")
+        resolved.append(_module(t.backend).check(t))
+    os.environ[ENV_VAR] = " ".join(t.text() for t in resolved)
+    return resolved
+
+
+def targets() -> list[Target]:
+    """The trackers runs started now go to (from MOTORLAB_TRACK; an unusable value tracks nothing, with a warning)."""
+    value = os.environ.get(ENV_VAR, "").strip()
+    if not value:
+        return []
+    try:
+        return parse(value)
+    except MotorlabError as e:
+        _warn_once("config", f"${ENV_VAR} is not used: {e}")
+        return []
+
+
+def child_env() -> dict[str, str]:
+    """The variables that make a process started now track its runs under the current parent
+    (for trials whose environment is given explicitly, e.g. on Ray workers)."""
+    return {k: os.environ[k] for k in (ENV_VAR, PARENT_VAR) if os.environ.get(k)}
+
+
+# ---- what the trackers are told ----------------------------------------------------------------
+
+
+@dataclass
+class RunInfo:
+    """A tracked run as the backends see it."""
+
+    name: str
+    kind: str
+    run_dir: Path | None
+    config: dict[str, Any]
+    tags: dict[str, str]
+    parent: dict[str, Any] = field(default_factory=dict)  # the parent's handoff, per backend
+    group: str | None = None  # W&B's group: the parent's, or this run's own when it is a parent
+    nested: bool = False  # started under a parent (which says where the runs are)
+
+
+def flat(config: dict[str, Any], prefix: str = "") -> dict[str, str]:
+    """Nested settings as one level ("env.id": "InvertedPendulum-v5"), values as text (JSON for numbers and lists)."""
+    out: dict[str, str] = {}
+    for key, value in config.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict) and value:
+            out.update(flat(value, name + "."))
+        else:
+            out[name] = value if isinstance(value, str) else json.dumps(value, default=str)
+    return out
+
+
+def numbers(summary: dict[str, Any]) -> dict[str, float]:
+    """The numbers of a summary (booleans as 0 and 1), for the tracker's final metrics."""
+    return {k: float(v) for k, v in summary.items()
+            if isinstance(v, (int, float)) and (isinstance(v, bool) or math.isfinite(v))}
+
+
+def run_files(folder: Path) -> list[tuple[Path, str]]:
+    """The files of a run folder a tracked run gets, each with the folder it goes to inside the run ("" at the top)."""
+    folder = Path(folder)
+    files = [(p, "") for p in sorted(folder.iterdir()) if p.is_file() and p.suffix in FILE_SUFFIXES
+             and not p.name.startswith((".", *MODEL_PREFIXES))] if folder.is_dir() else []
+    for sub in FILE_FOLDERS:
+        for p in sorted((folder / sub).rglob("*")) if (folder / sub).is_dir() else ():
+            if p.is_file() and not p.name.startswith("."):
+                files.append((p, p.parent.relative_to(folder).as_posix()))
+    return files
+
+
+# ---- the background thread and the failures it reports -------------------------------------------
+
+_warned: set[str] = set()
+_broken: set[str] = set()  # backends switched off in this process after a failure
+_lock = threading.Lock()
+
+
+def _warn_once(key: str, message: str) -> None:
+    with _lock:
+        if key in _warned:
+            return
+        _warned.add(key)
+    sys.stderr.write(f"warning: {message}\n")
+    sys.stderr.flush()
+
+
+def _first_line(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[0][:300]}" if text else type(e).__name__
+
+
+class _Worker:
+    """The one thread per process that talks to the trackers: tasks in order, and every
+    FLUSH_SECONDS the scalars each open run has buffered."""
+
+    def __init__(self) -> None:
+        self.tasks: queue.Queue = queue.Queue()
+        self.runs: list[_Run] = []
+        self.thread = threading.Thread(target=self._loop, name="motorlab-tracking", daemon=True)
+        self.thread.start()
+
+    def _loop(self) -> None:
+        while True:
+            try:
+                task = self.tasks.get(timeout=FLUSH_SECONDS)
+            except queue.Empty:
+                task = None
+            try:
+                for run in list(self.runs):
+                    run.flush()
+                if task is not None:
+                    task()
+            except BaseException as e:  # never let the thread die: later runs still need it
+                _warn_once("worker", f"experiment tracking stopped working ({_first_line(e)}); runs go on untracked.")
+
+
+_worker: _Worker | None = None
+
+
+def _the_worker() -> _Worker:
+    global _worker
+    with _lock:
+        if _worker is None or not _worker.thread.is_alive():  # none yet, or a forked child's copy
+            _worker = _Worker()
+        return _worker
+
+
+class _Run:
+    """One tracked run on each tracker, driven from the background thread."""
+
+    def __init__(self, info: RunInfo, found: list[Target]):
+        """`found`: the trackers, resolved and loaded (see `_load`)."""
+        self.info = info
+        self.sinks = [_module(t.backend).Sink(t) for t in found]
+        self.buffer: list[tuple[str, float, int, float]] = []
+        self.buffer_lock = threading.Lock()
+        self.worker = _the_worker()
+        self.live = False  # the trackers were told to start it (scalars are sent from then on)
+        self.ended = False
+
+    def _call(self, sink: Any, method: str, *args: Any) -> None:
+        if sink.backend in _broken or (method != "start" and not sink.started):
+            return
+        try:
+            getattr(sink, method)(*args)
+        except Exception as e:  # a tracker's failure never stops a run
+            _broken.add(sink.backend)
+            _warn_once(sink.backend, f"tracking to {sink.label} failed ({_first_line(e)}); the run goes on and its "
+                                     f"folder is complete, but {sink.label} gets nothing more from this process.")
+
+    def submit(self, method: str, *args: Any) -> None:
+        def task() -> None:
+            for sink in self.sinks:
+                self._call(sink, method, *args)
+
+        self.worker.tasks.put(task)
+
+    def start(self) -> None:
+        def task() -> None:
+            for sink in self.sinks:
+                self._call(sink, "start", self.info)
+            self.live = True
+
+        self.worker.runs.append(self)
+        self.worker.tasks.put(task)
+
+    def scalar(self, tag: str, value: float, step: int) -> None:
+        with self.buffer_lock:
+            self.buffer.append((tag, value, step, time.time()))
+
+    def flush(self) -> None:  # in the background thread
+        if not self.live:
+            return
+        with self.buffer_lock:
+            rows, self.buffer = self.buffer, []
+        if rows:
+            for sink in self.sinks:
+                self._call(sink, "scalars", rows)
+
+    def wait(self, seconds: float = CLOSE_SECONDS) -> bool:
+        """Block until the thread has done everything asked of it so far (at most `seconds`)."""
+        done = threading.Event()
+        self.worker.tasks.put(done.set)
+        if done.wait(seconds):
+            return True
+        _warn_once("timeout", f"the experiment tracker did not answer within {seconds:.0f} s; the run's folder is "
+                              "complete, its tracked copy may not be.")
+        return False
+
+    def log_outputs(self, folder: Path | None, summary: dict[str, Any] | None) -> None:
+        if summary:
+            self.submit("summary", summary)
+        if folder is not None:
+            self.submit("files", run_files(folder))
+
+    def end(self, status: str) -> None:
+        """FINISHED, FAILED or KILLED; waits for the trackers (bounded), then says where the run is."""
+        if self.ended:
+            return
+        self.ended = True
+
+        def task() -> None:
+            self.flush()
+            for sink in self.sinks:
+                self._call(sink, "end", status)
+            if self in self.worker.runs:
+                self.worker.runs.remove(self)
+
+        self.worker.tasks.put(task)
+        if self.wait() and not self.info.nested:  # an outermost run: say where to look
+            for sink in self.sinks:
+                if sink.started and sink.backend not in _broken:
+                    sys.stderr.write(f"tracked: {sink.where()}\n")
+
+    def handoff(self) -> dict[str, Any]:
+        return {s.backend: s.handoff() for s in self.sinks if s.started and s.backend not in _broken}
+
+
+def _load(found: list[Target]) -> list[Target]:
+    """The trackers resolved, their packages imported here, in the main thread, before a run starts:
+    importing is the heavy part (seconds of Python holding the interpreter), and two threads must not
+    import one package at once. Those that cannot be loaded (MOTORLAB_TRACK set by hand where the
+    package is missing) are left out, with a warning."""
+    loaded = []
+    for t in found:
+        if t.backend in _broken:
+            continue
+        try:
+            resolved = _module(t.backend).resolve(t)
+            _module(t.backend).load(resolved)
+            loaded.append(resolved)
+        except Exception as e:
+            _broken.add(t.backend)
+            _warn_once(t.backend, f"cannot track to {_module(t.backend).LABEL} ({_first_line(e)}); runs go on "
+                                  "untracked there.")
+    return loaded
+
+
+# ---- a step kind's run ---------------------------------------------------------------------------
+
+
+def _inherited_parent() -> dict[str, Any]:
+    try:
+        parent = json.loads(os.environ.get(PARENT_VAR) or "{}")
+        return parent if isinstance(parent, dict) else {}
+    except ValueError:
+        return {}
+
+
+def _info(kind: str, run_dir: Path | None, config: dict[str, Any], own_group: bool = False) -> RunInfo:
+    parent = _inherited_parent()
+    name = kind if run_dir is None else Path(run_dir).name
+    tags = {"motorlab.kind": kind}
+    if run_dir is not None:
+        run_dir = Path(run_dir).resolve()
+        tags["motorlab.run_dir"] = str(run_dir)
+        root = parent.get("root")  # the outermost parent's folder: names are unique inside it
+        if root and run_dir.is_relative_to(root) and run_dir != Path(root):
+            name = run_dir.relative_to(root).as_posix()
+    if isinstance(config.get("seed"), int):
+        tags["motorlab.seed"] = str(config["seed"])
+    if parent.get("name"):
+        tags["motorlab.parent"] = parent["name"]
+    group = parent.get("group")
+    if own_group and group is None:  # an outermost parent: every run under it shares its group
+        group = f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    return RunInfo(name=name, kind=kind, run_dir=run_dir, config=config, tags=tags,
+                   parent={k: v for k, v in parent.items() if k in BACKENDS}, group=group, nested=bool(parent))
+
+
+class Step:
+    """A step kind's run as a tracked run (see `step`)."""
+
+    def __init__(self, kind: str, config: dict[str, Any], found: list[Target]):
+        self.kind, self.config, self.found = kind, config, found
+        self.run: _Run | None = None
+        self.pending: list[tuple[str, float, int]] = []
+
+    def folder_ready(self, run_dir: Path) -> None:
+        if self.run is None:
+            self.run = _Run(_info(self.kind, run_dir, self.config), self.found)
+            self.run.start()
+            for row in self.pending:
+                self.run.scalar(*row)
+            self.pending = []
+
+    def scalar(self, tag: str, value: float, step: int) -> None:
+        if self.run is None:
+            self.pending.append((tag, value, step))
+        else:
+            self.run.scalar(tag, value, step)
+
+    def done(self, run_dir: Path | None, summary: dict[str, Any]) -> None:
+        """The run finished: its summary's numbers and its folder's files (the run ends when `step` does)."""
+        if self.run is None:
+            self.folder_ready(run_dir)
+        self.run.log_outputs(run_dir, summary)
+
+
+class _NoStep:
+    """Tracking is off: nothing to do (and false, for `if tracked:`)."""
+
+    def __bool__(self) -> bool:
+        return False
+
+    def folder_ready(self, run_dir: Path) -> None: ...
+
+    def scalar(self, tag: str, value: float, step: int) -> None: ...
+
+    def done(self, run_dir: Path | None, summary: dict[str, Any]) -> None: ...
+
+
+_NO_STEP = _NoStep()
+_current: Step | None = None
+
+
+def _status(error: BaseException) -> str:
+    return "KILLED" if isinstance(error, (KeyboardInterrupt, SystemExit)) else "FAILED"
+
+
+@contextlib.contextmanager
+def step(kind: str, settings: Any) -> Iterator[Step | _NoStep]:
+    """Track one run of a step kind, when tracking is on (else nothing happens, at no cost).
+
+    The tracked run starts at `folder_ready` (the run folder exists, the settings passed their
+    checks), gets its scalars live, its summary and files at `done`, and ends with the block:
+    FINISHED, or FAILED / KILLED when the block raised. A run inside another (a kind calling
+    another kind) is part of the outer one."""
+    global _current
+    found = targets() if _current is None else []
+    found = _load(found) if found else []  # before `run`, so its clock (wall_seconds) does not count the imports
+    if not found:
+        yield _NO_STEP
+        return
+    config = settings.config() if hasattr(settings, "config") else dict(settings)
+    _current = tracked = Step(kind, config, found)
+    try:
+        yield tracked
+    except BaseException as e:
+        if tracked.run is not None:
+            tracked.run.end(_status(e))
+        raise
+    else:
+        if tracked.run is not None:
+            tracked.run.end("FINISHED")
+    finally:
+        _current = None
+
+
+def folder_ready(run_dir: Path) -> None:
+    """The current step's run folder exists: its tracked run starts now (called by StepKind.start and train)."""
+    if _current is not None:
+        _current.folder_ready(run_dir)
+
+
+def scalar(tag: str, value: Any, step: int | None) -> None:
+    """One scalar of the current run, as TensorBoard would get it."""
+    if _current is not None:
+        try:
+            _current.scalar(tag, float(value), int(step or 0))
+        except (TypeError, ValueError):
+            pass  # not a number: TensorBoard would have refused it too
+
+
+def scalars(values: dict[str, Any], step: int) -> None:
+    """Several scalars of the current run at one step (kinds that write no TensorBoard scalars)."""
+    for tag, value in values.items():
+        if value is not None:
+            scalar(tag, value, step)
+
+
+def mirror(writer: Any) -> Any:
+    """A TensorBoard SummaryWriter whose scalars also go to the current tracked run (the same
+    writer, its add_scalar wrapped; unchanged when no run is tracked)."""
+    if _current is None or getattr(writer, "_motorlab_tracked", False):
+        return writer
+    add_scalar = writer.add_scalar
+
+    def tracked_add_scalar(tag, scalar_value, global_step=None, *args, **kwargs):
+        result = add_scalar(tag, scalar_value, global_step, *args, **kwargs)
+        scalar(tag, scalar_value, global_step)
+        return result
+
+    writer.add_scalar = tracked_add_scalar
+    writer._motorlab_tracked = True
+    return writer
+
+
+# ---- sweeps, studies, tune: parents ---------------------------------------------------------------
+
+
+class Parent:
+    """A sweep, study or tune folder as a tracked run that the runs started under it nest under."""
+
+    def __init__(self, run: _Run | None):
+        self.run = run
+
+    def outputs(self, folder: Path, summary: dict[str, Any] | None) -> None:
+        if self.run is not None:
+            self.run.log_outputs(folder, summary)
+
+
+_parents: dict[str, Parent] = {}  # open parents by folder
+
+
+@contextlib.contextmanager
+def parent(kind: str, folder: Path, config: dict[str, Any]) -> Iterator[Parent]:
+    """Track a sweep, study or tune in `folder` as a parent run (when tracking is on). Runs started
+    inside the block, here or in processes started here, nest under it; `outputs` (or
+    motorlab.trackers.outputs) logs its summary and files. Ends FINISHED, or FAILED/KILLED."""
+    found = targets()
+    found = _load(found) if found else []
+    if not found:
+        yield Parent(None)
+        return
+    folder = Path(folder).resolve()
+    run = _Run(_info(kind, folder, config, own_group=True), found)
+    run.start()
+    run.wait()  # the children need its identity
+    handoff = {**run.handoff(), "name": run.info.name, "root": _inherited_parent().get("root") or str(folder)}
+    if run.info.group:
+        handoff["group"] = run.info.group
+    before = os.environ.get(PARENT_VAR)
+    os.environ[PARENT_VAR] = json.dumps(handoff)
+    tracked = _parents[str(folder)] = Parent(run)
+    try:
+        yield tracked
+    except BaseException as e:
+        run.end(_status(e))
+        raise
+    else:
+        run.end("FINISHED")
+    finally:
+        _parents.pop(str(folder), None)
+        if before is None:
+            os.environ.pop(PARENT_VAR, None)
+        else:
+            os.environ[PARENT_VAR] = before
+
+
+def outputs(folder: Path, summary: dict[str, Any] | None) -> None:
+    """Log a sweep's, study's or tune's summary and files to its open parent run (no parent open
+    for `folder`, e.g. a search run from Python: nothing)."""
+    tracked = _parents.get(str(Path(folder).resolve()))
+    if tracked is not None:
+        tracked.outputs(folder, summary)
