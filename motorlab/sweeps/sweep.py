@@ -24,7 +24,6 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from motorlab import trackers
 from motorlab.errors import MotorlabError
-from motorlab.recipes import bundled, find_recipe
 from motorlab.report import sweep_plots
 from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
@@ -32,17 +31,10 @@ from motorlab.runs import atomic_write_text, read_json, run_path, write_config, 
 from motorlab.stats import aggregate, trial_scores
 from motorlab.sweeps import backends
 from motorlab.sweeps.grid import parse_grid, settings
-from motorlab.sweeps.trials import command_trials, is_finished, recipe_trials
+from motorlab.sweeps.trials import command_trials, is_finished, recipe_path, recipe_trials
 
 if TYPE_CHECKING:
     from typer.core import TyperGroup  # the motorlab command, handed down by the CLI
-
-def _recipe_path(target: str) -> Path | None:
-    """The recipe file TARGET names, or None when TARGET is a command line."""
-    if len(target.split()) == 1 and (target.endswith(".toml") or target in bundled()):
-        return find_recipe(target)
-    return None
-
 
 MAX_SEEDS = 10_000  # far beyond any study; a typo such as --seeds 1000000 should fail, not plan for hours
 
@@ -67,7 +59,7 @@ def plan(target: str, seeds: int | list[int], grid: list[str] | None, sweep_dir:
     """
     combos = settings(parse_grid(grid))
     seed_list = _seeds(seeds)
-    recipe = _recipe_path(target)
+    recipe = recipe_path(target)
     if recipe is not None:
         return recipe_trials(recipe, combos, seed_list, sweep_dir, threads or {})
     if commands is None:
@@ -160,7 +152,7 @@ def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[st
                "finished": len(done), "failed": len(trials) - len(done), "wall_seconds": round(wall, 2), **flat}
     write_json(sweep_dir / "aggregate.json", {"runs": {s: [t["run_dir"] for t in done if t["setting"] == s]
                                                        for s in labels}, **details})
-    title = f"sweep of {Path(target).name if _recipe_path(target) else target}"
+    title = f"sweep of {Path(target).name if recipe_path(target) else target}"
     title = title if len(title) <= 60 else title[:57] + "..."
     if details["metrics"]:
         sweep_plots.interval_estimates(details["metrics"], sweep_dir / "plots" / "iqm.png", title)

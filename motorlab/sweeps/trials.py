@@ -21,7 +21,7 @@ import tomli_w
 
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.kinds import DEFAULT_KIND, KINDS, for_command, kind
-from motorlab.recipes import SEEDS, fields_of, parse_recipe
+from motorlab.recipes import SEEDS, bundled, fields_of, find_recipe, parse_recipe
 from motorlab.runs import atomic_write_text, finished_with, is_complete, toml_holds, write_toml
 from motorlab.sweeps.grid import label
 
@@ -32,6 +32,13 @@ TRIAL_FILE = "sweep_trial.toml"
 STARTED_FILE = "sweep_trial_started.toml"  # the command line a trial's folder was started with
 # Commands of step kinds that take a seed (and --out): the ones a sweep can repeat.
 SWEEPABLE = tuple(k.command for k in KINDS.values() if k.command and "seed" in k.settings.model_fields)
+
+
+def recipe_path(target: str) -> Path | None:
+    """The recipe file TARGET names, or None when TARGET is a command line (sweep and tune targets)."""
+    if len(target.split()) == 1 and (target.endswith(".toml") or target in bundled()):
+        return find_recipe(target)
+    return None
 
 
 def trial(name: str, setting: str, seed: int, argv: list[str], run_dir: Path, log: Path,

@@ -15,20 +15,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from motorlab.errors import MotorlabError
-from motorlab.recipes import bundled, find_recipe
 from motorlab.sweeps import backends
-from motorlab.sweeps.trials import command_trials, recipe_trials
+from motorlab.sweeps.trials import command_trials, recipe_path, recipe_trials
 from motorlab.tuning.space import Dist
 
 if TYPE_CHECKING:
     from typer.core import TyperGroup
-
-
-def recipe_path(target: str) -> Path | None:
-    """The recipe file TARGET names, or None when TARGET is a command line (as `sweep` reads it)."""
-    if len(target.split()) == 1 and (target.endswith(".toml") or target in bundled()):
-        return find_recipe(target)
-    return None
 
 
 class Planner:
