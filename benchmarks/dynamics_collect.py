@@ -32,7 +32,7 @@ import time
 import gymnasium as gym
 import numpy as np
 
-from motorlab.dynamics.collect import collect_transitions
+from motorlab.dynamics.collection import collect_transitions
 
 TARGET_RATIO = 5.0
 TARGET_RATE = 200_000

@@ -23,7 +23,7 @@ import time
 import torch
 from torch import nn
 
-from motorlab.dynamics.collect import collect_transitions
+from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.train import fit_model, normalized_mse, split_episodes
 
 TARGET_SPEEDUP = 5.0

@@ -36,7 +36,7 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 # torch first and pinned, so no dependency can pull a CUDA build.
 "$VENV/bin/pip" install -q --disable-pip-version-check torch==2.13.0 2>&1 | grep -v "^WARNING: Location" || true
-"$VENV/bin/pip" install -q --disable-pip-version-check -c requirements.lock -e ".[all,test]" 2>&1 | grep -v "^WARNING: Location" || true
+"$VENV/bin/pip" install -q --disable-pip-version-check -c requirements.lock -e ".[all,test,docs]" 2>&1 | grep -v "^WARNING: Location" || true
 "$VENV/bin/python" -c "import motorlab, torch; assert '+cpu' in torch.__version__ or not torch.cuda.is_available()" \
   || { echo "setup: motorlab did not install; see the pip output above" >&2; exit 1; }
 touch "$VENV/.installed"

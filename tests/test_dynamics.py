@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from motorlab.control.mpc import CEMPlanner, EvoTorchCEM, MPPIPlanner, model_scorer
-from motorlab.dynamics.collect import collect_transitions
+from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import ForwardModel, Normalizer, load_model
 from motorlab.dynamics.rewards import reacher_v5
 from motorlab.dynamics.train import fit_model, normalized_mse, split_episodes

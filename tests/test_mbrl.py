@@ -18,7 +18,7 @@ import torch
 
 from helpers import USER_PACKAGES, assert_ok, assert_one_line_error, read_summary, run_cli, run_kind
 from motorlab.control.steps import MPC
-from motorlab.dynamics.collect import collect_transitions
+from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import ForwardModel, device_for
 from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_FIT
 from motorlab.dynamics.train import fit_model

@@ -10,7 +10,7 @@ import torch
 
 from motorlab import user_modules
 from motorlab.dynamics import rewards
-from motorlab.dynamics.collect import collect_transitions
+from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.rewards import Task, UserFunction, builtin_envs, load_function, resolve_task, reward_for
 from motorlab.errors import MotorlabError
 

@@ -30,7 +30,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from motorlab import trackers
 from motorlab.control.mpc_episodes import build_policy, run_episodes
-from motorlab.dynamics.collect import collect_transitions, episode_arrays
+from motorlab.dynamics.collection import collect_transitions, episode_arrays
 from motorlab.dynamics.model import MODEL_JSON, ForwardModel, load_model
 from motorlab.dynamics.state import layout_for
 from motorlab.dynamics.train import evaluate_rows, fit_model

@@ -71,7 +71,7 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
 
     def run(self, settings: DynamicsCollectSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> DynamicsCollectSummary:
-        from motorlab.dynamics.collect import collect_transitions
+        from motorlab.dynamics.collection import collect_transitions
 
         s = settings
         data = collect_transitions(s.env, s.episodes, s.policy, s.workers, s.seed, s.state, s.simulator, progress)
@@ -227,7 +227,7 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
 
     def run(self, settings: DynamicsCheckSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> DynamicsCheckSummary:
-        from motorlab.dynamics.check import REPORT_STEPS, open_loop, state_labels, write_error_table
+        from motorlab.dynamics.open_loop import REPORT_STEPS, open_loop, state_labels, write_error_table
         from motorlab.dynamics.model import load_model
         from motorlab.report.dynamics_plots import error_by_dimension, error_vs_horizon, xy_traces
 

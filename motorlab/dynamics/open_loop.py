@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from motorlab.dynamics.collect import collect_transitions
+from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import ForwardModel
 
 REPORT_STEPS = (1, 5, 10, 25)
