@@ -1,9 +1,17 @@
 """motorlab: learn motor control of simulated bodies in MuJoCo.
 
 Workflows: robust policies (PID, PPO/SAC/TD3, delay, history, model-based LQR),
-muscle synergies and model-based control (see the README).
+muscle synergies and model-based control (see the README and the docs).
+
+The Python API (motorlab.api) is here too, imported on first use so that `motorlab --help`
+and the worker processes start fast:
+
+    import motorlab
+    run = motorlab.train("InvertedPendulum-v5", timesteps=20_000)
+    run.evaluate(episodes=10)
 """
 
+import importlib
 import os
 
 # OpenMP threads that spin after each torch op steal the cores that env processes need
@@ -12,3 +20,17 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __version__ = "0.1.0"
+
+# The API's names, loaded from motorlab.api when first used. `motorlab.dynamics` is the domain
+# package (forward models); its collect / fit / check are the API's (motorlab/dynamics/__init__.py).
+_API = ("train", "evaluate", "video", "zeroshot", "robustness", "compare", "mpc", "mbrl", "run_recipe", "sweep",
+        "tune", "load", "synergies", "Result", "Run", "Study", "Sweep", "Tune", "MotorlabError")
+__all__ = [*_API, "dynamics"]
+
+
+def __getattr__(name: str):
+    if name in _API:
+        return getattr(importlib.import_module("motorlab.api"), name)
+    if name == "dynamics":
+        return importlib.import_module("motorlab.dynamics")
+    raise AttributeError(f"module 'motorlab' has no attribute {name!r}")

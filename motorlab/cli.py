@@ -26,6 +26,7 @@ import typer  # noqa: E402
 from rich.console import Console  # noqa: E402
 from rich.markup import escape  # noqa: E402
 from rich.table import Table  # noqa: E402
+from typer.core import TyperGroup  # noqa: E402
 
 from motorlab import trackers  # noqa: E402
 from motorlab.control.steps import MBRL, MPC  # noqa: E402
@@ -734,7 +735,7 @@ def sweep(
 
     trackers.enable(track)
     summary = run_sweep(target, seeds, grid, backend, address, max_parallel, out, console=stdout,
-                        commands=typer.main.get_command(app))
+                        commands=app_commands())
     stdout.print(f"\n[bold]Results:[/bold] {summary['sweep_dir']}  (report.html, table.txt, summary.json, "
                  "aggregate.json, plots/*.png, <setting>/seed<k>/)")
 
@@ -802,10 +803,7 @@ def tune(
                      prune_startup, report_every, max_parallel, fresh_seeds, backend=backend,
                      address=address, sampler_seed=sampler_seed)
     trackers.enable(track)
-    # --track: the search is a parent run, each seed's run nests under it; run_tune logs its outputs at the end
-    with trackers.parent("tune", spec.out, {"tune": target, "space": space or [], "trials": trials, "seeds": seeds,
-                                            "objective": objective, "sampler": sampler, "pruner": pruner}):
-        summary = run_tune(spec, console=stdout, commands=typer.main.get_command(app))
+    summary = run_tune(spec, console=stdout, commands=app_commands())
     stdout.print(f"\n[bold]Results:[/bold] {summary['tune_dir']}  (best.toml, trials.csv, table.txt, summary.json, "
                  "plots/*.png, report.html, study.db)")
     stdout.print(f"The study in a browser: optuna-dashboard {shlex.quote(spec.storage)}")
@@ -893,6 +891,11 @@ def _field_line(model: type[Settings], name: str) -> str:
         return name  # the flat env settings (env, delay, history, ...) and seeds
     default = info.get_default(call_default_factory=True)
     return f"{name} = {default!r}" if not info.is_required() else f"{name} (required)"
+
+
+def app_commands() -> TyperGroup:
+    """The command group, as sweeps and searches check their command-line targets against it."""
+    return typer.main.get_command(app)
 
 
 def main() -> None:

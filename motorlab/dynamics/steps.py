@@ -227,8 +227,8 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
 
     def run(self, settings: DynamicsCheckSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> DynamicsCheckSummary:
-        from motorlab.dynamics.open_loop import REPORT_STEPS, open_loop, state_labels, write_error_table
         from motorlab.dynamics.model import load_model
+        from motorlab.dynamics.open_loop import REPORT_STEPS, open_loop, state_labels, write_error_table
         from motorlab.report.dynamics_plots import error_by_dimension, error_vs_horizon, xy_traces
 
         model = load_model(Path(settings.model))

@@ -91,21 +91,24 @@ def run_tune(spec: TuneSpec, console: Console | None = None, commands: TyperGrou
     planner.check()
     if spec.storage.startswith("sqlite:///") and spec.storage == f"sqlite:///{spec.out / 'study.db'}":
         spec.out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    if spec.backend == "ray":
-        from motorlab.tuning.ray_search import run_ray_search  # Ray, imported only when asked for
+    config = {"tune": spec.target, "space": {k: d.describe() for k, d in spec.space.items()},
+              "objective": spec.objective.key, "direction": spec.objective.direction,
+              "trials": spec.trials, "seeds": spec.seeds, "storage": spec.storage,
+              "study_name": spec.study_name, "sampler": spec.sampler, "pruner": spec.pruner,
+              **({"sampler_seed": spec.sampler_seed} if spec.sampler_seed is not None else {})}
+    # --track: the search is a parent run, each seed's run nests under it
+    with trackers.parent("tune", spec.out, config):
+        t0 = time.perf_counter()
+        if spec.backend == "ray":
+            from motorlab.tuning.ray_search import run_ray_search  # Ray, imported only when asked for
 
-        study = run_ray_search(spec, planner, console)
-    else:
-        study = run_search(spec, planner, console)
-    spec.out.mkdir(parents=True, exist_ok=True)
-    write_config(spec.out, {"tune": spec.target, "space": {k: d.describe() for k, d in spec.space.items()},
-                            "objective": spec.objective.key, "direction": spec.objective.direction,
-                            "trials": spec.trials, "seeds": spec.seeds, "storage": spec.storage,
-                            "study_name": spec.study_name, "sampler": spec.sampler, "pruner": spec.pruner,
-                            **({"sampler_seed": spec.sampler_seed} if spec.sampler_seed is not None else {})})
-    summary = write_results(spec, study, planner, console, time.perf_counter() - t0)
-    trackers.outputs(spec.out, summary)  # --track: the tune's parent run gets trials.csv, best.toml, plots, ...
+            study = run_ray_search(spec, planner, console)
+        else:
+            study = run_search(spec, planner, console)
+        spec.out.mkdir(parents=True, exist_ok=True)
+        write_config(spec.out, config)
+        summary = write_results(spec, study, planner, console, time.perf_counter() - t0)
+        trackers.outputs(spec.out, summary)  # the parent run gets trials.csv, best.toml, plots, ...
     return summary
 
 

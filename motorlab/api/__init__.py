@@ -1,0 +1,31 @@
+"""The Python API: every command as a function that writes the same run folder and returns it.
+
+    import motorlab
+
+    run = motorlab.train("InvertedPendulum-v5", preset="fast", until_solved=True)
+    run.summary["steps_to_success"], run.evaluate(delay=0.2)["return_mean"]
+    run.policy(obs)                                   # the trained policy, one observation in
+    study = motorlab.run_recipe("pendulum")           # a whole study; in Jupyter, its table and plots
+
+The functions go through the same step kinds as the CLI, recipes and sweeps (`motorlab.kinds`):
+the same settings (keyword arguments named as the options), defaults, checks and files. A
+user mistake raises `MotorlabError` with the message the CLI prints. Results are views of
+their folders (`Result`, `Run`, `Study`, `Sweep`, `Tune`); `load(path)` opens any finished one.
+"""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # as the CLI: videos render offscreen, in a notebook too
+
+from motorlab.api import dynamics, synergies  # noqa: E402
+from motorlab.api.control import mbrl, mpc  # noqa: E402
+from motorlab.api.policies import compare, evaluate, robustness, train, video, zeroshot  # noqa: E402
+from motorlab.api.results import PolicyFunction, Result, Run, Study, Sweep, Tune, load  # noqa: E402
+from motorlab.api.studies import run_recipe, sweep, tune  # noqa: E402
+from motorlab.errors import MotorlabError  # noqa: E402
+
+__all__ = [
+    "train", "evaluate", "video", "zeroshot", "robustness", "compare", "mpc", "mbrl",
+    "run_recipe", "sweep", "tune", "load", "synergies", "dynamics",
+    "Result", "Run", "Study", "Sweep", "Tune", "PolicyFunction", "MotorlabError",
+]

@@ -1,0 +1,43 @@
+"""Model-based control from Python: MPC on a learned forward model, and the PETS loop."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from motorlab.api import steps
+from motorlab.api.results import Result
+from motorlab.api.steps import Track
+
+
+def mpc(env: str, model: str | Path | Result, *, episodes: int | None = None, out: str | Path | None = None,
+        progress: bool = True, track: Track = None, **settings: Any) -> Result:
+    """Model-predictive control of `env` on a learned forward model (`motorlab mpc`).
+
+    Args:
+        env: the env id the model was fit on (Reacher-v5, or MODULE:ID).
+        model: a `motorlab.dynamics.fit` result or a model folder.
+        episodes: control episodes (default 50).
+        **settings: optimizer ("cem", "mppi", "evotorch"), horizon, population, iterations, elites,
+            reward ("auto", a builtin, MODULE:FUNCTION or "learned"), parallel, video, ...
+
+    Returns:
+        Its numbers (`["return_mean"]`, `["success_rate"]`, `["plan_ms_median"]`) and plots.
+    """
+    return steps.run_kind("mpc", out, progress, track, env=env, model=model, episodes=episodes, **settings)
+
+
+def mbrl(env: str, rounds: int | None = None, *, out: str | Path | None = None, progress: bool = True,
+         track: Track = None, **settings: Any) -> Result:
+    """The model-based RL loop (PETS, `motorlab mbrl`): plan with the ensemble, collect, refit, evaluate.
+
+    Args:
+        env: any Box-action env (InvertedPendulum-v5, MODULE:ID).
+        rounds: collect-fit-evaluate rounds (default 10).
+        **settings: ensemble, probabilistic, propagation, horizon, population, episodes_per_round,
+            eval_episodes, until_return, ...
+
+    Returns:
+        Its folder: curve.csv, plots/learning_curve.png, the final model in model/.
+    """
+    return steps.run_kind("mbrl", out, progress, track, env=env, rounds=rounds, **settings)

@@ -1,0 +1,51 @@
+"""Forward models from Python (`motorlab dynamics ...`): collect transitions, fit, check open loop.
+
+    data = motorlab.dynamics.collect("Reacher-v5", episodes=2000)
+    model = motorlab.dynamics.fit(data, epochs=50)
+    motorlab.dynamics.check(model)                    # error vs horizon against the simulator
+    motorlab.mpc("Reacher-v5", model, episodes=20)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from motorlab.api import steps
+from motorlab.api.results import Result
+from motorlab.api.steps import Track
+
+__all__ = ["collect", "fit", "check"]
+
+
+def collect(env: str, episodes: int | None = None, *, out: str | Path | None = None, progress: bool = True,
+            **settings: Any) -> Result:
+    """Record transitions (state, action, next state, reward, done) to transitions.npz.
+
+    Args:
+        env: the env id (Reacher-v5, or MODULE:ID).
+        episodes: episodes to record (default 1,000).
+        **settings: policy ("random", or a run), simulator ("auto", "closed-form", "mujoco", "gym"),
+            state, workers, seed.
+    """
+    return steps.run_kind("dynamics-collect", out, progress, env=env, episodes=episodes, **settings)
+
+
+def fit(transitions: str | Path | Result, *, epochs: int | None = None, out: str | Path | None = None,
+        progress: bool = True, track: Track = None, **settings: Any) -> Result:
+    """Fit a forward model of the normalized state delta: model.safetensors + model.json.
+
+    Args:
+        transitions: a `collect` result, its folder or transitions.npz.
+        epochs: training epochs (default 50).
+        **settings: hidden=[64, 64], lr, batch_size, ensemble, probabilistic, learn_reward,
+            learn_termination, patience, valid_fraction, seed.
+    """
+    return steps.run_kind("dynamics-fit", out, progress, track, transitions=transitions, epochs=epochs, **settings)
+
+
+def check(model: str | Path | Result, *, episodes: int | None = None, out: str | Path | None = None,
+          progress: bool = True, **settings: Any) -> Result:
+    """The model against the simulator under the same actions, open loop: error vs horizon,
+    traces, and the summary numbers (`motorlab dynamics check`)."""
+    return steps.run_kind("dynamics-check", out, progress, model=model, episodes=episodes, **settings)

@@ -1,0 +1,130 @@
+"""Policies from Python: train, evaluate, film, test zero-shot, measure robustness, compare.
+
+Each function is its CLI command: the same settings (keyword arguments named as the options,
+`--n-envs` is `n_envs`), the same run folder, the same errors (`MotorlabError`, the CLI's message).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from motorlab.api import steps
+from motorlab.api.results import Result, Run
+from motorlab.api.steps import Track
+
+PolicyLike = str | Path | Result
+
+
+def train(env: str, algo: str | None = None, timesteps: int | None = None, *, preset: str | None = None,
+          seed: int | None = None, out: str | Path | None = None, progress: bool = True, track: Track = None,
+          **settings: Any) -> Run:
+    """Train a policy on `env` (`motorlab train ENV`) and return its run.
+
+    Args:
+        env: a Gymnasium env id (InvertedPendulum-v5), or MODULE:ID for your own env.
+        algo: ppo, sac, td3 or lqr (default: the preset's, else ppo).
+        timesteps: the env-step budget (default 100,000).
+        preset: named settings: fast, sb3-ppo, sb3-sac, sar-sac, sar-sac-fast, upkie-balancer.
+        seed: the run's seed (default 0).
+        out: the run folder (default runs/train-<time>).
+        progress: show a progress bar (in Jupyter too).
+        track: "mlflow", "wandb" (or "mlflow=URI", "wandb=PROJECT"): log the run there too.
+        **settings: any other `motorlab train` option, named as in `motorlab recipes --kinds`:
+            until_solved=True, delay=0.2, history=10, n_envs=4, lr="linear:3e-4,0", reward=...,
+            sar=<a fit result or sar.npz>, env_kwargs={...}, hyperparams={"n_steps": 1024}, ...
+
+    Returns:
+        The run: `.summary`, `.policy`, `.evaluate()`, `.video()`, `.plot()`, `.path`.
+
+    Raises:
+        MotorlabError: a wrong setting (one line, as the CLI prints it), or an env that does not exist.
+
+    Example:
+        >>> run = motorlab.train("InvertedPendulum-v5", preset="fast", until_solved=True)
+        >>> run.steps_to_success, run.evaluate(delay=0.2)["return_mean"]
+    """
+    fields = {"env": env, "algo": algo, "timesteps": timesteps, "preset": preset, "seed": seed,
+              "progress": progress, **settings}
+    checked = steps.settings("train", **fields)
+    return steps.run("train", checked, out, progress, track)  # type: ignore[return-value]
+
+
+def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None = None, seed: int | None = None,
+             workers: int | None = None, out: str | Path | None = None, progress: bool = True,
+             **env_settings: Any) -> Result:
+    """Evaluate a policy deterministically (`motorlab evaluate POLICY`).
+
+    Args:
+        policy: a `Run` or run folder, or a built-in controller: "pid", "pid:kp=[...],kd=[...]",
+            "zero", "random".
+        env: the env id (default: the run's training env; needed for built-in controllers).
+        episodes: evaluation episodes (default 10).
+        seed: the first episode's reset seed (default 0).
+        workers: env processes (default: as many as help).
+        **env_settings: the env as evaluated, on top of the run's own: delay=0.2, delay_on="action",
+            history, obs_noise, latency, push_force, kwargs={...}, success=...
+
+    Returns:
+        Its numbers: `result["return_mean"]`, `["success_rate"]`, `["episode_lengths"]`, ...
+    """
+    from motorlab.evaluation.steps import settings_for
+
+    env_fields = {"id": env, **{k: steps.path_of(v) for k, v in env_settings.items()}}
+    checked = settings_for(steps.path_of(policy), {k: v for k, v in env_fields.items() if v is not None},
+                           episodes, seed, workers)
+    return steps.run("evaluate", checked, out, progress)
+
+
+def video(run: PolicyLike, episodes: int | None = None, *, out: str | Path | None = None,
+          **settings: Any) -> Result:
+    """Render episodes of a run's policy to MP4 files (`motorlab video RUN`), offscreen.
+
+    Args:
+        run: a training `Run` or its folder (or an evaluation's: its policy on its env).
+        episodes: episodes to film, one MP4 each (default 5).
+        out: the folder for the videos (default RUN/videos).
+        **settings: camera, width, height, seed.
+
+    Returns:
+        The videos folder: `.videos` lists the files, `["returns"]` each episode's return.
+    """
+    return steps.run_kind("video", out, run=run, episodes=episodes, **settings)
+
+
+def zeroshot(runs: list[PolicyLike], envs: list[str], *, episodes: int | None = None, seed: int | None = None,
+             workers: int | None = None, out: str | Path | None = None, progress: bool = True) -> Result:
+    """Zero-shot success of trained policies on envs they never saw (`motorlab zeroshot`)."""
+    return steps.run_kind("zeroshot", out, progress, runs=list(runs), envs=list(envs), episodes=episodes, seed=seed,
+                          workers=workers)
+
+
+def robustness(policies: list[PolicyLike], vary: str | list[str] | dict[str, Any], *, env: str | None = None,
+               episodes: int | None = None, seed: int | None = None, workers: int | None = None,
+               out: str | Path | None = None, progress: bool = True, **env_settings: Any) -> Result:
+    """How far each policy holds as a disturbance grows (`motorlab robustness`).
+
+    Args:
+        policies: runs, run folders or built-in controllers ("pid").
+        vary: the grids, one disturbance at a time: "delay=0:0.3:7" (start:stop:count), a list
+            of those, or a dict {"delay": [0, 0.1, 0.2], "obs_noise": "0:0.05:6"}.
+        env: the env id for built-in controllers (default: the first run's).
+        **env_settings: the env every policy meets besides the grid: push_body="pole", delay_on=...
+
+    Returns:
+        Its folder: curves.csv, plots/robustness.png, `["<policy>.<disturbance>.threshold"]`, ...
+    """
+    grids = vary if isinstance(vary, list) else [vary] if isinstance(vary, str) else [
+        f"{key}={value if isinstance(value, str) else ','.join(map(str, value))}" for key, value in vary.items()]
+    fixed = {k: v for k, v in {"id": env, **env_settings}.items() if v is not None}
+    return steps.run_kind("robustness", out, progress, policies=list(policies), vary=grids, episodes=episodes,
+                          seed=seed, workers=workers, env=fixed or None)
+
+
+def compare(groups: dict[str, list[PolicyLike]], *, title: str | None = None, out: str | Path | None = None) -> Result:
+    """Learning curves of settings across seeds, with rliable's IQMs (`motorlab compare`).
+
+    Args:
+        groups: label -> that setting's training runs, one per seed.
+    """
+    return steps.run_kind("compare", out, groups={k: list(v) for k, v in groups.items()}, title=title)

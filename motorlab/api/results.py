@@ -1,0 +1,324 @@
+"""What the Python API returns: a view of a run folder that reads what the CLI wrote.
+
+Every function of `motorlab.api` writes the same run folder as its command and returns one of
+these. They hold only the folder's path and read its files when asked, so a `Result` is as
+good as the folder: `motorlab.load("runs/ppo")` gives the same object a week later.
+
+- `Result`: any step's folder (summary.json, config.toml, results.json, plots/, videos/).
+- `Run`: a training run, plus its policy, evaluation, videos and plots.
+- `Study`, `Sweep`, `Tune`: the folders of `run_recipe`, `sweep` and `tune`.
+
+In Jupyter each shows its headline numbers as a table and its plots inline (`_repr_html_`).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import tomllib
+from collections.abc import Callable
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from motorlab.errors import MotorlabError
+from motorlab.report.results import Number, read_run_results, read_study_results
+from motorlab.runs import CONFIG, SUMMARY, read_json
+
+if TYPE_CHECKING:
+    import gymnasium as gym
+
+    from motorlab.policies import Policy
+
+MAX_INLINE_FIGURES = 6  # a notebook cell shows this many plots; report() has them all
+MAX_INLINE_VIDEO_BYTES = 8 << 20  # and its first video, where it is small enough to keep in the notebook
+
+
+class Result:
+    """One finished run folder of any step: its summary, settings, numbers and files.
+
+    Attributes:
+        path: the run folder.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+
+    @property
+    def name(self) -> str:
+        return self.path.name
+
+    @cached_property
+    def summary(self) -> dict[str, Any]:
+        """summary.json: every headline number of the run, flat keys."""
+        return read_json(self.path / SUMMARY)
+
+    @cached_property
+    def config(self) -> dict[str, Any]:
+        """config.toml: the resolved settings the run used (run it again with `--config`)."""
+        try:
+            return tomllib.loads((self.path / CONFIG).read_text())
+        except FileNotFoundError:
+            return {}
+
+    @property
+    def kind(self) -> str | None:
+        """The step kind that wrote the folder ("train", "evaluate", "fit", ...), from results.json."""
+        results = read_run_results(self.path)
+        return results.kind if results else None
+
+    @property
+    def numbers(self) -> list[Number]:
+        """The headline numbers as people read them (label, value, text with its unit)."""
+        results = read_run_results(self.path)
+        return results.numbers if results else []
+
+    def __getitem__(self, key: str) -> Any:
+        """A summary number: `result["return_mean"]`."""
+        return self.summary[key]
+
+    @property
+    def figures(self) -> list[Path]:
+        """The PNG figures of the folder (plots/*.png, and any at its top level)."""
+        return sorted(self.path.glob("plots/*.png")) + sorted(self.path.glob("*.png"))
+
+    @property
+    def videos(self) -> list[Path]:
+        """The MP4 videos of the folder (videos/*.mp4)."""
+        return sorted(self.path.glob("videos/*.mp4")) + sorted(self.path.glob("*.mp4"))
+
+    def report(self, out: str | Path | None = None) -> Path:
+        """Write the self-contained HTML report of this folder (`motorlab report`); returns its path."""
+        from motorlab.report.html import build_report
+
+        return build_report([self.path], Path(out) if out is not None else None)
+
+    # ---- display -----------------------------------------------------------------------
+
+    def _rows(self) -> list[tuple[str, str]]:
+        """(label, text) rows of the headline table."""
+        if numbers := [n for n in self.numbers if not n.setup] or self.numbers:
+            return [(n.label, n.text) for n in numbers]
+        return [(k, _short(v)) for k, v in self.summary.items() if _scalar(v)][:12]
+
+    def _title(self) -> str:
+        return f"{self.kind or 'run'}: {self.path}"
+
+    def __repr__(self) -> str:
+        shown = ", ".join(f"{label} {text}" for label, text in self._rows()[:4])
+        return f"{type(self).__name__}({str(self.path)!r}{': ' + shown if shown else ''})"
+
+    def _repr_html_(self) -> str:
+        rows = "".join(f"<tr><th style='text-align:left'>{html.escape(label)}</th>"
+                       f"<td style='text-align:right'>{html.escape(text)}</td></tr>" for label, text in self._rows())
+        figures = "".join(f"<img src='data:image/png;base64,{base64.b64encode(p.read_bytes()).decode()}' "
+                          f"title='{html.escape(p.name)}' style='max-width:32%;margin:2px'>"
+                          for p in self.figures[:MAX_INLINE_FIGURES])
+        videos = [p for p in self.videos[:1] if p.stat().st_size <= MAX_INLINE_VIDEO_BYTES]
+        video = "".join(f"<br><video controls loop muted playsinline style='max-width:48%' title='{html.escape(p.name)}' "
+                        f"src='data:video/mp4;base64,{base64.b64encode(p.read_bytes()).decode()}'></video>"
+                        for p in videos)
+        return f"<div><b>{html.escape(self._title())}</b><table>{rows}</table>{figures}{video}</div>"
+
+
+class Run(Result):
+    """A training run (`motorlab.train`, `motorlab train`): a `Result` with a policy.
+
+    `run.policy(obs)` acts on observations of the env as trained (its delay and history
+    wrappers included: `run.env()` makes that env).
+    """
+
+    @property
+    def steps_to_success(self) -> int | None:
+        """Env steps until the policy was consistently solved (None: not within the budget)."""
+        return self.summary.get("steps_to_success")
+
+    @cached_property
+    def policy(self) -> PolicyFunction:
+        """The trained policy, loaded pickle-free from policy.json + policy.safetensors."""
+        from motorlab.policies import load_run_policy
+
+        return PolicyFunction(load_run_policy(self.path))
+
+    def env(self, **env_settings: Any) -> gym.Env:
+        """The env the run trained on, with its wrappers; `env_settings` (delay, history, kwargs,
+        ...) change it."""
+        from motorlab.envs import EnvConfig, make_env
+        from motorlab.evaluation import trained_env_settings
+        from motorlab.evaluation.steps import merge_env
+
+        return make_env(EnvConfig.model_validate(merge_env(trained_env_settings(self.path), env_settings)))
+
+    def evaluate(self, env: str | None = None, episodes: int | None = None, seed: int | None = None,
+                 out: str | Path | None = None, progress: bool = True, **env_settings: Any) -> Result:
+        """Evaluate the policy deterministically (`motorlab evaluate RUN`): on its training env, or
+        `env`, changed by `env_settings` (delay=0.2, history, obs_noise, ...)."""
+        from motorlab.api.policies import evaluate
+
+        return evaluate(self, env, episodes=episodes, seed=seed, out=out, progress=progress, **env_settings)
+
+    def video(self, episodes: int | None = None, out: str | Path | None = None, **settings: Any) -> list[Path]:
+        """Render episodes of the policy to MP4 (`motorlab video RUN`); returns the video files."""
+        from motorlab.api.policies import video
+
+        return video(self, episodes=episodes, out=out, **settings).videos
+
+    def plot(self) -> list[Path]:
+        """Draw plots/learning_curve.png and plots/observation_trace.png (`motorlab plot RUN`)."""
+        from motorlab.report.run import plot_run
+
+        return plot_run(self.path)
+
+
+class PolicyFunction:
+    """A run's policy as a function: one observation in, one action out (or a batch: rows)."""
+
+    def __init__(self, policy: Policy):
+        self.inner = policy
+        self._rows: int | None = None
+
+    def reset(self) -> None:
+        """Start a new episode (stateful controllers such as PID forget their past)."""
+        self._rows = None
+
+    def __call__(self, obs: Any) -> np.ndarray:
+        obs = np.asarray(obs, dtype=np.float32)
+        single = obs.ndim == 1
+        batch = obs[None] if single else obs
+        if self._rows != len(batch):
+            self.inner.reset(len(batch))
+            self._rows = len(batch)
+        action = self.inner.act(batch)
+        return action[0] if single else action
+
+
+class Study(Result):
+    """A study's folder (`motorlab.run_recipe`, `motorlab run`): its table, findings and steps."""
+
+    def _title(self) -> str:
+        return f"study {self.config.get('recipe', '')}: {self.path}"
+
+    @property
+    def kind(self) -> str | None:
+        return "study"
+
+    @property
+    def table(self) -> str:
+        """table.txt: every step's numbers, as the command printed them."""
+        path = self.path / "table.txt"
+        return path.read_text() if path.is_file() else ""
+
+    @property
+    def steps(self) -> dict[str, Result | list[Result]]:
+        """Each step's run folder by step name (a step trained for several seeds: one per seed)."""
+        found: dict[str, Result | list[Result]] = {}
+        for name in self.config.get("steps", []):
+            folder = self.path / name
+            if (folder / SUMMARY).is_file():
+                found[name] = load(folder)
+            elif seeds := sorted(p for p in folder.glob("seed*") if (p / SUMMARY).is_file()):
+                found[name] = [load(p) for p in seeds]
+        return found
+
+    def _rows(self) -> list[tuple[str, str]]:
+        results = read_study_results(self.path)
+        if results is None:
+            return super()._rows()
+        return [(f"{f.label} ({f.step})", f.text + (f"  IQM {f.iqm} [{f.ci}]" if f.iqm else ""))
+                for f in results.findings]
+
+    def _repr_html_(self) -> str:
+        table = html.escape(self.table)
+        return super()._repr_html_().replace("</table>", f"</table><pre>{table}</pre>", 1)
+
+
+class Sweep(Study):
+    """A sweep's folder (`motorlab.sweep`): the aggregate over seeds and settings."""
+
+    def _title(self) -> str:
+        return f"sweep {self.config.get('sweep', '')}: {self.path}"
+
+    @property
+    def kind(self) -> str | None:
+        return "sweep"
+
+    @property
+    def aggregate(self) -> dict[str, Any]:
+        """aggregate.json: rliable's IQMs with 95% CIs per setting, and probabilities of improvement."""
+        return read_json(self.path / "aggregate.json")
+
+    def _rows(self) -> list[tuple[str, str]]:
+        return Result._rows(self)
+
+
+class Tune(Study):
+    """A search's folder (`motorlab.tune`): the best settings and every trial."""
+
+    def _title(self) -> str:
+        return f"tune {self.config.get('tune', '')}: {self.path}"
+
+    @property
+    def kind(self) -> str | None:
+        return "tune"
+
+    @property
+    def best(self) -> dict[str, Any]:
+        """best.toml: the best trial's settings (`motorlab train ... --preset-file OUT/best.toml`)."""
+        path = self.path / "best.toml"
+        return tomllib.loads(path.read_text()) if path.is_file() else {}
+
+    @property
+    def trials(self) -> list[dict[str, str]]:
+        """trials.csv, one dict per trial (number, state, value, per-seed values, settings)."""
+        import csv
+
+        path = self.path / "trials.csv"
+        if not path.is_file():
+            return []
+        with path.open(newline="") as f:
+            return list(csv.DictReader(f))
+
+    def _rows(self) -> list[tuple[str, str]]:
+        return Result._rows(self)
+
+
+def load(path: str | Path) -> Result:
+    """Open a finished run, study, sweep or tune folder as the object the API returned for it.
+
+    Raises:
+        MotorlabError: the folder does not exist or has not finished (no summary.json).
+    """
+    folder = Path(path)
+    if not (folder / SUMMARY).is_file():
+        if not folder.exists():
+            raise MotorlabError(f"{folder} does not exist; give a folder written by motorlab (its --out).")
+        raise MotorlabError(f"{folder} has no {SUMMARY}: it is not a motorlab run folder, or it did not finish; "
+                            "run the step again (the same --out resumes a study).")
+    config = Result(folder).config
+    for key, cls in (("recipe", Study), ("sweep", Sweep), ("tune", Tune)):
+        if key in config:
+            return cls(folder)
+    result = Result(folder)
+    return Run(folder) if result.kind == "train" or (folder / "policy.json").is_file() and "algo" in config \
+        else result
+
+
+def as_path(value: str | Path | Result, provides: Callable[[str], str | None] | None = None) -> str:
+    """A step's input as the CLI takes it: a path, or a `Result` (its folder, or the file in it that
+    its kind provides, e.g. a fit's sar.npz)."""
+    if isinstance(value, Result):
+        file = provides(value.kind) if provides and value.kind else None
+        return str(value.path / file) if file else str(value.path)
+    return str(value)
+
+
+def _scalar(value: Any) -> bool:
+    return isinstance(value, (int, float, str, bool)) or value is None
+
+
+def _short(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:,.4g}"
+    return str(value)

@@ -1,0 +1,73 @@
+"""Running one step kind from Python: settings from keyword arguments, the run folder, a `Result`.
+
+Every function of the API ends here, so that a script runs exactly what the CLI runs: the kind's
+settings model checks the arguments (a `MotorlabError` with the CLI's message), its `run` writes
+the folder, and `load` opens it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+
+from motorlab import trackers
+from motorlab.api.results import Result, as_path, load
+from motorlab.kinds import KINDS
+from motorlab.settings import Settings
+
+Track = str | list[str] | None
+
+
+def provided_file(kind: str) -> str | None:
+    """The file inside a `kind` run folder that later steps read (a fit's sar.npz), if any."""
+    provides = KINDS[kind].provides if kind in KINDS else None
+    return provides.file if provides else None
+
+
+def path_of(value: Any) -> Any:
+    """A step's input as its settings take it: `Result`s become their folder or file, lists elementwise."""
+    if isinstance(value, Result):
+        return as_path(value, provided_file)
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, (list, tuple)):
+        return [path_of(v) for v in value]
+    if isinstance(value, dict):
+        return {k: path_of(v) for k, v in value.items()}
+    return value
+
+
+def settings(kind: str, **fields: Any) -> Settings:
+    """The settings of a `kind` step from keyword arguments (None: the default).
+
+    Raises:
+        MotorlabError: a wrong or unknown setting, named as the CLI names it.
+    """
+    return KINDS[kind].make(**{k: path_of(v) for k, v in fields.items()})
+
+
+def run(kind: str, checked: Settings, out: str | Path | None, progress: bool, track: Track = None,
+        **run_args: Any) -> Result:
+    """Run a `kind` step with `checked` settings into `out` and open its folder."""
+    trackers.enable(track)
+    summary = KINDS[kind].run(checked, Path(out) if out is not None else None, console=console(),
+                              progress=progress, **run_args)
+    return load(summary.run_dir)
+
+
+def run_kind(kind: str, out: str | Path | None = None, progress: bool = True, track: Track = None,
+             **fields: Any) -> Result:
+    """`settings` then `run`: one step from keyword arguments."""
+    return run(kind, settings(kind, **fields), out, progress, track)
+
+
+def console() -> Console:
+    """Where steps print their tables: the notebook's output in Jupyter (Rich renders HTML there),
+    else stderr as the CLI does, so that a script's stdout stays its own."""
+    return Console() if _in_notebook() else Console(stderr=True)
+
+
+def _in_notebook() -> bool:
+    return Console().is_jupyter
