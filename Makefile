@@ -4,7 +4,7 @@ STAMP  := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: demo test test-fast lint bench setup clean screenshots
+.PHONY: demo test test-fast lint docs bench setup clean screenshots
 
 $(STAMP): pyproject.toml requirements.lock scripts/setup.sh
 	@VENV=$(VENV) bash scripts/setup.sh
@@ -42,8 +42,13 @@ lint: $(STAMP)  ## ruff (pyflakes, isort, bugbear) and the import layers (lint-i
 # most tests wait on `motorlab` subprocesses, so two files at a time keep both cores busy.
 # tests/conftest.py adjusts loadfile: files sharing an expensive session fixture go to one worker
 # together (SHARED), and files are handed out longest first (SECONDS), not most tests first.
-test: lint $(VENV)/.browser  ## the whole test suite, as CI runs it (under 15 min on 2 cores)
+test: lint docs $(VENV)/.browser  ## the whole test suite, as CI runs it (under 15 min on 2 cores)
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile
+
+# The documentation site (mkdocs.yml, docs/): strict, so a warning (a broken link, a docstring griffe
+# cannot read) fails it; docs/reference/cli.md is generated from every command's --help as it builds
+docs: $(STAMP)  ## the documentation site in site/ (open site/index.html, offline); any warning fails it
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 test-fast: lint $(VENV)/.browser  ## the edit loop: unit tests and one end-to-end test per workflow (under 3 min)
 	$(VENV)/bin/python -m pytest -q -m fast
