@@ -65,9 +65,17 @@ def _fixed_global_rng():
         np.random.set_state(state)
 
 
+def _one_run_each(values: dict[str, Any]) -> bool:
+    """Every setting has one run: its bootstrap resamples are all that run, the interval a point."""
+    return all(len(a) == 1 for v in values.values() for a in (v if isinstance(v, tuple) else (v,)))
+
+
 def _interval(values: dict[str, np.ndarray], func) -> tuple[dict, dict]:
     from rliable import library as rly
 
+    if _one_run_each(values):  # the bootstrap's exact answer, without its 2,000 resamples
+        point = {k: np.asarray(func(*v) if isinstance(v, tuple) else func(v)) for k, v in values.items()}
+        return point, {k: np.stack([p, p]) for k, p in point.items()}
     with _fixed_global_rng():
         return rly.get_interval_estimates(values, func, reps=REPS, confidence_interval_size=CONFIDENCE,
                                           random_state=np.random.RandomState(0))
@@ -139,6 +147,8 @@ def _profile(values: dict[str, np.ndarray]) -> dict[str, Any]:
     lo, hi = float(every.min()), float(every.max())
     taus = np.linspace(lo - 1e-9, hi + 1e-9 if hi > lo else lo + 1.0, 51)
     with _fixed_global_rng():
-        point, ci = rly.create_performance_profile(values, taus, reps=REPS)
+        point, ci = rly.create_performance_profile(values, taus, reps=1 if _one_run_each(values) else REPS)
+    if _one_run_each(values):
+        ci = {s: np.stack([p, p]) for s, p in point.items()}
     return {"tau": taus.tolist(), **{s: {"fraction": point[s].tolist(), "low": ci[s][0].tolist(),
                                          "high": ci[s][1].tolist()} for s in values}}

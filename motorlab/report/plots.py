@@ -3,12 +3,22 @@
 from __future__ import annotations
 
 import io
+import sys
 from pathlib import Path
 
 import matplotlib
 import matplotlib.ticker
 
-matplotlib.use("Agg")  # files only, never a window
+
+def files_only_backend() -> None:
+    """Draw to files, never to a window (Agg), except in Jupyter: its inline backend opens no
+    window either, and switching it away would hide the user's own figures from then on.
+    motorlab's figures are closed once saved, so they never show up in a notebook's output."""
+    if "ipykernel" not in sys.modules:
+        matplotlib.use("Agg")
+
+
+files_only_backend()
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 

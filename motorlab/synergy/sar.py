@@ -85,6 +85,11 @@ class SAR:
     bias: np.ndarray
     metadata: dict[str, Any] = field(default_factory=dict)
 
+    def __repr__(self) -> str:  # the sizes, not every array (a notebook cell ending in `sar` prints this)
+        vaf = self.metadata.get("vaf")
+        return (f"SAR({self.method}, {self.n_synergies} synergies x {self.n_muscles} muscles"
+                + (f", VAF {vaf:.1%}" if isinstance(vaf, float) else "") + ")")
+
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise MotorlabError(f"unknown SAR method {self.method!r}; expected one of {', '.join(METHODS)}.")

@@ -126,13 +126,9 @@ def reproduce_line(target: str, best_toml: Path, seed: int) -> str:
 def write_plots(study: optuna.Study, space: dict[str, Dist], plots: Path, title: str) -> list[Path]:
     """Optimization history, parameter importances (two or more keys, enough trials) and one
     slice plot per key, each with its caption inside the PNG (motorlab's save_figure)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
+    from motorlab.report.plots import save_figure  # noqa: I001 (first: it picks the files-only backend)
     import matplotlib.pyplot as plt
     from optuna.visualization import matplotlib as ovm
-
-    from motorlab.report.plots import save_figure
 
     warnings.filterwarnings("ignore", category=UserWarning, module="optuna")  # flat axes of one-valued keys
     done = [t for t in study.get_trials(deepcopy=False) if t.state == TrialState.COMPLETE]
