@@ -153,3 +153,14 @@ def test_a_recipe_a_sweep_and_a_search_from_python(tmp_path):
                            out=tmp_path / "tune")
     assert isinstance(search, Tune) and len(search.trials) == 1
     assert search.best["lqr"]["timesteps"] in (1000, 1500)
+
+
+def test_robustness_from_python_is_the_function_not_the_package(api_run, tmp_path):
+    import motorlab.robustness.curves  # noqa: F401  (the domain package, loaded: the name stays the API's)
+
+    curves = motorlab.robustness(["pid", api_run], {"delay": [0, 0.1]}, episodes=1, workers=1, out=tmp_path / "r",
+                                 progress=False)
+    assert curves.kind == "robustness" and (curves.path / "curves.csv").is_file()
+    lengths = motorlab.evaluate("pid", ENV_ID, episodes=1, env_kwargs={"reset_noise_scale": 0.0},
+                                out=tmp_path / "e", progress=False)
+    assert lengths.config["env"]["kwargs"] == {"reset_noise_scale": 0.0}

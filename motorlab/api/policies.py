@@ -27,12 +27,12 @@ def train(env: str, algo: str | None = None, timesteps: int | None = None, *, pr
         timesteps: the env-step budget (default 100,000).
         preset: named settings: fast, sb3-ppo, sb3-sac, sar-sac, sar-sac-fast, upkie-balancer.
         seed: the run's seed (default 0).
-        out: the run folder (default runs/train-<time>).
+        out: the run folder (default `runs/train-<time>`).
         progress: show a progress bar (in Jupyter too).
         track: "mlflow", "wandb" (or "mlflow=URI", "wandb=PROJECT"): log the run there too.
         **settings: any other `motorlab train` option, named as in `motorlab recipes --kinds`:
             until_solved=True, delay=0.2, history=10, n_envs=4, lr="linear:3e-4,0", reward=...,
-            sar=<a fit result or sar.npz>, env_kwargs={...}, hyperparams={"n_steps": 1024}, ...
+            `sar=<a fit result or sar.npz>`, env_kwargs={...}, hyperparams={"n_steps": 1024}, ...
 
     Returns:
         The run: `.summary`, `.policy`, `.evaluate()`, `.video()`, `.plot()`, `.path`.
@@ -70,7 +70,7 @@ def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None
     """
     from motorlab.evaluation.steps import settings_for
 
-    env_fields = {"id": env, **{k: steps.path_of(v) for k, v in env_settings.items()}}
+    env_fields = {"id": env, **{_env_field(k): steps.path_of(v) for k, v in env_settings.items()}}
     checked = settings_for(steps.path_of(policy), {k: v for k, v in env_fields.items() if v is not None},
                            episodes, seed, workers)
     return steps.run("evaluate", checked, out, progress)
@@ -116,7 +116,7 @@ def robustness(policies: list[PolicyLike], vary: str | list[str] | dict[str, Any
     """
     grids = vary if isinstance(vary, list) else [vary] if isinstance(vary, str) else [
         f"{key}={value if isinstance(value, str) else ','.join(map(str, value))}" for key, value in vary.items()]
-    fixed = {k: v for k, v in {"id": env, **env_settings}.items() if v is not None}
+    fixed = {_env_field(k): v for k, v in {"id": env, **env_settings}.items() if v is not None}
     return steps.run_kind("robustness", out, progress, policies=list(policies), vary=grids, episodes=episodes,
                           seed=seed, workers=workers, env=fixed or None)
 
@@ -128,3 +128,10 @@ def compare(groups: dict[str, list[PolicyLike]], *, title: str | None = None, ou
         groups: label -> that setting's training runs, one per seed.
     """
     return steps.run_kind("compare", out, groups={k: list(v) for k, v in groups.items()}, title=title)
+
+
+def _env_field(name: str) -> str:
+    """An env setting as `EnvConfig` names it: the options' and train's `env_kwargs` is its `kwargs`."""
+    from motorlab.envs import ENV_KEYS
+
+    return ENV_KEYS.get(name, name)

@@ -152,12 +152,14 @@ class Run(Result):
         return make_env(EnvConfig.model_validate(merge_env(trained_env_settings(self.path), env_settings)))
 
     def evaluate(self, env: str | None = None, episodes: int | None = None, seed: int | None = None,
-                 out: str | Path | None = None, progress: bool = True, **env_settings: Any) -> Result:
+                 workers: int | None = None, out: str | Path | None = None, progress: bool = True,
+                 **env_settings: Any) -> Result:
         """Evaluate the policy deterministically (`motorlab evaluate RUN`): on its training env, or
         `env`, changed by `env_settings` (delay=0.2, history, obs_noise, ...)."""
         from motorlab.api.policies import evaluate
 
-        return evaluate(self, env, episodes=episodes, seed=seed, out=out, progress=progress, **env_settings)
+        return evaluate(self, env, episodes=episodes, seed=seed, workers=workers, out=out, progress=progress,
+                        **env_settings)
 
     def video(self, episodes: int | None = None, out: str | Path | None = None, **settings: Any) -> list[Path]:
         """Render episodes of the policy to MP4 (`motorlab video RUN`); returns the video files."""

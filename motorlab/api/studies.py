@@ -12,26 +12,29 @@ from motorlab.api.steps import Track, console
 
 def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: str = "local",
                address: str | None = None, max_parallel: int | None = None, parallel_steps: int | None = None,
-               track: Track = None) -> Study:
+               track: Track = None, **fields: Any) -> Study:
     """Run a study from a recipe (`motorlab run RECIPE`): its steps, table, findings and report.
 
     Args:
         recipe: a bundled recipe's name ("pendulum", "sar-hand-quick", "reacher-quick"; see
             `motorlab recipes`) or a TOML file.
-        out: the study folder (default runs/<recipe>-<time>). Running again into the same folder
+        out: the study folder (default `runs/<recipe>-<time>`). Running again into the same folder
             keeps the steps that finished with the same settings.
         backend: where a train step's seeds run: "local" (processes here) or "ray".
         max_parallel: seeds trained at once.
         parallel_steps: independent train steps run at once.
+        **fields: fields of the recipe to set (`motorlab run --set KEY=VALUE`): FIELD for every step
+            that has it, `**{"STEP.FIELD": value}` for one step, or one of the recipe's inputs
+            (`run_recipe("sar-legs-published", sar="sar.npz")`).
 
     Returns:
-        The study: `.table`, `.summary` ("<step>.<key>"), `.steps` (each step's `Result`),
+        The study: `.table`, `.summary` (`"<step>.<key>"`), `.steps` (each step's `Result`),
         `.report()`; in Jupyter its findings and figures.
     """
     from motorlab.recipes import load_recipe
     from motorlab.studies import Execution, run_study
 
-    study = load_recipe(str(recipe))
+    study = load_recipe(str(recipe), fields)
     trackers.enable(track)
     summary = run_study(study, Path(out) if out is not None else None, console=console(),
                         execution=Execution(backend, address, max_parallel, parallel_steps))
@@ -100,7 +103,15 @@ def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int =
 
 
 def _pairs(values: list[str] | dict[str, Any] | None) -> list[str] | None:
-    """KEY=VALUE strings from a dict (lists joined with commas), as the command line gives them."""
+    """KEY=VALUE strings from a dict, as the command line gives them: a list's values joined with
+    commas, or with | where one holds a comma itself ("linear:3e-4,0")."""
     if values is None or isinstance(values, list):
         return values
-    return [f"{k}={v if isinstance(v, str) else ','.join(map(str, v))}" for k, v in values.items()]
+    pairs = []
+    for key, value in values.items():
+        if isinstance(value, str):
+            pairs.append(f"{key}={value}")
+        else:
+            texts = [str(v) for v in value]
+            pairs.append(f"{key}={('|' if any(',' in t for t in texts) else ',').join(texts)}")
+    return pairs

@@ -1,10 +1,12 @@
 """Muscle synergies from Python (`motorlab synergies ...`): collect, VAF, fit, import, export.
 
-    play = motorlab.train("myoHandReorient8-v0", preset="sar-sac-fast", timesteps=50_000)
-    acts = motorlab.synergies.collect(play, episodes=200)
-    motorlab.synergies.vaf(acts)                      # how many synergies explain 80%?
-    sar = motorlab.synergies.fit(acts, n_synergies=20)
-    motorlab.train("myoHandReorient100-v0", sar=sar, phi=0.5)
+```python
+play = motorlab.train("myoHandReorient8-v0", preset="sar-sac-fast", timesteps=50_000)
+acts = motorlab.synergies.collect(play, episodes=200)
+motorlab.synergies.vaf(acts)                      # how many synergies explain 80%?
+sar = motorlab.synergies.fit(acts, n_synergies=20)
+motorlab.train("myoHandReorient100-v0", sar=sar, phi=0.5)
+```
 """
 
 from __future__ import annotations
@@ -24,8 +26,9 @@ def collect(run: str | Path | Result, episodes: int | None = None, *, out: str |
 
     Args:
         run: the play policy: a training `Run` or its folder.
-        episodes: episodes to roll out (default 100).
-        **settings: percentile (keep episodes above it, default 80), signal ("auto", "act",
+        episodes: episodes to keep (default 100): rollouts go on until this many score at or
+            above the threshold that the first `preview` episodes set.
+        **settings: percentile (the threshold's percentile of the preview's returns, default 80), signal ("auto", "act",
             "ctrl", "action"), deterministic, preview, max_episodes, seed, workers.
 
     Returns:
@@ -36,8 +39,8 @@ def collect(run: str | Path | Result, episodes: int | None = None, *, out: str |
 
 def vaf(activations: str | Path | Result, *, threshold: float | None = None, out: str | Path | None = None,
         **settings: Any) -> Result:
-    """Variance accounted for by 1..N synergies (`motorlab synergies vaf`): plots/vaf.png and the
-    smallest N that reaches `threshold` (default 0.8) in `["n_at_threshold"]`.
+    """Variance accounted for by 1..N synergies (`motorlab synergies vaf`): vaf.png and the
+    smallest N that reaches `threshold` (default 0.8) in `["n_for_threshold"]`.
 
     Args:
         activations: a `collect` result, its folder or activations.npz.

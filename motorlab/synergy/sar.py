@@ -685,8 +685,10 @@ def load_sar(path: Path | str) -> SAR:
     fix = "re-create it (fit the SAR again, or re-import its source pickles)."
     if not path.exists():
         raise MotorlabError(f"SAR file {path} does not exist; check the path or fit a SAR first.")
+    if path.is_dir() and (path / "sar.npz").is_file():  # a `synergies fit` run folder
+        path = path / "sar.npz"
     if not path.is_file():
-        raise MotorlabError(f"{path} is not a file; pass the sar.npz file itself.")
+        raise MotorlabError(f"{path} is not a file; pass the sar.npz file itself (or the folder of a synergies fit).")
 
     def bad(problem: str) -> MotorlabError:
         return MotorlabError(f"SAR file {path} is corrupt or not a SAR: {problem}; {fix}")
