@@ -63,3 +63,19 @@ def test_notebook_runs_on_tiny_budgets(path, tmp_path):
     for cell in nb.cells:
         if cell.cell_type == "code":
             assert not [o for o in cell.outputs if o.get("output_type") == "error"]
+
+
+def test_a_users_figures_still_show_after_motorlab_draws(tmp_path):
+    """motorlab draws its figures to files; in Jupyter that must not switch the inline backend off."""
+    nb = nbformat.v4.new_notebook(cells=[
+        nbformat.v4.new_code_cell("import motorlab\n"
+                                  "run = motorlab.train('InvertedPendulum-v5', 'ppo', 256, out='ppo', progress=False,\n"
+                                  "                     hyperparams={'n_steps': 128, 'batch_size': 64})\n"
+                                  "run.plot()"),
+        nbformat.v4.new_code_cell("import matplotlib.pyplot as plt\nplt.plot([0, 1], [1, 0])\nplt.show()"),
+    ])
+    NotebookClient(nb, timeout=CELL_TIMEOUT, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}
+                   ).execute()
+    assert (tmp_path / "ppo" / "plots" / "learning_curve.png").is_file()
+    assert not any("image/png" in o.get("data", {}) for o in nb.cells[0].outputs)  # motorlab's own: files only
+    assert any("image/png" in o.get("data", {}) for o in nb.cells[1].outputs)
