@@ -250,6 +250,17 @@ def _parse_sets(items: list[str], flag: str = "--set") -> dict:
     return params
 
 
+def _key_values(items: list[str], flag: str) -> dict[str, str]:
+    """KEY=VALUE items as written (the recipe reads VALUE as TOML)."""
+    given = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise MotorlabError(f"{flag} {item!r}: write KEY=VALUE, e.g. {flag} ppo.timesteps=50000.")
+        given[key.strip()] = value
+    return given
+
+
 def _warn_faults(summary: Any) -> None:
     """One line when episodes ended on a numerical fault (they are counted and listed, not fatal)."""
     n = getattr(summary, "numerical_faults", 0) or 0
@@ -679,6 +690,10 @@ def run(
         help="Train steps that need nothing from each other (e.g. SAR-RL's chain and RL-E2E) run at once, "
              "each its own process, at most this many (default: the recipe's parallel_steps, else 1).")] = None,
     check: Annotated[bool, typer.Option("--check", help="Only validate the recipe and list its steps; run nothing.")] = False,
+    given: Annotated[Optional[list[str]], typer.Option(
+        "--set", help="KEY=VALUE, repeatable: set a field of the recipe (VALUE as TOML reads it). KEY: FIELD (every "
+                      "step that has it), STEP.FIELD (one step), or one of the recipe's [inputs] (--set sar=sar.npz).")
+    ] = None,
     track: Track = None,
 ):
     """Run a study from a TOML recipe: its steps, a printed table, summary.json and plots.
@@ -689,7 +704,7 @@ def run(
     """
     from motorlab.studies import Execution, run_study
 
-    study = load_recipe(recipe)
+    study = load_recipe(recipe, _key_values(given or [], "--set"))
     if check:
         stdout.print(f"{study.source}: valid, {len(study.steps)} steps: "
                      + ", ".join(f"{st.name} ({st.kind.name})" for st in study.steps))

@@ -32,10 +32,23 @@
 A step's fields are its kind's settings (`motorlab recipes --kinds` lists them, with their
 defaults); "@step" names an earlier step's output. Bundled recipes live in motorlab/recipes/
 and are addressed by name.
+
+Any field can be set from the command line, `motorlab run RECIPE --set KEY=VALUE` (VALUE as TOML
+reads it, else a string): KEY is FIELD (every step whose kind has it) or STEP.FIELD (one step). A
+recipe that needs something only its user has (a file) names it in `[inputs]` and uses it as
+"${NAME}" in its values; `--set NAME=VALUE` gives it, and the recipe does not run without it:
+
+    [inputs]
+    sar = "the SAR to train in: a sar.npz (motorlab synergies import-sklearn FOLDER --trust --out sar.npz)"
+
+    [[steps]]
+    name = "sar-rl"
+    sar = "${sar}"
 """
 
 from __future__ import annotations
 
+import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -52,6 +65,7 @@ from motorlab.stepkind import StepKind
 from motorlab.user_modules import import_modules
 
 SEEDS = "seeds"  # a training step's field: run it once per seed
+INPUT = re.compile(r"\$\{([A-Za-z_][\w-]*)\}")  # "${NAME}": a recipe input, given with --set NAME=VALUE
 
 
 @dataclass
@@ -98,6 +112,7 @@ class _RecipeFile(BaseModel):
     seeds: int | list[int] | None = None  # every training step that sets none: seeds 0..N-1 (or this list)
     parallel_steps: int = Field(1, ge=1)  # training steps that need nothing from each other, run at once
     imports: list[str] = Field(default_factory=list)  # the user's modules that register its envs
+    inputs: dict[str, str] = Field(default_factory=dict)  # NAME -> what to give: --set NAME=VALUE fills "${NAME}"
     defaults: dict[str, Any] = Field(default_factory=dict)
     steps: list[dict[str, Any]] = Field(min_length=1)
     findings: list[FindingSpec] = Field(default_factory=list)  # default: each step's own (see StepKind.findings)
@@ -226,6 +241,7 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
         raw = _RecipeFile.model_validate(data)
     except ValidationError as e:
         raise MotorlabError(_explain(e, source, set(_RecipeFile.model_fields))) from None
+    _missing_inputs({"defaults": raw.defaults, "steps": raw.steps}, raw.inputs, source)
     import_modules(raw.imports, f"{source}: imports")  # before the steps are checked: they register the envs
     all_fields = set().union(*(fields_of(k) for k in KINDS.values()))
     unknown_defaults = [k for k in raw.defaults if k not in all_fields]
@@ -268,11 +284,99 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
                   steps=steps, findings=raw.findings)
 
 
-def load_recipe(name_or_path: str) -> Recipe:
-    """Load a bundled recipe by name, or a recipe file by path."""
+def load_recipe(name_or_path: str, given: dict[str, Any] | None = None) -> Recipe:
+    """Load a bundled recipe by name, or a recipe file by path, with the fields and inputs
+    `given` on the command line (`--set KEY=VALUE`) set."""
     path = find_recipe(name_or_path)
     try:
         text = path.read_text()
     except (OSError, UnicodeDecodeError) as e:
         raise MotorlabError(f"cannot read recipe {path}: {e}") from None
+    if given:
+        import tomli_w
+
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as e:
+            raise MotorlabError(f"{path}: not valid TOML ({e}).") from None
+        text = tomli_w.dumps(set_fields(data, given, str(path)))
     return parse_recipe(text, str(path))
+
+
+def toml_value(text: Any) -> Any:
+    """A value given on the command line as TOML reads it (numbers, booleans, arrays, inline
+    tables), else the plain string; a value that is no string (from Python) as it is."""
+    if not isinstance(text, str):
+        return text
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def set_fields(data: dict[str, Any], given: dict[str, Any], source: str, flag: str = "--set") -> dict[str, Any]:
+    """A recipe's TOML data with `given` set: each KEY is one of the recipe's [inputs] (its
+    "${KEY}" in values become VALUE), FIELD (every step whose kind has it) or STEP.FIELD.
+
+    Raises:
+        MotorlabError: a step name or field the recipe does not have (with close matches).
+    """
+    data = {**data, "steps": [dict(s) for s in data.get("steps", [])]}
+    inputs = data.get("inputs", {}) if isinstance(data.get("inputs"), dict) else {}
+    steps = data["steps"]
+    names = [str(s.get("name", f"step{i + 1}")) for i, s in enumerate(steps)]
+    for key, text in given.items():
+        if key in inputs:
+            data = _fill(data, key, text)
+            steps = data["steps"]
+            continue
+        step_name, dot, field_name = key.rpartition(".")
+        value = toml_value(text)
+        targets = [i for i, n in enumerate(names) if n == step_name] if dot else range(len(steps))
+        if dot and not targets:
+            raise MotorlabError(f"{flag} {key}: {source} has no step {step_name!r}{did_you_mean(step_name, names)}; "
+                                f"steps: {', '.join(names)}.")
+        hit = [i for i in targets if field_name in step_fields(steps[i])]
+        if not hit:
+            close = did_you_mean(field_name, set().union(*map(fields_of, KINDS.values())) | set(inputs))
+            if dot:
+                raise MotorlabError(f"{flag} {key}: step {step_name!r} of {source} has no field {field_name!r}{close}.")
+            raise MotorlabError(f"{flag} {key}: no step of {source} has a field {field_name!r}"
+                                f"{', nor is it one of its [inputs]' if inputs else ''}{close}.")
+        for i in hit:
+            steps[i][field_name] = value
+    return data
+
+
+def _fill(value: Any, name: str, text: Any) -> Any:
+    """`value` with "${name}" replaced by `text` in every string, however deep (a whole "${name}"
+    becomes the value as TOML reads it)."""
+    if isinstance(value, str):
+        if value == f"${{{name}}}":
+            return toml_value(text)
+        return value.replace(f"${{{name}}}", str(text))
+    if isinstance(value, list):
+        return [_fill(v, name, text) for v in value]
+    if isinstance(value, dict):
+        return {k: (v if k == "inputs" else _fill(v, name, text)) for k, v in value.items()}
+    return value
+
+
+def step_fields(step: dict[str, Any]) -> set[str]:
+    """The fields of a recipe step's kind (none for a kind the recipe check will refuse)."""
+    try:
+        return fields_of(kind(str(step.get("kind", DEFAULT_KIND))))
+    except MotorlabError:
+        return set()
+
+
+def _missing_inputs(data: Any, inputs: dict[str, str], source: str) -> None:
+    """One line for the first "${NAME}" no --set gave."""
+    found = INPUT.findall(repr(data))
+    if not found:
+        return
+    name = found[0]
+    if name not in inputs:
+        raise MotorlabError(f"{source}: \"${{{name}}}\" is not one of its [inputs]"
+                            f"{did_you_mean(name, inputs)}; declare it there, or write the value itself.")
+    raise MotorlabError(f"{source} needs --set {name}=VALUE: {inputs[name]}.")

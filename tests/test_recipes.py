@@ -12,7 +12,7 @@ import pytest
 
 from helpers import assert_ok, assert_png, read_summary, run_cli
 from motorlab.errors import MotorlabError
-from motorlab.recipes import bundled, load_recipe, parse_recipe
+from motorlab.recipes import bundled, load_recipe, parse_recipe, set_fields
 
 # ---- the bundled recipe ------------------------------------------------------------
 
@@ -375,3 +375,62 @@ def test_the_step_schema_is_a_union_of_the_registered_kinds():
             assert parsed.kind == step.get("kind", "train") and parsed.name == step["name"]
     with pytest.raises(ValueError, match="episodes"):
         union.validate_python({"kind": "evaluate", "name": "e", "policy": "pid", "episodes": 0})
+
+
+INPUT_RECIPE = """name = "with-input"
+[inputs]
+sar = "the SAR to train in: a sar.npz"
+
+[[steps]]
+name = "ppo"
+kind = "train"
+env = "InvertedPendulum-v5"
+timesteps = 1000
+
+[[steps]]
+name = "pid"
+kind = "evaluate"
+policy = "pid"
+env = "InvertedPendulum-v5"
+episodes = 3
+sar = "${sar}"
+"""
+
+
+def test_set_overrides_recipe_fields_one_step_or_every_step():
+    recipe = load_recipe("pendulum", {"ppo.timesteps": "5000", "episodes": "3"})
+    steps = {s.name: s for s in recipe.steps}
+    assert steps["ppo"].settings.timesteps == 5000 and steps["ppo-delay"].settings.timesteps == 50000
+    assert all(s.settings.episodes == 3 for s in recipe.steps if "episodes" in type(s.settings).model_fields)
+
+
+@pytest.mark.parametrize(("given", "fragments"), [
+    ({"pp.timesteps": "1"}, ("--set pp.timesteps", "no step 'pp'", "did you mean ppo?")),
+    ({"ppo.timestep": "1"}, ("--set ppo.timestep", "step 'ppo'", "no field 'timestep'", "did you mean timesteps")),
+    ({"timestep": "1"}, ("--set timestep", "no step", "has a field 'timestep'", "did you mean timesteps")),
+])
+def test_set_names_the_bad_field_with_close_matches(given, fragments):
+    with pytest.raises(MotorlabError) as caught:
+        load_recipe("pendulum", given)
+    for fragment in fragments:
+        assert fragment in str(caught.value)
+
+
+def test_a_recipe_input_is_required_and_filled_by_set(tmp_path):
+    path = tmp_path / "input.toml"
+    path.write_text(INPUT_RECIPE)
+    with pytest.raises(MotorlabError, match=r"needs --set sar=VALUE: the SAR to train in: a sar.npz"):
+        load_recipe(str(path))
+    filled = set_fields(tomllib.loads(INPUT_RECIPE), {"sar": "runs/fit/sar.npz"}, str(path))
+    assert filled["steps"][1]["sar"] == "runs/fit/sar.npz" and "sar" not in filled["steps"][0]
+    with pytest.raises(MotorlabError, match=r"SAR file .*missing\.npz does not exist"):  # filled, then checked
+        load_recipe(str(path), {"sar": str(tmp_path / "missing.npz")})
+
+
+def test_run_set_on_the_command_line_is_one_line_on_a_mistake(tmp_path):
+    from helpers import assert_one_line_error
+
+    proc = run_cli("run", "pendulum", "--set", "ppo.timestep=5000", "--check")
+    assert_one_line_error(proc, "--set ppo.timestep", "did you mean timesteps")
+    proc = run_cli("run", "pendulum", "--set", "ppo.timesteps=5000", "--check")
+    assert_ok(proc)

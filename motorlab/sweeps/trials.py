@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, Any
 import tomli_w
 
 from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.kinds import DEFAULT_KIND, KINDS, for_command, kind
-from motorlab.recipes import SEEDS, bundled, fields_of, find_recipe, parse_recipe
+from motorlab.kinds import KINDS, for_command
+from motorlab.recipes import SEEDS, bundled, find_recipe, parse_recipe, set_fields, step_fields
 from motorlab.runs import atomic_write_text, finished_with, is_complete, toml_holds, write_toml
 from motorlab.sweeps.grid import label
 
@@ -154,55 +154,21 @@ def command_trials(cli: TyperGroup, command: str, settings: list[dict[str, str]]
     return out
 
 
-def _toml_value(text: str) -> Any:
-    """A grid value as TOML reads it (numbers, booleans, arrays, inline tables), else the plain string."""
-    try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text
-
-
 def recipe_variant(data: dict[str, Any], setting: dict[str, str], seed: int, source: str) -> dict[str, Any]:
-    """The recipe's TOML data with the setting's fields set and every step's seed set to `seed`.
-
-    Keys: FIELD (every step whose kind has it) or STEP.FIELD (one step).
+    """The recipe's TOML data with the setting's fields set (`set_fields`: FIELD, STEP.FIELD or one
+    of its [inputs]) and every step's seed set to `seed`.
 
     Raises:
         MotorlabError: a step name or field the recipe does not have.
     """
-    data = {**data, "steps": [dict(s) for s in data.get("steps", [])]}
+    data = set_fields(data, setting, source, flag="--grid")
     data.pop(SEEDS, None)  # one seed per trial: the sweep's
-    defaults = {k: v for k, v in data.get("defaults", {}).items() if k != SEEDS}
-    data["defaults"] = defaults
-    steps = data["steps"]
-    names = [str(s.get("name", f"step{i + 1}")) for i, s in enumerate(steps)]
-    for key, text in setting.items():
-        step_name, dot, field = key.rpartition(".")
-        value = _toml_value(text)
-        targets = [i for i, n in enumerate(names) if n == step_name] if dot else range(len(steps))
-        if dot and not targets:
-            raise MotorlabError(f"--grid {key}: {source} has no step {step_name!r}{did_you_mean(step_name, names)}; "
-                                f"steps: {', '.join(names)}.")
-        hit = [i for i in targets if field in _fields(steps[i])]
-        if not hit:
-            where = f"step {step_name!r}" if dot else "any step"
-            raise MotorlabError(f"--grid {key}: {where} of {source} has no field {field!r}"
-                                f"{did_you_mean(field, set().union(*map(fields_of, KINDS.values())))}.")
-        for i in hit:
-            steps[i][field] = value
-    for s in steps:
+    data["defaults"] = {k: v for k, v in data.get("defaults", {}).items() if k != SEEDS}
+    for s in data["steps"]:
         s.pop(SEEDS, None)
-        if "seed" in _fields(s):
+        if "seed" in step_fields(s):
             s["seed"] = seed
     return data
-
-
-def _fields(step: dict[str, Any]) -> set[str]:
-    """The fields of a recipe step's kind (none for a kind the recipe check will refuse)."""
-    try:
-        return fields_of(kind(str(step.get("kind", DEFAULT_KIND))))
-    except MotorlabError:
-        return set()
 
 
 def recipe_trials(path: Path, settings: list[dict[str, str]], seeds: list[int], sweep_dir: Path,
