@@ -199,12 +199,16 @@ class PolicyFunction:
 class Study(Result):
     """A study's folder (`motorlab.run_recipe`, `motorlab run`): its table, findings and steps."""
 
+    label = "study"  # its kind
+    config_key = "recipe"  # the config.toml key that names what it ran
+    findings = True  # its headline rows are the study's findings (sweeps, tunes: their summary)
+
     def _title(self) -> str:
-        return f"study {self.config.get('recipe', '')}: {self.path}"
+        return f"{self.label} {self.config.get(self.config_key, '')}: {self.path}"
 
     @property
     def kind(self) -> str | None:
-        return "study"
+        return self.label
 
     @property
     def table(self) -> str:
@@ -225,7 +229,7 @@ class Study(Result):
         return found
 
     def _rows(self) -> list[tuple[str, str]]:
-        results = read_study_results(self.path)
+        results = read_study_results(self.path) if self.findings else None
         if results is None:
             return super()._rows()
         return [(f"{f.label} ({f.step})", f.text + (f"  IQM {f.iqm} [{f.ci}]" if f.iqm else ""))
@@ -239,31 +243,20 @@ class Study(Result):
 class Sweep(Study):
     """A sweep's folder (`motorlab.sweep`): the aggregate over seeds and settings."""
 
-    def _title(self) -> str:
-        return f"sweep {self.config.get('sweep', '')}: {self.path}"
-
-    @property
-    def kind(self) -> str | None:
-        return "sweep"
+    label = config_key = "sweep"
+    findings = False
 
     @property
     def aggregate(self) -> dict[str, Any]:
         """aggregate.json: rliable's IQMs with 95% CIs per setting, and probabilities of improvement."""
         return read_json(self.path / "aggregate.json")
 
-    def _rows(self) -> list[tuple[str, str]]:
-        return Result._rows(self)
-
 
 class Tune(Study):
     """A search's folder (`motorlab.tune`): the best settings and every trial."""
 
-    def _title(self) -> str:
-        return f"tune {self.config.get('tune', '')}: {self.path}"
-
-    @property
-    def kind(self) -> str | None:
-        return "tune"
+    label = config_key = "tune"
+    findings = False
 
     @property
     def best(self) -> dict[str, Any]:
@@ -282,9 +275,6 @@ class Tune(Study):
         with path.open(newline="") as f:
             return list(csv.DictReader(f))
 
-    def _rows(self) -> list[tuple[str, str]]:
-        return Result._rows(self)
-
 
 def load(path: str | Path) -> Result:
     """Open a finished run, study, sweep or tune folder as the object the API returned for it.
@@ -299,8 +289,8 @@ def load(path: str | Path) -> Result:
         raise MotorlabError(f"{folder} has no {SUMMARY}: it is not a motorlab run folder, or it did not finish; "
                             "run the step again (the same --out resumes a study).")
     config = Result(folder).config
-    for key, cls in (("recipe", Study), ("sweep", Sweep), ("tune", Tune)):
-        if key in config:
+    for cls in (Study, Sweep, Tune):
+        if cls.config_key in config:
             return cls(folder)
     result = Result(folder)
     return Run(folder) if result.kind == "train" or (folder / "policy.json").is_file() and "algo" in config \
