@@ -25,6 +25,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "onnx": ("onnx==1.23.2", "onnxruntime==1.20.1"),
     "mlflow": ("mlflow-skinny==3.17.2",),
     "wandb": ("wandb==0.31.0",),
+    "notebook": ("ipykernel==7.4.0", "ipywidgets==8.1.9"),  # Jupyter: the kernel, live progress bars
 }
 
 

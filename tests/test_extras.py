@@ -99,7 +99,7 @@ def test_extras_table_matches_pyproject_and_the_lock_covers_every_pin():
 
 def test_setup_installs_all_extras():
     setup = (ROOT / "scripts/setup.sh").read_text()
-    assert '-c requirements.lock -e ".[all,test]"' in setup
+    assert '-c requirements.lock -e ".[all,test,docs]"' in setup  # docs: make docs, run by make test
 
 
 # ---- the helper -------------------------------------------------------------------------

@@ -14,12 +14,14 @@ import motorlab
 from motorlab.kinds import KINDS
 
 PACKAGE = Path(motorlab.__file__).parent
-CLI, STUDIES, KIND_REGISTRY, STEP_KINDS, DOMAIN, GROUND = 5, 4, 3, 2, 1, 0
+API, CLI, STUDIES, KIND_REGISTRY, STEP_KINDS, DOMAIN, GROUND = 6, 5, 4, 3, 2, 1, 0
 GROUND_FLOOR = {"motorlab.runs", "motorlab.errors", "motorlab.faults", "motorlab.environment", "motorlab.extras",
                 "motorlab.settings", "motorlab.user_modules", "motorlab"}
 
 
 def layer(module: str) -> int:
+    if module.startswith("motorlab.api"):
+        return API
     if module in ("motorlab.cli", "motorlab.__main__"):
         return CLI
     if module.startswith(("motorlab.studies", "motorlab.sweeps", "motorlab.tuning")) or module == "motorlab.recipes":
