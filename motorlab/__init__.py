@@ -23,14 +23,13 @@ __version__ = "0.1.0"
 
 # The API's names, loaded from motorlab.api when first used. `motorlab.dynamics` is the domain
 # package (forward models); its collect / fit / check are the API's (motorlab/dynamics/__init__.py).
-_API = ("train", "evaluate", "video", "zeroshot", "robustness", "compare", "mpc", "mbrl", "run_recipe", "sweep",
-        "tune", "load", "synergies", "Result", "Run", "Study", "Sweep", "Tune", "MotorlabError")
-__all__ = [*_API, "dynamics"]
+__all__ = ["train", "evaluate", "video", "zeroshot", "robustness", "compare", "mpc", "mbrl", "run_recipe", "sweep",
+           "tune", "load", "synergies", "Result", "Run", "Study", "Sweep", "Tune", "MotorlabError", "dynamics"]
 
 
 def __getattr__(name: str):
-    if name in _API:
-        return getattr(importlib.import_module("motorlab.api"), name)
     if name == "dynamics":
         return importlib.import_module("motorlab.dynamics")
+    if name in __all__:
+        return getattr(importlib.import_module("motorlab.api"), name)
     raise AttributeError(f"module 'motorlab' has no attribute {name!r}")

@@ -20,8 +20,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # as the CLI: videos render offscreen
 import motorlab as _motorlab  # noqa: E402
 from motorlab.api import dynamics, synergies  # noqa: E402
 from motorlab.api.control import mbrl, mpc  # noqa: E402
-from motorlab.api.policies import compare, evaluate, robustness, train, video, zeroshot  # noqa: E402
-from motorlab.api.results import PolicyFunction, Result, Run, Study, Sweep, Tune, load  # noqa: E402
+from motorlab.api.policies import Run, compare, evaluate, robustness, train, video, zeroshot  # noqa: E402
+from motorlab.api.results import PolicyFunction, Result, Study, Sweep, Tune, load  # noqa: E402
 from motorlab.api.studies import run_recipe, sweep, tune  # noqa: E402
 from motorlab.errors import MotorlabError  # noqa: E402
 

@@ -8,6 +8,7 @@ from typing import Any
 from motorlab.api import steps
 from motorlab.api.results import Result
 from motorlab.api.steps import Track
+from motorlab.control.steps import MBRL, MPC
 
 
 def mpc(env: str, model: str | Path | Result, *, episodes: int | None = None, out: str | Path | None = None,
@@ -24,7 +25,7 @@ def mpc(env: str, model: str | Path | Result, *, episodes: int | None = None, ou
     Returns:
         Its numbers (`["return_mean"]`, `["success_rate"]`, `["plan_ms_median"]`) and plots.
     """
-    return steps.run_kind("mpc", out, progress, track, env=env, model=model, episodes=episodes, **settings)
+    return steps.run_kind(MPC, out, progress, track, env=env, model=model, episodes=episodes, **settings)
 
 
 def mbrl(env: str, rounds: int | None = None, *, out: str | Path | None = None, progress: bool = True,
@@ -40,4 +41,4 @@ def mbrl(env: str, rounds: int | None = None, *, out: str | Path | None = None, 
     Returns:
         Its folder: curve.csv, plots/learning_curve.png, the final model in model/.
     """
-    return steps.run_kind("mbrl", out, progress, track, env=env, rounds=rounds, **settings)
+    return steps.run_kind(MBRL, out, progress, track, env=env, rounds=rounds, **settings)

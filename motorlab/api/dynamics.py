@@ -16,6 +16,7 @@ from typing import Any
 from motorlab.api import steps
 from motorlab.api.results import Result
 from motorlab.api.steps import Track
+from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
 
 __all__ = ["collect", "fit", "check"]
 
@@ -30,7 +31,7 @@ def collect(env: str, episodes: int | None = None, *, out: str | Path | None = N
         **settings: policy ("random", or a run), simulator ("auto", "closed-form", "mujoco", "gym"),
             state, workers, seed.
     """
-    return steps.run_kind("dynamics-collect", out, progress, env=env, episodes=episodes, **settings)
+    return steps.run_kind(DYNAMICS_COLLECT, out, progress, env=env, episodes=episodes, **settings)
 
 
 def fit(transitions: str | Path | Result, *, epochs: int | None = None, out: str | Path | None = None,
@@ -43,11 +44,11 @@ def fit(transitions: str | Path | Result, *, epochs: int | None = None, out: str
         **settings: hidden=[64, 64], lr, batch_size, ensemble, probabilistic, learn_reward,
             learn_termination, patience, valid_fraction, seed.
     """
-    return steps.run_kind("dynamics-fit", out, progress, track, transitions=transitions, epochs=epochs, **settings)
+    return steps.run_kind(DYNAMICS_FIT, out, progress, track, transitions=transitions, epochs=epochs, **settings)
 
 
 def check(model: str | Path | Result, *, episodes: int | None = None, out: str | Path | None = None,
           progress: bool = True, **settings: Any) -> Result:
     """The model against the simulator under the same actions, open loop: error vs horizon,
     traces, and the summary numbers (`motorlab dynamics check`)."""
-    return steps.run_kind("dynamics-check", out, progress, model=model, episodes=episodes, **settings)
+    return steps.run_kind(DYNAMICS_CHECK, out, progress, model=model, episodes=episodes, **settings)

@@ -6,12 +6,20 @@ Each function is its CLI command: the same settings (keyword arguments named as 
 
 from __future__ import annotations
 
+from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from motorlab.api import steps
-from motorlab.api.results import Result, Run
+from motorlab.api.results import FOLDER_TYPES, PolicyFunction, Result
 from motorlab.api.steps import Track
+from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
+from motorlab.report.steps import COMPARE, VIDEO
+from motorlab.rl.steps import TRAIN
+from motorlab.robustness.steps import ROBUSTNESS
+
+if TYPE_CHECKING:
+    import gymnasium as gym
 
 PolicyLike = str | Path | Result
 
@@ -46,8 +54,8 @@ def train(env: str, algo: str | None = None, timesteps: int | None = None, *, pr
     """
     fields = {"env": env, "algo": algo, "timesteps": timesteps, "preset": preset, "seed": seed,
               "progress": progress, **settings}
-    checked = steps.settings("train", **fields)
-    return steps.run("train", checked, out, progress, track)  # type: ignore[return-value]
+    checked = steps.settings(TRAIN, **fields)
+    return steps.run(TRAIN, checked, out, progress, track)  # type: ignore[return-value]
 
 
 def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None = None, seed: int | None = None,
@@ -73,7 +81,7 @@ def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None
     env_fields = {"id": env, **{_env_field(k): steps.path_of(v) for k, v in env_settings.items()}}
     checked = settings_for(steps.path_of(policy), {k: v for k, v in env_fields.items() if v is not None},
                            episodes, seed, workers)
-    return steps.run("evaluate", checked, out, progress)
+    return steps.run(EVALUATE, checked, out, progress)
 
 
 def video(run: PolicyLike, episodes: int | None = None, *, out: str | Path | None = None,
@@ -89,13 +97,13 @@ def video(run: PolicyLike, episodes: int | None = None, *, out: str | Path | Non
     Returns:
         The videos folder: `.videos` lists the files, `["returns"]` each episode's return.
     """
-    return steps.run_kind("video", out, run=run, episodes=episodes, **settings)
+    return steps.run_kind(VIDEO, out, run=run, episodes=episodes, **settings)
 
 
 def zeroshot(runs: list[PolicyLike], envs: list[str], *, episodes: int | None = None, seed: int | None = None,
              workers: int | None = None, out: str | Path | None = None, progress: bool = True) -> Result:
     """Zero-shot success of trained policies on envs they never saw (`motorlab zeroshot`)."""
-    return steps.run_kind("zeroshot", out, progress, runs=list(runs), envs=list(envs), episodes=episodes, seed=seed,
+    return steps.run_kind(ZEROSHOT, out, progress, runs=list(runs), envs=list(envs), episodes=episodes, seed=seed,
                           workers=workers)
 
 
@@ -117,7 +125,7 @@ def robustness(policies: list[PolicyLike], vary: str | list[str] | dict[str, Any
     grids = vary if isinstance(vary, list) else [vary] if isinstance(vary, str) else [
         f"{key}={value if isinstance(value, str) else ','.join(map(str, value))}" for key, value in vary.items()]
     fixed = {_env_field(k): v for k, v in {"id": env, **env_settings}.items() if v is not None}
-    return steps.run_kind("robustness", out, progress, policies=list(policies), vary=grids, episodes=episodes,
+    return steps.run_kind(ROBUSTNESS, out, progress, policies=list(policies), vary=grids, episodes=episodes,
                           seed=seed, workers=workers, env=fixed or None)
 
 
@@ -127,7 +135,7 @@ def compare(groups: dict[str, list[PolicyLike]], *, title: str | None = None, ou
     Args:
         groups: label -> that setting's training runs, one per seed.
     """
-    return steps.run_kind("compare", out, groups={k: list(v) for k, v in groups.items()}, title=title)
+    return steps.run_kind(COMPARE, out, groups={k: list(v) for k, v in groups.items()}, title=title)
 
 
 def _env_field(name: str) -> str:
@@ -135,3 +143,53 @@ def _env_field(name: str) -> str:
     from motorlab.envs import ENV_KEYS
 
     return ENV_KEYS.get(name, name)
+
+
+class Run(Result):
+    """A training run (`motorlab.train`, `motorlab train`): a `Result` with a policy.
+
+    `run.policy(obs)` acts on observations of the env as trained (its delay and history
+    wrappers included: `run.env()` makes that env).
+    """
+
+    @property
+    def steps_to_success(self) -> int | None:
+        """Env steps until the policy was consistently solved (None: not within the budget)."""
+        return self.summary.get("steps_to_success")
+
+    @cached_property
+    def policy(self) -> PolicyFunction:
+        """The trained policy, loaded pickle-free from policy.json + policy.safetensors."""
+        from motorlab.policies import load_run_policy
+
+        return PolicyFunction(load_run_policy(self.path))
+
+    def env(self, **env_settings: Any) -> gym.Env:
+        """The env the run trained on, with its wrappers; `env_settings` (delay, history, kwargs,
+        ...) change it."""
+        from motorlab.envs import EnvConfig, make_env
+        from motorlab.evaluation import trained_env_settings
+        from motorlab.evaluation.steps import merge_env
+
+        return make_env(EnvConfig.model_validate(merge_env(trained_env_settings(self.path), env_settings)))
+
+    def evaluate(self, env: str | None = None, episodes: int | None = None, seed: int | None = None,
+                 workers: int | None = None, out: str | Path | None = None, progress: bool = True,
+                 **env_settings: Any) -> Result:
+        """Evaluate the policy deterministically (`motorlab evaluate RUN`): on its training env, or
+        `env`, changed by `env_settings` (delay=0.2, history, obs_noise, ...)."""
+        return evaluate(self, env, episodes=episodes, seed=seed, workers=workers, out=out, progress=progress,
+                        **env_settings)
+
+    def video(self, episodes: int | None = None, out: str | Path | None = None, **settings: Any) -> list[Path]:
+        """Render episodes of the policy to MP4 (`motorlab video RUN`); returns the video files."""
+        return video(self, episodes=episodes, out=out, **settings).videos
+
+    def plot(self) -> list[Path]:
+        """Draw plots/learning_curve.png and plots/observation_trace.png (`motorlab plot RUN`)."""
+        from motorlab.report.run import plot_run
+
+        return plot_run(self.path)
+
+
+FOLDER_TYPES[TRAIN.name] = Run

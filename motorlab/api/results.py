@@ -5,7 +5,7 @@ these. They hold only the folder's path and read its files when asked, so a `Res
 good as the folder: `motorlab.load("runs/ppo")` gives the same object a week later.
 
 - `Result`: any step's folder (summary.json, config.toml, results.json, plots/, videos/).
-- `Run`: a training run, plus its policy, evaluation, videos and plots.
+- `Run` (motorlab.api.policies): a training run, plus its policy, evaluation, videos and plots.
 - `Study`, `Sweep`, `Tune`: the folders of `run_recipe`, `sweep` and `tune`.
 
 In Jupyter each shows its headline numbers as a table and its plots inline (`_repr_html_`).
@@ -25,13 +25,15 @@ import numpy as np
 
 from motorlab.errors import MotorlabError
 from motorlab.report.results import Number, read_run_results, read_study_results
+from motorlab.rl.steps import TRAIN
 from motorlab.runs import CONFIG, SUMMARY, read_json
 
 if TYPE_CHECKING:
-    import gymnasium as gym
 
     from motorlab.policies import Policy
 
+# The classes folders of a kind open as (the train kind's: motorlab.api.policies.Run, which adds itself)
+FOLDER_TYPES: dict[str, type[Result]] = {}
 MAX_INLINE_FIGURES = 6  # a notebook cell shows this many plots; report() has them all
 MAX_INLINE_VIDEO_BYTES = 8 << 20  # and its first video, where it is small enough to keep in the notebook
 
@@ -121,57 +123,6 @@ class Result:
                         f"src='data:video/mp4;base64,{base64.b64encode(p.read_bytes()).decode()}'></video>"
                         for p in videos)
         return f"<div><b>{html.escape(self._title())}</b><table>{rows}</table>{figures}{video}</div>"
-
-
-class Run(Result):
-    """A training run (`motorlab.train`, `motorlab train`): a `Result` with a policy.
-
-    `run.policy(obs)` acts on observations of the env as trained (its delay and history
-    wrappers included: `run.env()` makes that env).
-    """
-
-    @property
-    def steps_to_success(self) -> int | None:
-        """Env steps until the policy was consistently solved (None: not within the budget)."""
-        return self.summary.get("steps_to_success")
-
-    @cached_property
-    def policy(self) -> PolicyFunction:
-        """The trained policy, loaded pickle-free from policy.json + policy.safetensors."""
-        from motorlab.policies import load_run_policy
-
-        return PolicyFunction(load_run_policy(self.path))
-
-    def env(self, **env_settings: Any) -> gym.Env:
-        """The env the run trained on, with its wrappers; `env_settings` (delay, history, kwargs,
-        ...) change it."""
-        from motorlab.envs import EnvConfig, make_env
-        from motorlab.evaluation import trained_env_settings
-        from motorlab.evaluation.steps import merge_env
-
-        return make_env(EnvConfig.model_validate(merge_env(trained_env_settings(self.path), env_settings)))
-
-    def evaluate(self, env: str | None = None, episodes: int | None = None, seed: int | None = None,
-                 workers: int | None = None, out: str | Path | None = None, progress: bool = True,
-                 **env_settings: Any) -> Result:
-        """Evaluate the policy deterministically (`motorlab evaluate RUN`): on its training env, or
-        `env`, changed by `env_settings` (delay=0.2, history, obs_noise, ...)."""
-        from motorlab.api.policies import evaluate
-
-        return evaluate(self, env, episodes=episodes, seed=seed, workers=workers, out=out, progress=progress,
-                        **env_settings)
-
-    def video(self, episodes: int | None = None, out: str | Path | None = None, **settings: Any) -> list[Path]:
-        """Render episodes of the policy to MP4 (`motorlab video RUN`); returns the video files."""
-        from motorlab.api.policies import video
-
-        return video(self, episodes=episodes, out=out, **settings).videos
-
-    def plot(self) -> list[Path]:
-        """Draw plots/learning_curve.png and plots/observation_trace.png (`motorlab plot RUN`)."""
-        from motorlab.report.run import plot_run
-
-        return plot_run(self.path)
 
 
 class PolicyFunction:
@@ -292,9 +243,10 @@ def load(path: str | Path) -> Result:
     for cls in (Study, Sweep, Tune):
         if cls.config_key in config:
             return cls(folder)
-    result = Result(folder)
-    return Run(folder) if result.kind == "train" or (folder / "policy.json").is_file() and "algo" in config \
-        else result
+    kind = Result(folder).kind
+    if kind is None and (folder / "policy.json").is_file() and "algo" in config:  # a training run from before results.json
+        kind = TRAIN.name
+    return FOLDER_TYPES.get(kind, Result)(folder)
 
 
 def as_path(value: str | Path | Result, provides: Callable[[str], str | None] | None = None) -> str:

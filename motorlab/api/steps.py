@@ -16,6 +16,7 @@ from motorlab import trackers
 from motorlab.api.results import Result, as_path, load
 from motorlab.kinds import KINDS
 from motorlab.settings import Settings
+from motorlab.stepkind import StepKind
 
 Track = str | list[str] | None
 
@@ -39,25 +40,25 @@ def path_of(value: Any) -> Any:
     return value
 
 
-def settings(kind: str, **fields: Any) -> Settings:
+def settings(kind: StepKind, **fields: Any) -> Settings:
     """The settings of a `kind` step from keyword arguments (None: the default).
 
     Raises:
         MotorlabError: a wrong or unknown setting, named as the CLI names it.
     """
-    return KINDS[kind].make(**{k: path_of(v) for k, v in fields.items()})
+    return kind.make(**{k: path_of(v) for k, v in fields.items()})
 
 
-def run(kind: str, checked: Settings, out: str | Path | None, progress: bool, track: Track = None,
+def run(kind: StepKind, checked: Settings, out: str | Path | None, progress: bool, track: Track = None,
         **run_args: Any) -> Result:
     """Run a `kind` step with `checked` settings into `out` and open its folder."""
     trackers.enable(track)
-    summary = KINDS[kind].run(checked, Path(out) if out is not None else None, console=console(),
+    summary = kind.run(checked, Path(out) if out is not None else None, console=console(),
                               progress=progress, **run_args)
     return load(summary.run_dir)
 
 
-def run_kind(kind: str, out: str | Path | None = None, progress: bool = True, track: Track = None,
+def run_kind(kind: StepKind, out: str | Path | None = None, progress: bool = True, track: Track = None,
              **fields: Any) -> Result:
     """`settings` then `run`: one step from keyword arguments."""
     return run(kind, settings(kind, **fields), out, progress, track)

@@ -16,6 +16,7 @@ from typing import Any
 
 from motorlab.api import steps
 from motorlab.api.results import Result
+from motorlab.synergy.steps import COLLECT, FIT, VAF
 
 __all__ = ["collect", "vaf", "fit", "import_sklearn", "export_sklearn", "load_sar"]
 
@@ -34,7 +35,7 @@ def collect(run: str | Path | Result, episodes: int | None = None, *, out: str |
     Returns:
         Its folder, with activations.npz (steps x muscles).
     """
-    return steps.run_kind("collect", out, progress, run=run, episodes=episodes, **settings)
+    return steps.run_kind(COLLECT, out, progress, run=run, episodes=episodes, **settings)
 
 
 def vaf(activations: str | Path | Result, *, threshold: float | None = None, out: str | Path | None = None,
@@ -46,7 +47,7 @@ def vaf(activations: str | Path | Result, *, threshold: float | None = None, out
         activations: a `collect` result, its folder or activations.npz.
         **settings: method ("pca", "nmf"), max_n.
     """
-    return steps.run_kind("vaf", out, activations=activations, threshold=threshold, **settings)
+    return steps.run_kind(VAF, out, activations=activations, threshold=threshold, **settings)
 
 
 def fit(activations: str | Path | Result, n_synergies: int | None = None, *, out: str | Path | None = None,
@@ -61,7 +62,7 @@ def fit(activations: str | Path | Result, n_synergies: int | None = None, *, out
     Returns:
         Its folder; `load_sar(result)` gives the SAR, and `train(..., sar=result)` trains in its space.
     """
-    return steps.run_kind("fit", out, activations=activations, n_synergies=n_synergies, **settings)
+    return steps.run_kind(FIT, out, activations=activations, n_synergies=n_synergies, **settings)
 
 
 def import_sklearn(folder: str | Path, out: str | Path, *, trust: bool = False) -> Path:

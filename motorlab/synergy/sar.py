@@ -86,9 +86,7 @@ class SAR:
     metadata: dict[str, Any] = field(default_factory=dict)
 
     def __repr__(self) -> str:  # the sizes, not every array (a notebook cell ending in `sar` prints this)
-        vaf = self.metadata.get("vaf")
-        return (f"SAR({self.method}, {self.n_synergies} synergies x {self.n_muscles} muscles"
-                + (f", VAF {vaf:.1%}" if isinstance(vaf, float) else "") + ")")
+        return f"SAR({self.method}, {self.n_synergies} synergies x {self.n_muscles} muscles)"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
