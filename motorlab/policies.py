@@ -171,6 +171,15 @@ def save_sb3_policy(run_dir: Path, model, algo: str, vecnorm=None) -> None:
     write_json(Path(run_dir) / POLICY_JSON, meta)
 
 
+class _NoOptimizer:
+    """What a loaded policy gets in place of the optimizer SB3 builds beside its networks: it acts and
+    never learns, and building a torch optimizer imports torch._dynamo, over a second of the start-up
+    of every command that loads a policy (evaluate, video, zeroshot, synergies collect and their workers)."""
+
+    def __init__(self, params: Any, **settings: Any):
+        pass
+
+
 def _load_sb3(run_dir: Path, meta: dict) -> SB3Policy:
     import torch
     from safetensors import SafetensorError
@@ -181,6 +190,7 @@ def _load_sb3(run_dir: Path, meta: dict) -> SB3Policy:
     if cls is None:
         raise MotorlabError(f"{run_dir / POLICY_JSON}: unknown policy class {meta.get('policy_class')!r}.")
     kwargs = decode_classes(meta.get("policy_kwargs") or {})
+    kwargs["optimizer_class"] = _NoOptimizer  # the networks only (the run's optimizer class is still checked above)
     if meta.get("use_sde") is not None:
         kwargs["use_sde"] = meta["use_sde"]
     try:

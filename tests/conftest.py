@@ -32,7 +32,7 @@ def pytest_collection_modifyitems(config, items):
         if item.path.name in FAST_FILES or item.nodeid in FAST_TESTS:
             item.add_marker(pytest.mark.fast)
     if hasattr(config, "workerinput"):  # an xdist worker: the units of work in the order they are handed out
-        items.sort(key=lambda item: -SECONDS.get(unit(item.nodeid), float("inf")))  # stable: tests keep their order
+        items.sort(key=lambda item: -seconds(item.nodeid))  # stable: tests keep their order
 
 
 # ---- `make test`: pytest -n 2 --dist loadfile, with two changes (pytest_xdist_make_scheduler) ----
@@ -44,33 +44,49 @@ SHARED = {
     # hand_play_run and hand_activations: SAC on the MyoSuite hand, and activations collected from it
     "test_collect.py": "hand", "test_sar_cli.py": "hand", "test_determinism.py": "hand",
     "test_zeroshot_video_compare.py": "hand",
-    # a local Ray head each, stopped with `ray stop --force`, which stops every Ray on the machine: one at a time
+    # one local Ray head (ray_address, below), started once for both and stopped with `ray stop --force`,
+    # which stops every Ray on the machine: one unit, so never beside another Ray test
     "test_sweep.py": "ray", "test_tune_ray.py": "ray",
 }
+# ... and the tests of these files are a unit each: they share nothing, and together they would
+# be the longest unit by far (each notebook runs in its own kernel)
+EACH_TEST = {"test_notebooks.py"}
 # 2. Units start longest first (xdist would start the files with the most tests first), so the
 # last to start are short and both workers finish together. About how many seconds each unit
-# takes in `make test`; a file not listed here starts first (it may be long).
+# takes alone on an idle 2-core machine (pytest --durations); a file not listed here starts first
+# (it may be long).
 SECONDS = {
-    "ray": 360, "sar-hand-quick": 180, "hand": 160, "tests/test_parallel_steps.py": 120,
-    "tests/test_user_env.py": 90, "tests/test_upkie.py": 100, "tests/test_train_evaluate.py": 60,
-    "tests/test_safe_loading.py": 55, "tests/test_dynamics_cli.py": 50, "tests/test_report.py": 45,
-    "tests/test_cli_errors.py": 45, "tests/test_fuzz.py": 45, "tests/test_synergy_signals.py": 35,
-    "tests/test_reacher_study.py": 30, "tests/test_onnx_export.py": 30, "tests/test_robustness.py": 25,
-    "tests/test_parallel_eval.py": 12, "tests/test_tune.py": 190, "tests/test_tracking.py": 100,
-    "tests/test_disturbances.py": 8, "tests/test_resume.py": 25, "tests/test_recipes.py": 18,
-    "tests/test_extras.py": 16, "tests/test_dynamics.py": 14, "tests/test_plots.py": 13, "tests/test_myosuite.py": 12,
-    "tests/test_steps_to_success.py": 8, "tests/test_synergy_wrapper.py": 7, "tests/test_sar_formats.py": 6,
-    "tests/test_faults_success.py": 5, "tests/test_sklearn_import.py": 1.2, "tests/test_pid.py": 0.8,
-    "tests/test_schedules.py": 0.7, "tests/test_lqr.py": 0.5, "tests/test_dynamics_collect.py": 0.5,
-    "tests/test_layers.py": 0.4, "tests/test_results.py": 0.3, "tests/test_runner.py": 0.2, "tests/test_sar.py": 0.2,
-    "tests/test_wrappers.py": 0.1, "tests/test_runs.py": 0.05,
+    "ray": 240, "tests/test_upkie.py": 125, "sar-hand-quick": 110, "hand": 110, "tests/test_mbrl.py": 90,
+    "tests/test_tune.py": 90, "tests/test_user_env.py": 85, "tests/test_parallel_steps.py": 75,
+    "tests/test_synergy_signals.py": 60, "tests/test_train_evaluate.py": 50, "tests/test_tracking.py": 48,
+    "tests/test_fuzz.py": 40, "tests/test_report.py": 31, "tests/test_resume.py": 31, "tests/test_recipes.py": 27,
+    "tests/test_safe_loading.py": 24, "tests/test_dynamics_cli.py": 20, "tests/test_robustness.py": 17,
+    "tests/test_faults_success.py": 15, "tests/test_onnx_export.py": 15, "tests/test_parallel_eval.py": 15,
+    "tests/test_extras.py": 13, "tests/test_dynamics.py": 13, "tests/test_cli_errors.py": 11,
+    "tests/test_reacher_study.py": 11, "tests/test_sar_formats.py": 9, "tests/test_plots.py": 9,
+    "tests/test_steps_to_success.py": 7, "tests/test_myosuite.py": 5.5, "tests/test_synergy_wrapper.py": 4,
+    "tests/test_rewards.py": 1.4, "tests/test_pid.py": 1, "tests/test_sklearn_import.py": 1,
+    "tests/test_disturbances.py": 0.7, "tests/test_results.py": 0.6, "tests/test_layers.py": 0.5,
+    "tests/test_lqr.py": 0.4, "tests/test_dynamics_collect.py": 0.4, "tests/test_schedules.py": 0.2,
+    "tests/test_runner.py": 0.2, "tests/test_sar.py": 0.2, "tests/test_wrappers.py": 0.2, "tests/test_runs.py": 0.05,
+    "tests/test_api.py": 60, "tests/test_docs.py": 35, "tests/test_notebooks.py": 1,
+    "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[sar_synergies]": 85,
+    "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[your_own_body]": 45,
+    "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[robust_pendulum]": 40,
+    "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[forward_model_mpc]": 20,
 }
+
+
+def seconds(nodeid: str) -> float:
+    """About how long the unit of this test takes (a unit of one test: else its file's figure); unknown: inf."""
+    return SECONDS.get(unit(nodeid), SECONDS.get(nodeid.split("::", 1)[0], float("inf")))
 
 
 def unit(nodeid: str) -> str:
     """The unit of work a test belongs to: its file, or the name of the files it shares a fixture with."""
     path = nodeid.split("::", 1)[0]
-    return SHARED.get(path.rsplit("/", 1)[-1], path)
+    name = path.rsplit("/", 1)[-1]
+    return nodeid if name in EACH_TEST else SHARED.get(name, path)
 
 
 def pytest_xdist_make_scheduler(config, log):
@@ -86,6 +102,41 @@ def pytest_xdist_make_scheduler(config, log):
 
     config.option.loadscopereorder = False  # hand the units out in collection order (sorted above)
     return Units(config, log)
+
+
+# ---- one local Ray head for the "ray" unit --------------------------------------------
+
+_ray_head: dict[str, int] = {}  # the port of the running head, while there is one
+
+
+@pytest.fixture
+def ray_address() -> str:
+    """HOST:PORT of a local Ray head (2 CPUs; helpers.ray_head), as `ray start --head` prints it. The
+    tests of one unit of work share it (starting a head takes seconds); it is stopped with
+    `ray stop --force` when the next test belongs to another unit, or none follows."""
+    from helpers import free_port, ray_head
+
+    if "port" not in _ray_head:
+        port = free_port()
+        ray_head(port)
+        _ray_head["port"] = port
+    return f"127.0.0.1:{_ray_head['port']}"
+
+
+def pytest_runtest_teardown(item, nextitem):
+    if "port" in _ray_head and (nextitem is None or unit(nextitem.nodeid) != unit(item.nodeid)):
+        from helpers import ray_stop
+
+        del _ray_head["port"]
+        ray_stop()
+
+
+def pytest_sessionfinish(session):
+    if "port" in _ray_head:  # a run stopped early (-x, Ctrl-C) leaves no Ray behind
+        from helpers import ray_stop
+
+        del _ray_head["port"]
+        ray_stop()
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -52,6 +52,67 @@ def run_cli(*args: str | os.PathLike, cwd: Path | None = None, timeout: float = 
     )
 
 
+def run_here(*args: str | os.PathLike, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """`motorlab ARGS` run in this process through `motorlab.cli.main` (what `python -m motorlab`
+    runs), for tests of what a command answers rather than of starting a process: milliseconds,
+    not an interpreter start. As a process would: its output is what reached stdout and stderr,
+    Python's and the C libraries' (file descriptors 1 and 2), warnings shown as a fresh interpreter
+    shows them, an exception other than SystemExit is the traceback a user would see with exit
+    status 1; argv, the working directory and the environment are restored afterwards."""
+    import contextlib
+    import io
+    import tempfile
+    import traceback
+    import warnings
+
+    from motorlab.cli import main
+
+    argv = ["motorlab", *map(str, args)]
+    saved_argv, saved_cwd, saved_env = sys.argv, os.getcwd(), dict(os.environ)
+    text = {1: io.StringIO(), 2: io.StringIO()}
+    code: int | str | None = 0
+    with contextlib.ExitStack() as stack:
+        raw = {}
+        for fd in (1, 2):  # what C code writes to the descriptors themselves
+            sys.stdout.flush(), sys.stderr.flush()
+            raw[fd] = stack.enter_context(tempfile.TemporaryFile())
+            kept = os.dup(fd)
+            os.dup2(raw[fd].fileno(), fd)
+            stack.callback(os.close, kept)
+            stack.callback(os.dup2, kept, fd)
+        stack.enter_context(contextlib.redirect_stdout(text[1]))
+        stack.enter_context(contextlib.redirect_stderr(text[2]))
+        stack.enter_context(warnings.catch_warnings())
+        warnings.resetwarnings()  # Python's own defaults, not pytest's recording of warnings
+        for category in (ResourceWarning, ImportWarning, PendingDeprecationWarning, DeprecationWarning):
+            warnings.simplefilter("ignore", category)
+        warnings.filterwarnings("default", category=DeprecationWarning, module="__main__")
+        try:
+            sys.argv = argv
+            if cwd is not None:
+                os.chdir(cwd)
+            main()
+        except SystemExit as e:
+            code = e.code
+        except BaseException:  # noqa: B036 - what the interpreter would print and exit with
+            text[2].write(traceback.format_exc())
+            code = 1
+        finally:
+            sys.argv = saved_argv
+            os.chdir(saved_cwd)
+            os.environ.clear()
+            os.environ.update(saved_env)
+        for fd in (1, 2):
+            raw[fd].seek(0)
+            text[fd].write(raw[fd].read().decode(errors="replace"))
+    if code is None:
+        code = 0
+    elif not isinstance(code, int):  # sys.exit("message"): printed, exit status 1
+        text[2].write(f"{code}\n")
+        code = 1
+    return subprocess.CompletedProcess(argv, code, text[1].getvalue(), text[2].getvalue())
+
+
 def assert_ok(proc: subprocess.CompletedProcess) -> None:
     """The command succeeded; on failure show what it printed."""
     assert proc.returncode == 0, f"exit {proc.returncode}\nstdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
@@ -153,14 +214,16 @@ COLLECT_ARGS = ["--episodes", str(COLLECT_EPISODES), "--percentile", str(COLLECT
 # max(1, n // divisor); a string replaces the match (re.sub).
 # collect in-process: at this scale a pool of fresh interpreters costs more than it saves (pools: test_collect.py)
 ONE_WORKER = (r'(kind = "collect"\n)', r"\1workers = 1\n")
+# SAC's 8 gradient steps per env step (most of a training's time at this scale) become 1.
+ONE_GRADIENT_STEP = (r"gradient_steps = (\d+)", 8)
 SCALED = {
     # ~3.5 min on 2 cores as bundled: collect 5 of 5 preview episodes, zero-shot 5 episodes per env
     "sar-hand-quick": [(r"timesteps = (\d+)", 10), (r"eval_every = (\d+)", 5), (r"episodes = (\d+)", 10),
-                       (r"preview = (\d+)", 4), ONE_WORKER],
+                       (r"preview = (\d+)", 4), ONE_WORKER, ONE_GRADIENT_STEP],
     # its collection (5000 episodes), fit (20 epochs) and MPC (10 episodes); the check keeps its 3 episodes
     "reacher-quick": [(r"episodes = (\d{2,})", 5), (r"epochs = (\d+)", 4)],
     # ~2 min on 2 cores as bundled
-    "sar-ant-quick": [(r"timesteps = (\d+)", 4), (r"eval_every = (\d+)", 4), ONE_WORKER],
+    "sar-ant-quick": [(r"timesteps = (\d+)", 4), (r"eval_every = (\d+)", 4), ONE_WORKER, ONE_GRADIENT_STEP],
 }
 
 

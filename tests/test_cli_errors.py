@@ -1,5 +1,9 @@
 """Every user mistake gives exit code 2 and one line 'error: ...' naming the thing and
-the fix, never a traceback, and never a run folder that looks finished."""
+the fix, never a traceback, and never a run folder that looks finished.
+
+The mistakes run through `motorlab.cli.main` in this process (helpers.run_here: the same output,
+exit status and files as `python -m motorlab`, without an interpreter start each); the last test
+runs a real process, and other files' error tests do too."""
 
 from __future__ import annotations
 
@@ -8,7 +12,7 @@ import textwrap
 
 import pytest
 
-from helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli
+from helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli, run_here
 
 # ---- train -------------------------------------------------------------------------
 
@@ -34,7 +38,7 @@ TRAIN_ERRORS = [
 @pytest.mark.parametrize("args, fragments", TRAIN_ERRORS, ids=[" ".join(a) for a, _ in TRAIN_ERRORS])
 def test_train_bad_input(tmp_path, args, fragments):
     out = tmp_path / "out"
-    proc = run_cli("train", *args, "--no-progress", "--out", out)
+    proc = run_here("train", *args, "--no-progress", "--out", out)
     assert_one_line_error(proc, *fragments)
     assert not (out / "summary.json").exists()
 
@@ -42,26 +46,26 @@ def test_train_bad_input(tmp_path, args, fragments):
 def test_train_bad_hyperparameter_value_is_a_user_error(tmp_path):
     # n_steps=1 is a value SB3 rejects with an assertion; it is still the user's typo.
     out = tmp_path / "out"
-    proc = run_cli("train", ENV_ID, "--algo", "ppo", "--timesteps", "100", "--set", "n_steps=1",
-                   "--no-progress", "--out", out)
+    proc = run_here("train", ENV_ID, "--algo", "ppo", "--timesteps", "100", "--set", "n_steps=1",
+                    "--no-progress", "--out", out)
     assert_one_line_error(proc, "n_steps")
     assert not (out / "summary.json").exists()
 
 
 def test_error_message_is_printed_verbatim(tmp_path):
     # Messages quote what the user typed; text in brackets must not be read as console markup.
-    proc = run_cli("train", ENV_ID, "--reward", "[/tmp]", "--no-progress", "--out", tmp_path / "out")
+    proc = run_here("train", ENV_ID, "--reward", "[/tmp]", "--no-progress", "--out", tmp_path / "out")
     assert_one_line_error(proc, "[/tmp]")
 
 
 def test_invalid_train_leaves_no_complete_run_folder(tmp_path):
     out = tmp_path / "out"
-    proc = run_cli("train", ENV_ID, "--algo", "td3", "--clip-range", "0.2", "--timesteps", "100",
-                   "--no-progress", "--out", out)
+    proc = run_here("train", ENV_ID, "--algo", "td3", "--clip-range", "0.2", "--timesteps", "100",
+                    "--no-progress", "--out", out)
     assert_one_line_error(proc, "PPO")
     # Settings are checked before the run folder is created.
     assert not out.exists()
-    assert_one_line_error(run_cli("evaluate", out, "--out", tmp_path / "ev"), str(out))
+    assert_one_line_error(run_here("evaluate", out, "--out", tmp_path / "ev"), str(out))
 
 
 def test_invalid_train_keeps_a_finished_run_in_its_out_folder(ppo_run, tmp_path):
@@ -70,8 +74,8 @@ def test_invalid_train_keeps_a_finished_run_in_its_out_folder(ppo_run, tmp_path)
     out = tmp_path / "finished"
     shutil.copytree(ppo_run, out)
     before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
-    proc = run_cli("train", ENV_ID, "--algo", "sac", "--clip-range", "0.2", "--timesteps", "100",
-                   "--no-progress", "--out", out)
+    proc = run_here("train", ENV_ID, "--algo", "sac", "--clip-range", "0.2", "--timesteps", "100",
+                    "--no-progress", "--out", out)
     assert_one_line_error(proc, "PPO")
     after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
     assert after == before
@@ -105,25 +109,25 @@ def corrupt_run(request, ppo_run, tmp_path):
 def test_evaluate_missing_folder(tmp_path):
     missing = tmp_path / "no-such-run"
     out = tmp_path / "out"
-    assert_one_line_error(run_cli("evaluate", missing, "--out", out), "no-such-run")
+    assert_one_line_error(run_here("evaluate", missing, "--out", out), "no-such-run")
     assert not (out / "summary.json").exists()
 
 
 def test_evaluate_file_instead_of_folder(ppo_run, tmp_path):
     out = tmp_path / "out"
-    assert_one_line_error(run_cli("evaluate", ppo_run / "summary.json", "--out", out), "not a folder")
+    assert_one_line_error(run_here("evaluate", ppo_run / "summary.json", "--out", out), "not a folder")
     assert not (out / "summary.json").exists()
 
 
 def test_evaluate_unfinished_folder(unfinished_run, tmp_path):
     out = tmp_path / "out"
-    assert_one_line_error(run_cli("evaluate", unfinished_run, "--out", out), "summary.json")
+    assert_one_line_error(run_here("evaluate", unfinished_run, "--out", out), "summary.json")
     assert not (out / "summary.json").exists()
 
 
 def test_evaluate_corrupt_weights(corrupt_run, tmp_path):
     out = tmp_path / "out"
-    assert_one_line_error(run_cli("evaluate", corrupt_run, "--episodes", "2", "--out", out), "policy.safetensors")
+    assert_one_line_error(run_here("evaluate", corrupt_run, "--episodes", "2", "--out", out), "policy.safetensors")
     assert not (out / "summary.json").exists()
 
 
@@ -132,20 +136,20 @@ def test_evaluate_corrupt_policy_json(ppo_run, tmp_path):
     shutil.copytree(ppo_run, run)
     (run / "policy.json").write_text('{"type": "sb3", ')
     out = tmp_path / "out"
-    assert_one_line_error(run_cli("evaluate", run, "--episodes", "2", "--out", out), "policy.json")
+    assert_one_line_error(run_here("evaluate", run, "--episodes", "2", "--out", out), "policy.json")
     assert not (out / "summary.json").exists()
 
 
 def test_evaluate_with_wrong_history(ppo_run, tmp_path):
     out = tmp_path / "out"
-    proc = run_cli("evaluate", ppo_run, "--history", "3", "--episodes", "2", "--out", out)
+    proc = run_here("evaluate", ppo_run, "--history", "3", "--episodes", "2", "--out", out)
     assert_one_line_error(proc, "--history")
     assert not (out / "summary.json").exists()
 
 
 def test_evaluate_lqr_with_wrong_history(fast_run, tmp_path):
     out = tmp_path / "out"
-    assert_one_line_error(run_cli("evaluate", fast_run, "--history", "2", "--out", out), "history")
+    assert_one_line_error(run_here("evaluate", fast_run, "--history", "2", "--out", out), "history")
     assert not (out / "summary.json").exists()
 
 
@@ -163,20 +167,20 @@ EVALUATE_ERRORS = [
 @pytest.mark.parametrize("args, fragments", EVALUATE_ERRORS, ids=[" ".join(a) for a, _ in EVALUATE_ERRORS])
 def test_evaluate_bad_input(tmp_path, args, fragments):
     out = tmp_path / "out"
-    assert_one_line_error(run_cli("evaluate", *args, "--out", out), *fragments)
+    assert_one_line_error(run_here("evaluate", *args, "--out", out), *fragments)
     assert not (out / "summary.json").exists()
 
 
 def test_plot_missing_folder(tmp_path):
-    assert_one_line_error(run_cli("plot", tmp_path / "no-such-run"), "no-such-run")
+    assert_one_line_error(run_here("plot", tmp_path / "no-such-run"), "no-such-run")
 
 
 def test_plot_file_instead_of_folder(ppo_run):
-    assert_one_line_error(run_cli("plot", ppo_run / "config.toml"), "not a folder")
+    assert_one_line_error(run_here("plot", ppo_run / "config.toml"), "not a folder")
 
 
 def test_plot_unfinished_folder(unfinished_run):
-    assert_one_line_error(run_cli("plot", unfinished_run), "summary.json")
+    assert_one_line_error(run_here("plot", unfinished_run), "summary.json")
     assert not (unfinished_run / "plots").exists()
 
 
@@ -184,7 +188,7 @@ def test_plot_corrupt_weights(ppo_run, tmp_path):
     run = tmp_path / "corrupt"
     shutil.copytree(ppo_run, run)
     (run / "policy.safetensors").write_bytes(b"")
-    assert_one_line_error(run_cli("plot", run), "policy.safetensors")
+    assert_one_line_error(run_here("plot", run), "policy.safetensors")
 
 
 # ---- recipes -----------------------------------------------------------------------
@@ -240,7 +244,7 @@ def test_bad_recipe(tmp_path, case):
     path = tmp_path / f"{case}.toml"
     path.write_text(textwrap.dedent(text))
     out = tmp_path / "study"
-    assert_one_line_error(run_cli("run", path, "--out", out), *fragments)
+    assert_one_line_error(run_here("run", path, "--out", out), *fragments)
     assert not out.exists()  # validated before anything ran
 
 
@@ -249,7 +253,7 @@ def test_bad_recipe(tmp_path, case):
 )
 def test_unknown_recipe(tmp_path, recipe, fragments):
     out = tmp_path / "study"
-    assert_one_line_error(run_cli("run", recipe, "--out", out, cwd=tmp_path), *fragments)
+    assert_one_line_error(run_here("run", recipe, "--out", out, cwd=tmp_path), *fragments)
     assert not out.exists()
 
 

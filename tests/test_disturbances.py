@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from helpers import assert_one_line_error, run_cli
+from helpers import assert_one_line_error, run_here
 from motorlab.envs import EnvConfig, make_env
 from motorlab.envs.disturbances import GaussianNoise, Latency, RandomPush, mujoco_model_data, parse_span
 from motorlab.envs.wrappers import LowPassDelay
@@ -191,7 +191,7 @@ def test_a_push_to_an_unknown_body_lists_the_bodies():
 
 
 def test_cli_bad_range_is_one_line(tmp_path):
-    proc = run_cli("evaluate", "pid", "--env", ENV_ID, "--obs-noise", "0.05..0.01", "--out", tmp_path / "e")
+    proc = run_here("evaluate", "pid", "--env", ENV_ID, "--obs-noise", "0.05..0.01", "--out", tmp_path / "e")
     assert_one_line_error(proc, "observation noise", "runs backwards")
     assert not (tmp_path / "e").exists()
 

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from helpers import assert_ok, assert_one_line_error, assert_png, read_summary, run_cli
+from helpers import assert_ok, assert_one_line_error, assert_png, read_summary, run_cli, run_here
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_collect_fit_check_mpc(pipeline, tmp_path):
     (["dynamics", "fit", "missing.npz"], ["missing.npz is missing", "dynamics collect"]),
 ])
 def test_bad_collect_and_fit_input(args, fragments, tmp_path):
-    assert_one_line_error(run_cli(*args, "--out", tmp_path / "out"), *fragments)
+    assert_one_line_error(run_here(*args, "--out", tmp_path / "out"), *fragments)
     assert not (tmp_path / "out").exists()
 
 
@@ -75,11 +75,11 @@ def test_bad_model_and_plan_input_leave_finished_runs_intact(pipeline, tmp_path)
         (["--optimizer", "adam"], ["--optimizer 'adam'"]),
     ]
     for extra, fragments in cases:
-        assert_one_line_error(run_cli("mpc", "Reacher-v5", "--model", pipeline / "model", *extra, "--out", done),
+        assert_one_line_error(run_here("mpc", "Reacher-v5", "--model", pipeline / "model", *extra, "--out", done),
                               *fragments)
-    assert_one_line_error(run_cli("mpc", "Reacher-v4", "--model", pipeline / "model", "--out", done),
+    assert_one_line_error(run_here("mpc", "Reacher-v4", "--model", pipeline / "model", "--out", done),
                           "models 'Reacher-v5', not 'Reacher-v4'")
-    assert_one_line_error(run_cli("mpc", "Reacher-v5", "--model", tmp_path / "nope", "--out", done),
+    assert_one_line_error(run_here("mpc", "Reacher-v5", "--model", tmp_path / "nope", "--out", done),
                           "model.json is missing")
     assert (done / "summary.json").read_bytes() == before
 
@@ -91,9 +91,9 @@ def test_fit_rejects_bad_transitions_without_touching_the_run(pipeline, tmp_path
     out = tmp_path / "model"
     out.mkdir()
     (out / "summary.json").write_text('{"kept": true}')
-    assert_one_line_error(run_cli("dynamics", "fit", tmp_path / "bad.npz", "--out", out), "differ in shape")
-    assert_one_line_error(run_cli("dynamics", "fit", pipeline / "data", "--hidden", "64,,-3", "--out", out),
+    assert_one_line_error(run_here("dynamics", "fit", tmp_path / "bad.npz", "--out", out), "differ in shape")
+    assert_one_line_error(run_here("dynamics", "fit", pipeline / "data", "--hidden", "64,,-3", "--out", out),
                           "--hidden widths must be positive")
-    assert_one_line_error(run_cli("dynamics", "fit", pipeline / "data", "--patience", "2", "--valid-fraction", "0",
-                                  "--out", out), "--patience needs")
+    assert_one_line_error(run_here("dynamics", "fit", pipeline / "data", "--patience", "2", "--valid-fraction", "0",
+                                   "--out", out), "--patience needs")
     assert json.loads((out / "summary.json").read_text()) == {"kept": True}

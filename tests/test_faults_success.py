@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from helpers import assert_one_line_error, episode_rows, read_metrics_rows, read_summary, run_cli, run_kind
+from helpers import assert_one_line_error, episode_rows, read_metrics_rows, read_summary, run_cli, run_here, run_kind
 from motorlab.cli import app
 from motorlab.dynamics.steps import DYNAMICS_COLLECT
 from motorlab.envs import EnvConfig, make_env
@@ -301,8 +301,8 @@ def test_falling_forward_is_not_walking(tmp_path):
 
 
 def test_bad_success_setting_is_one_line(tmp_path):
-    proc = run_cli("evaluate", "zero", "--env", "InvertedPendulum-v5", "--success", "sometimes",
-                   "--out", tmp_path / "out")
+    proc = run_here("evaluate", "zero", "--env", "InvertedPendulum-v5", "--success", "sometimes",
+                    "--out", tmp_path / "out")
     assert_one_line_error(proc, "--success")
     assert not (tmp_path / "out").exists()
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from helpers import assert_ok, assert_one_line_error, read_summary, run_cli
+from helpers import assert_ok, assert_one_line_error, read_summary, run_cli, run_here
 from motorlab.recipes import parse_recipe
 from motorlab.runs import last_timesteps
 from motorlab.studies.schedule import run_overlapped
@@ -230,13 +230,13 @@ def test_interrupting_a_parallel_study_stops_its_trainings(tmp_path):
     (["--parallel-steps", "2", "--backend", "ray"], "--parallel-steps 1"),
 ])
 def test_bad_parallel_steps(tmp_path, args, fragment):
-    proc = run_cli("run", _recipe(tmp_path, parallel=None), "--out", tmp_path / "out", *args)
+    proc = run_here("run", _recipe(tmp_path, parallel=None), "--out", tmp_path / "out", *args)
     assert_one_line_error(proc, fragment)
     assert not (tmp_path / "out").exists()
 
 
 def test_bad_parallel_steps_in_a_recipe(tmp_path):
-    proc = run_cli("run", _recipe(tmp_path, parallel=0), "--check")
+    proc = run_here("run", _recipe(tmp_path, parallel=0), "--check")
     assert_one_line_error(proc, "parallel_steps")
 
 

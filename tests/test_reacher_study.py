@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from helpers import assert_ok, assert_one_line_error, read_summary, run_cli
+from helpers import assert_ok, assert_one_line_error, read_summary, run_cli, run_here
 from motorlab.recipes import load_recipe
 
 TINY = """
@@ -90,5 +90,5 @@ def test_bundled_reacher_recipes_parse(name):
 def test_recipe_mistakes(tmp_path, change, fragments):
     assert change[0] in TINY
     (tmp_path / "bad.toml").write_text(TINY.replace(*change))
-    assert_one_line_error(run_cli("run", tmp_path / "bad.toml", "--out", tmp_path / "out"), *fragments)
+    assert_one_line_error(run_here("run", tmp_path / "bad.toml", "--out", tmp_path / "out"), *fragments)
     assert not (tmp_path / "out" / "summary.json").exists()

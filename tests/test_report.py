@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli
+from helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli, run_here
 from motorlab.report.html import fmt
 
 CHROMIUM = "/usr/bin/chromium"
@@ -227,8 +227,8 @@ def test_report_of_two_run_folders(ppo_run, fast_run, tmp_path, browser):
 
 
 def test_report_bad_paths(tmp_path, ppo_run):
-    assert_one_line_error(run_cli("report", tmp_path / "missing"), "does not exist")
+    assert_one_line_error(run_here("report", tmp_path / "missing"), "does not exist")
     (tmp_path / "empty").mkdir()
-    assert_one_line_error(run_cli("report", tmp_path / "empty"), "not a finished run or study folder")
+    assert_one_line_error(run_here("report", tmp_path / "empty"), "not a finished run or study folder")
     (tmp_path / "folder.html").mkdir()
-    assert_one_line_error(run_cli("report", ppo_run, "--out", tmp_path / "folder.html"), "is a folder")
+    assert_one_line_error(run_here("report", ppo_run, "--out", tmp_path / "folder.html"), "is a folder")

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from safetensors.numpy import load_file
 
-from helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli
+from helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli, run_here
 from motorlab.errors import MotorlabError
 from motorlab.rl.tracking import METRIC_FIELDS
 from motorlab.runs import MetricsWriter
@@ -145,6 +145,6 @@ def test_metrics_writer_drops_rows_past_the_checkpoint_and_torn_lines(tmp_path):
 
 
 def test_resume_mistakes_are_one_clear_line(ppo_run, tmp_path):
-    assert_one_line_error(run_cli("train", "--resume", ppo_run), "finished already")
-    assert_one_line_error(run_cli("train", "--resume", tmp_path), "not a training run folder")
-    assert_one_line_error(run_cli("train", "--resume", ppo_run, "--timesteps", "5"), "drop the other settings")
+    assert_one_line_error(run_here("train", "--resume", ppo_run), "finished already")
+    assert_one_line_error(run_here("train", "--resume", tmp_path), "not a training run folder")
+    assert_one_line_error(run_here("train", "--resume", ppo_run, "--timesteps", "5"), "drop the other settings")

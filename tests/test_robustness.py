@@ -7,7 +7,7 @@ import csv
 
 import pytest
 
-from helpers import ENV_ID, TINY_PPO, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli
+from helpers import ENV_ID, TINY_PPO, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli, run_here
 from motorlab.errors import MotorlabError
 from motorlab.robustness.curves import subjects
 from motorlab.robustness.grid import parse_axis
@@ -75,14 +75,14 @@ def test_runs_keep_their_structure_but_not_their_training_disturbances(ppo_seeds
 
 
 def test_cli_errors_are_one_line(tmp_path):
-    assert_one_line_error(run_cli("robustness", "pid", "--env", ENV_ID, "--vary", "delya=0:1:3",
-                                  "--out", tmp_path / "a"), "did you mean delay")
-    assert_one_line_error(run_cli("robustness", "pid", "--env", ENV_ID, "--vary", "push-force=0:10:3",
-                                  "--out", tmp_path / "b"), "--push-body")
-    assert_one_line_error(run_cli("robustness", "pid", "--vary", "delay=0:0.2:3", "--out", tmp_path / "c"),
+    assert_one_line_error(run_here("robustness", "pid", "--env", ENV_ID, "--vary", "delya=0:1:3",
+                                   "--out", tmp_path / "a"), "did you mean delay")
+    assert_one_line_error(run_here("robustness", "pid", "--env", ENV_ID, "--vary", "push-force=0:10:3",
+                                   "--out", tmp_path / "b"), "--push-body")
+    assert_one_line_error(run_here("robustness", "pid", "--vary", "delay=0:0.2:3", "--out", tmp_path / "c"),
                           "--env")
-    assert_one_line_error(run_cli("robustness", "pid", "--env", ENV_ID, "--vary", "delay=0:0.2:3",
-                                  "--vary", "delay=0:0.1:2", "--out", tmp_path / "d"), "twice")
+    assert_one_line_error(run_here("robustness", "pid", "--env", ENV_ID, "--vary", "delay=0:0.2:3",
+                                   "--vary", "delay=0:0.1:2", "--out", tmp_path / "d"), "twice")
     assert not any((tmp_path / x).exists() for x in "abcd")
 
 

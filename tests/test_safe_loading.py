@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from helpers import assert_ok, assert_one_line_error, read_summary, run_cli
+from helpers import assert_ok, assert_one_line_error, read_summary, run_cli, run_here
 
 
 def exploit(marker: Path) -> bytes:
@@ -125,6 +125,6 @@ def test_export_mistakes_give_one_line(notebook_sac, ppo_run, tmp_path, case, fr
         "bad_vecnormalize": [*zip_args, "--vecnormalize", tmp_path / "vn.pkl"],
         "run_with_trust": [ppo_run, "--trust"],
     }[case]
-    proc = run_cli("export", *args, "--out", tmp_path / "out")
+    proc = run_here("export", *args, "--out", tmp_path / "out")
     assert_one_line_error(proc, *fragments)
     assert not (tmp_path / "out").exists()

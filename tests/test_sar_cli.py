@@ -18,6 +18,7 @@ from helpers import (
     assert_png,
     read_summary,
     run_cli,
+    run_here,
 )
 from motorlab.synergy import load_sar
 
@@ -77,7 +78,7 @@ def test_fit_by_n(hand_activations, tmp_path):
 
 
 def test_fit_with_both_n_and_vaf(hand_activations, tmp_path):
-    proc = run_cli("synergies", "fit", hand_activations, "--n", "5", "--vaf", "0.8", "--out", tmp_path / "fit")
+    proc = run_here("synergies", "fit", hand_activations, "--n", "5", "--vaf", "0.8", "--out", tmp_path / "fit")
     assert_one_line_error(proc, "--n-synergies", "--vaf")
     assert not (tmp_path / "fit").exists()
 
@@ -108,7 +109,7 @@ BAD_FILES = [
 def test_bad_activations_file(tmp_path, command, name, fragments):
     bad_files(tmp_path)
     extra = ["--vaf", "0.8"] if command == "fit" else []
-    proc = run_cli("synergies", command, tmp_path / name, *extra, "--out", tmp_path / "out")
+    proc = run_here("synergies", command, tmp_path / name, *extra, "--out", tmp_path / "out")
     assert_one_line_error(proc, *fragments)
     assert not (tmp_path / "out").exists()
 
@@ -116,7 +117,7 @@ def test_bad_activations_file(tmp_path, command, name, fragments):
 @pytest.mark.parametrize("threshold", ["1.5", "0"])
 def test_vaf_threshold_out_of_range(hand_activations, tmp_path, threshold):
     """A VAF threshold is a fraction in (0, 1], as `fit --vaf` and recipes insist."""
-    proc = run_cli("synergies", "vaf", hand_activations, "--threshold", threshold, "--out", tmp_path / "out")
+    proc = run_here("synergies", "vaf", hand_activations, "--threshold", threshold, "--out", tmp_path / "out")
     assert_one_line_error(proc, "--threshold", "than or equal to 1" if threshold == "1.5" else "greater than 0")
     assert not (tmp_path / "out" / "summary.json").exists()
 
@@ -125,7 +126,7 @@ def test_vaf_threshold_out_of_range(hand_activations, tmp_path, threshold):
 
 def test_import_sklearn_needs_trust(tmp_path):
     out = tmp_path / "hand.npz"
-    proc = run_cli("synergies", "import-sklearn", PUBLISHED_SAR / "manipulation", "--out", out)
+    proc = run_here("synergies", "import-sklearn", PUBLISHED_SAR / "manipulation", "--out", out)
     assert_one_line_error(proc, "--trust", "arbitrary code")
     assert not out.exists()
 

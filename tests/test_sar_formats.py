@@ -20,7 +20,7 @@ from myosuite.integrations.musclemimic.sar_extraction import (
 )
 from test_safe_loading import exploit
 
-from helpers import PUBLISHED_SAR, assert_ok, assert_one_line_error, run_cli
+from helpers import PUBLISHED_SAR, assert_ok, assert_one_line_error, run_cli, run_here
 from motorlab.errors import MotorlabError
 from motorlab.synergy.sar import fit_sar, load_sar, save_sar
 from motorlab.synergy.sklearn_export import export_sklearn
@@ -151,7 +151,7 @@ def test_incomplete_folders_are_named_in_one_line(tmp_path, case, fragments):
     if case == "both":
         (folder / "normalizer.pkl").write_bytes((folder / "scaler.pkl").read_bytes())
     # --trust given: the layout is checked before anything is opened, with or without it
-    proc = run_cli("synergies", "import-sklearn", folder, "--trust", "--out", tmp_path / "sar.npz")
+    proc = run_here("synergies", "import-sklearn", folder, "--trust", "--out", tmp_path / "sar.npz")
     assert_one_line_error(proc, *fragments)
     assert not (tmp_path / "sar.npz").exists()
 
@@ -248,7 +248,7 @@ def test_export_cli(tmp_path):
     assert load_synergy_model(tmp_path / "empty").n_synergies == 4
     # the folder exists now: refused, and left as it was
     before = {p.name: p.read_bytes() for p in (tmp_path / "empty").iterdir()}
-    proc = run_cli("synergies", "export-sklearn", tmp_path / "sar.npz", "--out", tmp_path / "empty")
+    proc = run_here("synergies", "export-sklearn", tmp_path / "sar.npz", "--out", tmp_path / "empty")
     assert_one_line_error(proc, "already exists and is not empty", "new folder")
     assert {p.name: p.read_bytes() for p in (tmp_path / "empty").iterdir()} == before
 
@@ -278,6 +278,6 @@ def test_export_cli_mistakes_give_one_line(tmp_path, case, fragments):
     out = tmp_path / "out"
     if case == "out_is_file":
         out.write_text("notes")
-    assert_one_line_error(run_cli("synergies", "export-sklearn", sar, "--out", out), *fragments)
+    assert_one_line_error(run_here("synergies", "export-sklearn", sar, "--out", out), *fragments)
     assert (out.is_file() if case == "out_is_file" else not out.exists())
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]

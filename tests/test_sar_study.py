@@ -12,7 +12,7 @@ import tomllib
 import pytest
 from rich.console import Console
 
-from helpers import HAND_MUSCLES, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli
+from helpers import HAND_MUSCLES, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli, run_here
 from motorlab.recipes import bundled, load_recipe, parse_recipe
 from motorlab.studies import run_study
 from motorlab.synergy import load_sar
@@ -140,7 +140,7 @@ activations = "@collect"
 def test_recipe_mistakes(tmp_path, tail, fragments):
     path = tmp_path / "broken.toml"
     path.write_text(HEAD + tail)
-    proc = run_cli("run", path, "--out", tmp_path / "out")
+    proc = run_here("run", path, "--out", tmp_path / "out")
     assert_one_line_error(proc, str(path), *fragments)
     assert not (tmp_path / "out").exists()
 

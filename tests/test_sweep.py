@@ -22,10 +22,9 @@ from helpers import (
     assert_one_line_error,
     assert_png,
     free_port,
-    ray_head,
-    ray_stop,
     read_summary,
     run_cli,
+    run_here,
 )
 from motorlab.cli import app
 from motorlab.errors import MotorlabError
@@ -35,6 +34,7 @@ from motorlab.sweeps.grid import label, parse_grid, settings
 CLI = typer.main.get_command(app)
 
 TINY = " ".join(["train", ENV_ID, *TINY_PPO])  # ~3 s a trial
+LQR = f"train {ENV_ID} --preset fast --until-solved --timesteps 1500 --solve-episodes 2"  # ~1 s a trial
 GRID = ["--grid", "lr=3e-4,1e-3"]
 
 
@@ -90,34 +90,9 @@ def test_local_sweep_aggregates_with_rliable(local_sweep):
     assert 'data-key="lr=3e-4.final_return_iqm"' in html
 
 
-def test_ray_backend_gives_the_same_folders_and_aggregate(local_sweep, tmp_path):
-    port = free_port()
-    ray_head(port)
-    try:
-        out = tmp_path / "ray"
-        proc = run_cli("sweep", TINY, "--seeds", "2", *GRID, "--backend", "ray", "--address", f"127.0.0.1:{port}",
-                       "--out", out)
-        assert_ok(proc)
-        # a user's env registered by their module, named with --import only: the workers' trial
-        # processes learn the module from the sweep (one Ray cluster for both: starting two is slow)
-        user = run_cli("--import", "userpkg.arm", "sweep", "train ArmReachHeavy-v0 " + " ".join(TINY_PPO),
-                       "--seeds", "1", "--backend", "ray", "--address", f"127.0.0.1:{port}",
-                       "--out", tmp_path / "user", env={"PYTHONPATH": USER_PACKAGES})
-        assert_ok(user)
-    finally:
-        ray_stop()
-    assert _run_folders(out) == _run_folders(local_sweep)
-    assert (out / "ray").is_dir()  # Ray Tune ran the trials
-    ray_summary, local_summary = read_summary(out), read_summary(local_sweep)
-    keys = [k for k in local_summary if k.startswith("lr=")]
-    assert keys and {k: ray_summary[k] for k in keys} == pytest.approx({k: local_summary[k] for k in keys})
-    trained = [json.loads(p.read_text()) for p in (tmp_path / "user").rglob("summary.json")]
-    assert [(s["env_id"], s["timesteps"]) for s in trained if "algo" in s] == [("ArmReachHeavy-v0", 256)]
-
-
 def test_interrupted_sweep_resumes_without_rerunning_finished_trials(tmp_path):
     out = tmp_path / "resume"
-    args = [sys.executable, "-m", "motorlab", "sweep", TINY, "--seeds", "3", "--max-parallel", "1", "--out", str(out)]
+    args = [sys.executable, "-m", "motorlab", "sweep", LQR, "--seeds", "3", "--max-parallel", "1", "--out", str(out)]
     # A new process group to interrupt as Ctrl-C would, with Python's SIGINT handling even when
     # the test runner itself was started with SIGINT ignored (as background jobs are).
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
@@ -137,7 +112,7 @@ def test_interrupted_sweep_resumes_without_rerunning_finished_trials(tmp_path):
     assert "seed2" not in finished
     stamp = {s: (out / "default" / s / "summary.json").stat().st_mtime_ns for s in finished}
 
-    again = run_cli("sweep", TINY, "--seeds", "3", "--max-parallel", "1", "--out", out)
+    again = run_cli("sweep", LQR, "--seeds", "3", "--max-parallel", "1", "--out", out)
     assert_ok(again)
     assert f"{len(finished)} already finished, kept" in again.stdout
     for s, mtime in stamp.items():
@@ -155,7 +130,7 @@ def test_interrupted_sweep_resumes_without_rerunning_finished_trials(tmp_path):
 ])
 def test_bad_grid_gives_one_clear_line_and_writes_nothing(tmp_path, grid, fragment):
     out = tmp_path / "bad"
-    assert_one_line_error(run_cli("sweep", TINY, "--grid", grid, "--out", out), fragment)
+    assert_one_line_error(run_here("sweep", TINY, "--grid", grid, "--out", out), fragment)
     assert not out.exists()
 
 
@@ -172,7 +147,7 @@ def test_grid_key_given_twice_is_refused():
 ])
 def test_bad_target_gives_one_clear_line(tmp_path, target, fragment):
     out = tmp_path / "bad"
-    assert_one_line_error(run_cli("sweep", target, "--out", out), fragment)
+    assert_one_line_error(run_here("sweep", target, "--out", out), fragment)
     assert not out.exists()
 
 
@@ -236,7 +211,7 @@ env = "{ENV_ID}"
 name = "fast"
 kind = "train"
 preset = "fast"
-timesteps = 1200
+timesteps = 300  # LQR refits (and evaluates) every 100 steps; it balances after the first
 solve_episodes = 2  # LQR evaluates after each update; 10 episodes of 1000 steps each time were most of a trial
 [[steps]]
 name = "pid"
@@ -250,20 +225,20 @@ def test_recipe_sweep_runs_whole_studies_with_the_setting_applied(tmp_path):
     recipe = tmp_path / "tiny.toml"
     recipe.write_text(RECIPE)
     out = tmp_path / "sweep"
-    assert_ok(run_cli("sweep", recipe, "--seeds", "2", "--grid", "fast.timesteps=1000,1200", "--out", out))
-    assert _run_folders(out) == {f"fast.timesteps={t}/seed{s}" for t in (1000, 1200) for s in (0, 1)}
-    study = out / "fast.timesteps=1000" / "seed1"
+    assert_ok(run_cli("sweep", recipe, "--seeds", "2", "--grid", "fast.timesteps=200,300", "--out", out))
+    assert _run_folders(out) == {f"fast.timesteps={t}/seed{s}" for t in (200, 300) for s in (0, 1)}
+    study = out / "fast.timesteps=200" / "seed1"
     assert (study / "report.html").is_file() and (study / "fast" / "config.toml").is_file()
     config = (study / "fast" / "config.toml").read_text()
-    assert "timesteps = 1000" in config and "seed = 1" in config  # one seed per trial, not the recipe's 3
+    assert "timesteps = 200" in config and "seed = 1" in config  # one seed per trial, not the recipe's 3
     summary = read_summary(out)
-    assert summary["fast.timesteps=1000.fast.final_return_iqm"] == pytest.approx(
-        np.mean([read_summary(out / "fast.timesteps=1000" / f"seed{s}")["fast.return_mean"] for s in (0, 1)]))
-    assert "fast.timesteps=1200.pid.final_return_mean" in summary
+    assert summary["fast.timesteps=200.fast.final_return_iqm"] == pytest.approx(
+        np.mean([read_summary(out / "fast.timesteps=200" / f"seed{s}")["fast.return_mean"] for s in (0, 1)]))
+    assert "fast.timesteps=300.pid.final_return_mean" in summary
 
-    assert_one_line_error(run_cli("sweep", recipe, "--grid", "nope.timesteps=1,2", "--out", tmp_path / "x"),
+    assert_one_line_error(run_here("sweep", recipe, "--grid", "nope.timesteps=1,2", "--out", tmp_path / "x"),
                           "has no step 'nope'")
-    assert_one_line_error(run_cli("sweep", recipe, "--grid", "pid.timesteps=1,2", "--out", tmp_path / "x"),
+    assert_one_line_error(run_here("sweep", recipe, "--grid", "pid.timesteps=1,2", "--out", tmp_path / "x"),
                           "has no field 'timesteps'")
 
 
@@ -298,7 +273,7 @@ def test_train_config_repeats_a_run(ppo_run, tmp_path):
     first, second = read_summary(ppo_run), read_summary(out)
     assert second["eval_return_mean"] == first["eval_return_mean"]  # same settings and seed: same numbers
     assert (out / "config.toml").read_text() == (ppo_run / "config.toml").read_text()
-    assert_one_line_error(run_cli("train", "--config", tmp_path / "none.toml"), "none.toml is missing")
+    assert_one_line_error(run_here("train", "--config", tmp_path / "none.toml"), "none.toml is missing")
 
 
 def test_interrupted_training_trial_resumes_from_its_checkpoint(tmp_path):
@@ -326,3 +301,23 @@ def test_interrupted_training_trial_resumes_from_its_checkpoint(tmp_path):
     assert summary["resumed_from"] >= 1024 and summary["timesteps"] == 4096
     assert (run / "sweep_trial.toml").is_file()
     assert "resumed at" in (out / "logs" / "default-seed0.log").read_text()
+
+
+# last in this file: test_tune_ray.py's first test uses the same Ray head (conftest.ray_address)
+def test_ray_backend_gives_the_same_folders_and_aggregate(local_sweep, ray_address, tmp_path):
+    out = tmp_path / "ray"
+    proc = run_cli("sweep", TINY, "--seeds", "2", *GRID, "--backend", "ray", "--address", ray_address, "--out", out)
+    assert_ok(proc)
+    # a user's env registered by their module, named with --import only: the workers' trial
+    # processes learn the module from the sweep (one Ray cluster for both: starting two is slow)
+    user = run_cli("--import", "userpkg.arm", "sweep", "train ArmReachHeavy-v0 " + " ".join(TINY_PPO),
+                   "--seeds", "1", "--backend", "ray", "--address", ray_address,
+                   "--out", tmp_path / "user", env={"PYTHONPATH": USER_PACKAGES})
+    assert_ok(user)
+    assert _run_folders(out) == _run_folders(local_sweep)
+    assert (out / "ray").is_dir()  # Ray Tune ran the trials
+    ray_summary, local_summary = read_summary(out), read_summary(local_sweep)
+    keys = [k for k in local_summary if k.startswith("lr=")]
+    assert keys and {k: ray_summary[k] for k in keys} == pytest.approx({k: local_summary[k] for k in keys})
+    trained = [json.loads(p.read_text()) for p in (tmp_path / "user").rglob("summary.json")]
+    assert [(s["env_id"], s["timesteps"]) for s in trained if "algo" in s] == [("ArmReachHeavy-v0", 256)]

@@ -21,6 +21,7 @@ from helpers import (
     assert_one_line_error,
     read_summary,
     run_cli,
+    run_here,
     run_kind,
     scaled_recipe,
 )
@@ -132,8 +133,8 @@ def test_collect_action_on_pendulum_by_cli(pendulum_run, tmp_path):
 
 
 def test_cli_ctrl_on_pendulum_is_one_line(pendulum_run, tmp_path):
-    proc = run_cli("synergies", "collect", pendulum_run, "--signal", "ctrl", "--episodes", "2", "--preview", "2",
-                   "--out", tmp_path / "out")
+    proc = run_here("synergies", "collect", pendulum_run, "--signal", "ctrl", "--episodes", "2", "--preview", "2",
+                    "--out", tmp_path / "out")
     assert_one_line_error(proc, PENDULUM, "--signal action")
     assert not (tmp_path / "out").exists()
 
@@ -205,8 +206,8 @@ def test_wrapped_robot_passes_check_env(phi):
 
 def test_a_robot_sar_on_another_body_is_one_line(tmp_path):
     save_sar(motor_sar(ANT), tmp_path / "sar.npz")
-    proc = run_cli("train", HUMANOID, "--sar", tmp_path / "sar.npz", "--timesteps", "100", "--no-progress",
-                   "--out", tmp_path / "out")
+    proc = run_here("train", HUMANOID, "--sar", tmp_path / "sar.npz", "--timesteps", "100", "--no-progress",
+                    "--out", tmp_path / "out")
     assert_one_line_error(proc, "8 actuator controls", "(17,)")
     assert not (tmp_path / "out" / "summary.json").exists()
 

@@ -6,11 +6,14 @@ import json
 
 import pytest
 
-from helpers import assert_one_line_error, run_cli
+from helpers import assert_one_line_error, run_cli, run_here
 from motorlab.errors import MotorlabError
 from motorlab.tuning.space import parse_space
 
 BASE = "train InvertedPendulum-v5 --preset fast --until-solved --timesteps 1500"  # LQR: solves in ~100 steps
+# BASE judged on 2 evaluation episodes, not 10 (each of up to 1000 steps, after every model update): for
+# searches whose trials need not run long (the pruning tests keep BASE, whose hopeless trials must outlast a poll)
+QUICK = f"{BASE} --solve-episodes 2"
 
 
 @pytest.mark.parametrize("space, fragment", [
@@ -27,20 +30,20 @@ def test_bad_space_names_the_problem(space, fragment):
 
 
 def test_bad_space_is_one_line_on_the_command_line(tmp_path):
-    assert_one_line_error(run_cli("tune", BASE, "--space", "lr=gauss:1,2", "--out", tmp_path / "t"),
+    assert_one_line_error(run_here("tune", BASE, "--space", "lr=gauss:1,2", "--out", tmp_path / "t"),
                           "unknown distribution")
     assert not (tmp_path / "t" / "study.db").exists()
 
 
 def test_unreachable_storage_is_one_line(tmp_path):
-    proc = run_cli("tune", BASE, "--space", "delay=uniform:0.05,0.2", "--storage", "sqlite:////no/such/dir/study.db",
-                   "--out", tmp_path / "t")
+    proc = run_here("tune", BASE, "--space", "delay=uniform:0.05,0.2", "--storage", "sqlite:////no/such/dir/study.db",
+                    "--out", tmp_path / "t")
     assert_one_line_error(proc, "storage")
 
 
 def test_tiny_search_prunes_writes_best_toml_and_reproduces(tmp_path):
     out = tmp_path / "t"
-    proc = run_cli("tune", BASE, "--space", "solve_return=choice:1000,5000", "--space", "delay=uniform:0.05,0.2",
+    proc = run_cli("tune", QUICK, "--space", "solve_return=choice:1000,5000", "--space", "delay=uniform:0.05,0.2",
                    "--trials", "4", "--seeds", "2", "--prune-startup", "1", "--report-every", "100",
                    "--sampler", "random", "--out", out)
     assert proc.returncode == 0, proc.stderr + proc.stdout
@@ -50,7 +53,7 @@ def test_tiny_search_prunes_writes_best_toml_and_reproduces(tmp_path):
     assert len(summary["fresh_values"]) == 2
     best = summary["best_trial"]
     rerun = run_cli("train", "InvertedPendulum-v5", "--preset", "fast", "--until-solved", "--timesteps", "1500",
-                    "--preset-file", out / "best.toml", "--seed", "0", "--out", tmp_path / "again")
+                    "--solve-episodes", "2", "--preset-file", out / "best.toml", "--seed", "0", "--out", tmp_path / "again")
     assert rerun.returncode == 0, rerun.stderr
     again = json.loads((tmp_path / "again" / "summary.json").read_text())
     trial_run = json.loads((out / "trials" / str(best) / "seed0" / "summary.json").read_text())
@@ -162,6 +165,7 @@ kind = "train"
 preset = "fast"
 timesteps = 1500
 until_solved = true
+solve_episodes = 2
 """
 
 
@@ -209,7 +213,7 @@ def test_two_processes_share_one_study_without_duplicates(tmp_path):
     import sys
 
     out = tmp_path / "t"
-    argv = [sys.executable, "-m", "motorlab", "tune", BASE, *SEARCH, "--trials", "3", "--out", str(out)]
+    argv = [sys.executable, "-m", "motorlab", "tune", QUICK, *SEARCH, "--trials", "3", "--out", str(out)]
     procs = [subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
     for p in procs:
         _, stderr = p.communicate(timeout=300)
@@ -228,7 +232,7 @@ def test_an_interrupted_search_resumes_with_its_finished_trials(tmp_path):
     import time
 
     out = tmp_path / "t"
-    argv = [sys.executable, "-m", "motorlab", "tune", BASE, *SEARCH, "--trials", "2", "--out", str(out)]
+    argv = [sys.executable, "-m", "motorlab", "tune", QUICK, *SEARCH, "--trials", "2", "--out", str(out)]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     first = out / "trials" / "0" / "seed0" / "summary.json"
     deadline = time.time() + 120
@@ -239,12 +243,12 @@ def test_an_interrupted_search_resumes_with_its_finished_trials(tmp_path):
     proc.send_signal(signal.SIGINT)
     proc.communicate(timeout=120)
     assert proc.returncode != 0
-    again = run_cli("tune", BASE, *SEARCH, "--trials", "2", "--out", out)
+    again = run_cli("tune", QUICK, *SEARCH, "--trials", "2", "--out", out)
     assert again.returncode == 0, again.stderr
     assert first.stat().st_mtime_ns == kept  # the finished trial was kept, not run again
     assert counted(out)[0] == 2
 
 
 def test_unknown_objective_is_one_line(tmp_path):
-    proc = run_cli("tune", BASE, *SEARCH, "--trials", "1", "--objective", "no_such_key", "--out", tmp_path / "t")
+    proc = run_cli("tune", QUICK, *SEARCH, "--trials", "1", "--objective", "no_such_key", "--out", tmp_path / "t")
     assert_one_line_error(proc, "no_such_key", "steps_to_success")

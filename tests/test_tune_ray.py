@@ -8,7 +8,7 @@ import json
 import pytest
 from test_tune import BASE, _study
 
-from helpers import assert_one_line_error, run_cli
+from helpers import assert_one_line_error, run_cli, run_here
 
 # ---- the ray backend: motorlab tune --backend ray (Ray Tune: OptunaSearch, ASHA) ----------------------------
 
@@ -31,14 +31,14 @@ def _live_processes(folder) -> list[str]:
     return found
 
 
-def test_ray_backend_searches_on_a_cluster_and_asha_stops_a_hopeless_trial(tmp_path):
+def test_ray_backend_searches_on_a_cluster_and_asha_stops_a_hopeless_trial(ray_address, tmp_path):
     """3 trials × 2 seeds on a local Ray head. The study queues the first two (Optuna's
     enqueue_trial; queued trials run first): one that solves in ~100 steps, then a hopeless one
     (solve_return 5000 is never reached), which ASHA stops at its first rung (step 300) with its
     seeds interrupted, long before their 1500-step budget."""
     import optuna
 
-    from helpers import assert_ok, free_port, ray_head, ray_stop
+    from helpers import assert_ok
     from motorlab.runs import last_timesteps
     from motorlab.stats import iqm_with_ci
     from motorlab.tuning.objective import Objective
@@ -48,16 +48,11 @@ def test_ray_backend_searches_on_a_cluster_and_asha_stops_a_hopeless_trial(tmp_p
     queued = optuna.create_study(storage=f"sqlite:///{out / 'study.db'}", study_name="ray", direction="minimize")
     queued.enqueue_trial({"solve_return": "1000", "delay": 0.1})
     queued.enqueue_trial({"solve_return": "5000", "delay": 0.1})
-    port = free_port()
-    ray_head(port)
-    argv = ["tune", BASE, *RAY_SEARCH, "--trials", "3", "--backend", "ray", "--address", f"127.0.0.1:{port}", "--out", out]
-    try:
-        proc = run_cli(*argv)
-        assert_ok(proc)
-        kept = (out / "trials" / "0" / "seed0" / "summary.json").stat().st_mtime_ns
-        again = run_cli(*argv)  # the same command again: every trial is finished, nothing runs
-    finally:
-        ray_stop()
+    argv = ["tune", BASE, *RAY_SEARCH, "--trials", "3", "--backend", "ray", "--address", ray_address, "--out", out]
+    proc = run_cli(*argv)
+    assert_ok(proc)
+    kept = (out / "trials" / "0" / "seed0" / "summary.json").stat().st_mtime_ns
+    again = run_cli(*argv)  # the same command again: every trial is finished, nothing runs
     assert "ASHA" in proc.stdout and "trial 1 stopped by ASHA at step 300" in proc.stdout
     assert not _live_processes(out / "trials")  # every seed process ended, the stopped ones too
 
@@ -113,11 +108,11 @@ def test_ray_backend_address_errors_are_one_line(tmp_path):
     from helpers import free_port
 
     t0 = time.monotonic()
-    proc = run_cli("tune", BASE, *RAY_SEARCH, "--trials", "1", "--backend", "ray",
-                   "--address", f"127.0.0.1:{free_port()}", "--out", tmp_path / "t")
+    proc = run_here("tune", BASE, *RAY_SEARCH, "--trials", "1", "--backend", "ray",
+                    "--address", f"127.0.0.1:{free_port()}", "--out", tmp_path / "t")
     assert_one_line_error(proc, "no Ray cluster answers")
     assert time.monotonic() - t0 < 30 and not (tmp_path / "t").exists()
-    assert_one_line_error(run_cli("tune", BASE, *RAY_SEARCH, "--address", "h:1", "--out", tmp_path / "t"),
+    assert_one_line_error(run_here("tune", BASE, *RAY_SEARCH, "--address", "h:1", "--out", tmp_path / "t"),
                           "add --backend ray")
     assert not (tmp_path / "t").exists()
 

@@ -21,6 +21,7 @@ from helpers import (
     read_metrics_rows,
     read_summary,
     run_cli,
+    run_here,
     run_kind,
 )
 from motorlab.envs import EnvConfig
@@ -175,6 +176,6 @@ def test_compare_cli(pendulum_runs, tmp_path):
 
 @pytest.mark.parametrize("group", ["A", "A=", "=runs/x"])
 def test_compare_bad_group_syntax(group, tmp_path):
-    proc = run_cli("compare", "--group", group, "--out", tmp_path / "cmp")
+    proc = run_here("compare", "--group", group, "--out", tmp_path / "cmp")
     assert_one_line_error(proc, "--group", "LABEL=RUN_DIR")
     assert not (tmp_path / "cmp").exists()

@@ -16,17 +16,16 @@ usable. Episodes in progress at the checkpoint are not restored: resumed trainin
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import safetensors.torch
-import torch
-from safetensors import SafetensorError
-from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.vec_env import VecNormalize
 
 from motorlab.errors import MotorlabError
 from motorlab.runs import atomic_write_bytes, atomic_write_npz, read_json, write_json
+
+if TYPE_CHECKING:  # torch, safetensors and SB3 are imported where a checkpoint is written or read:
+    import torch  # a sweep, tune or study process asks `has_checkpoint` of its trials without them
+    from stable_baselines3.common.base_class import BaseAlgorithm
 
 FOLDER = "checkpoint"
 LATEST = "latest.json"
@@ -35,6 +34,9 @@ BUFFER_ARRAYS = ("observations", "next_observations", "actions", "rewards", "don
 
 def save_checkpoint(run_dir: Path, model: BaseAlgorithm, tracker_state: dict[str, Any]) -> int:
     """Write a checkpoint of `model` at its current step count; returns that count."""
+    import safetensors.torch
+    from stable_baselines3.common.vec_env import VecNormalize
+
     folder = Path(run_dir) / FOLDER
     steps = int(model.num_timesteps)
     tag = f"{steps:012d}"
@@ -77,6 +79,9 @@ def load_checkpoint(run_dir: Path, model: BaseAlgorithm) -> dict[str, Any]:
     Raises:
         MotorlabError: a damaged checkpoint or one from other settings.
     """
+    import safetensors.torch
+    from safetensors import SafetensorError
+
     folder = Path(run_dir) / FOLDER
     record = read_json(folder / LATEST)
     try:
@@ -109,6 +114,8 @@ def load_checkpoint(run_dir: Path, model: BaseAlgorithm) -> dict[str, Any]:
 def _split(obj: Any, key: str, tensors: dict[str, torch.Tensor]) -> Any:
     """A nested state dict as JSON, its tensors moved to `tensors` under path-like keys.
     Dicts keep their key types (optimizer states are keyed by int), tuples become lists."""
+    import torch
+
     if isinstance(obj, torch.Tensor):
         tensors[key] = obj.detach().cpu().contiguous()
         return {"tensor": key}

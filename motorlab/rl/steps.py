@@ -139,7 +139,8 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
 
     def warm_up(self) -> None:
         import motorlab.report.run  # noqa: F401  (the study's figures: SB3 policies, torch)
-        import motorlab.rl.checkpoint  # noqa: F401  (resume_argv, in the background thread: SB3)
+        import motorlab.rl.checkpoint  # noqa: F401  (resume_argv, in the background thread)
+        import motorlab.rl.sb3  # noqa: F401  (torch and SB3 themselves: the modules above import them when used)
 
     def resume_argv(self, run_dir: Path) -> list[str] | None:
         from motorlab.rl.checkpoint import has_checkpoint

@@ -17,7 +17,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import torch
 from rich.progress import Progress
 
 from motorlab import trackers
@@ -27,9 +26,7 @@ from motorlab.errors import MotorlabError
 from motorlab.evaluation import success_mode
 from motorlab.policies import load_policy_files, save_controller
 from motorlab.report.run import plot_learning_curve
-from motorlab.rl.checkpoint import has_checkpoint, load_checkpoint
 from motorlab.rl.config import TrainConfig
-from motorlab.rl.sb3 import build_model, train_sb3
 from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker
 from motorlab.runs import prepare_run_dir, run_path, write_config, write_summary
 
@@ -77,15 +74,19 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
     if cfg.until_solved and solve_return is None:
         raise MotorlabError(f"{cfg.env.id} has no known maximum return; give --solve-return for --until-solved.")
 
-    torch.set_num_threads(cfg.torch_threads)
     run_dir = run_path(out, f"train-{cfg.algo}")
     t0 = time.perf_counter()
     model = None
-    if cfg.algo != "lqr":
-        model = build_model(cfg, run_dir)  # SB3 checks its settings here, before the folder is touched
     record = None
-    if resume and model is not None:
-        if has_checkpoint(run_dir):
+    if cfg.algo != "lqr":  # torch and SB3 are imported here: an LQR run (NumPy, SciPy) starts without them
+        import torch
+
+        from motorlab.rl.checkpoint import has_checkpoint, load_checkpoint
+        from motorlab.rl.sb3 import build_model
+
+        torch.set_num_threads(cfg.torch_threads)
+        model = build_model(cfg, run_dir)  # SB3 checks its settings here, before the folder is touched
+        if resume and has_checkpoint(run_dir):
             record = load_checkpoint(run_dir, model)
     prepare_run_dir(run_dir, f"train-{cfg.algo}")
     trackers.folder_ready(run_dir)  # a tracked run (--track) starts now, before the first scalar
@@ -97,6 +98,8 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
         if model is None:
             steps = _train_lqr(cfg, run_dir, tracker)
         else:
+            from motorlab.rl.sb3 import train_sb3
+
             steps = train_sb3(cfg, model, run_dir, tracker)
         wall = time.perf_counter() - t0 + (record["tracker"]["wall"] if record else 0.0)
         # Reload from disk, so the reported numbers are those of the saved files.

@@ -20,7 +20,6 @@ worker exits: its `finally` might not run, and the seeds would go on as orphans.
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 from ray import tune
@@ -58,7 +57,7 @@ class SeedTrial(tune.Trainable):
     def step(self) -> dict[str, Any]:
         while not self.queue:
             if self.seeds.running():
-                time.sleep(POLL_SECONDS)
+                self.seeds.join(POLL_SECONDS)
                 self.queue += [self._result(step, value) for step, value in self.reporter.reached()]
             else:
                 self.queue += self._end()

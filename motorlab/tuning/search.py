@@ -247,7 +247,7 @@ class Search:
         reporter = Reporter(self.spec.objective, self.spec.report_every, dirs)
         try:
             while seeds.running():
-                time.sleep(POLL_SECONDS)
+                seeds.join(POLL_SECONDS)
                 if _report(trial, reporter.reached()) and trial.should_prune():
                     seeds.stop()
                     self._pruned(trial, dirs, reporter.last_step)

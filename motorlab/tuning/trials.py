@@ -129,6 +129,10 @@ class SeedRuns:
     def running(self) -> bool:
         return self._thread.is_alive()
 
+    def join(self, timeout: float) -> None:
+        """Wait until the seeds have ended, or at most `timeout` seconds (a poll that ends as soon as they do)."""
+        self._thread.join(timeout)
+
     def stop(self) -> None:
         """Stop the running seeds as Ctrl-C would, and wait until they have."""
         self._stop.set()
