@@ -44,6 +44,12 @@ recipe that needs something only its user has (a file) names it in `[inputs]` an
     [[steps]]
     name = "sar-rl"
     sar = "${sar}"
+
+An input given as a table may have a default (then --set is optional) and named choices, each
+standing for the value that fills "${NAME}" (`--set terrain=hilly` below):
+
+    [inputs]
+    terrain = { help = "the terrain", default = "rough", choices = { rough = "myoLegRoughTerrainWalk-v0", hilly = "myoLegHillyTerrainWalk-v0" } }
 """
 
 from __future__ import annotations
@@ -104,6 +110,18 @@ class FindingSpec(BaseModel):
     label: str | None = Field(None, description="What the report calls it (default: the step and the number's label)")
 
 
+class RecipeInput(BaseModel):
+    """One of a recipe's `[inputs]` given as a table: `--set NAME=VALUE` fills its "${NAME}"
+    (an input given as a plain string is its help, and required)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    help: str = Field(description="What to give, and where to get it")
+    default: Any = Field(None, description="Used when no --set gives it (none: the recipe needs --set NAME=VALUE)")
+    choices: dict[str, Any] | None = Field(None, description="The names --set NAME=... accepts, each with the value "
+                                           "that fills \"${NAME}\" (a table: rough = \"myoLegRoughTerrainWalk-v0\")")
+
+
 class _RecipeFile(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -112,7 +130,7 @@ class _RecipeFile(BaseModel):
     seeds: int | list[int] | None = None  # every training step that sets none: seeds 0..N-1 (or this list)
     parallel_steps: int = Field(1, ge=1)  # training steps that need nothing from each other, run at once
     imports: list[str] = Field(default_factory=list)  # the user's modules that register its envs
-    inputs: dict[str, str] = Field(default_factory=dict)  # NAME -> what to give: --set NAME=VALUE fills "${NAME}"
+    inputs: dict[str, str | RecipeInput] = Field(default_factory=dict)  # NAME -> what --set NAME=VALUE gives
     defaults: dict[str, Any] = Field(default_factory=dict)
     steps: list[dict[str, Any]] = Field(min_length=1)
     findings: list[FindingSpec] = Field(default_factory=list)  # default: each step's own (see StepKind.findings)
@@ -241,6 +259,10 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
         raw = _RecipeFile.model_validate(data)
     except ValidationError as e:
         raise MotorlabError(_explain(e, source, set(_RecipeFile.model_fields))) from None
+    for name, spec in raw.inputs.items():  # inputs no --set gave: their defaults
+        if isinstance(spec, RecipeInput) and spec.default is not None:
+            data = _fill(data, name, input_value(name, spec, spec.default, source))
+    raw = _RecipeFile.model_validate(data)
     _missing_inputs({"defaults": raw.defaults, "steps": raw.steps}, raw.inputs, source)
     import_modules(raw.imports, f"{source}: imports")  # before the steps are checked: they register the envs
     all_fields = set().union(*(fields_of(k) for k in KINDS.values()))
@@ -327,7 +349,14 @@ def set_fields(data: dict[str, Any], given: dict[str, Any], source: str, flag: s
     names = [str(s.get("name", f"step{i + 1}")) for i, s in enumerate(steps)]
     for key, text in given.items():
         if key in inputs:
-            data = _fill(data, key, text)
+            spec = inputs[key]
+            if isinstance(spec, dict):  # a table: its choices (and a default, which --set replaces)
+                try:
+                    spec = RecipeInput.model_validate(spec)
+                except ValidationError as e:
+                    raise MotorlabError(_explain(e, f"{source}: [inputs] {key}", set(RecipeInput.model_fields))) from None
+                text = input_value(key, spec, text, source, flag)
+            data = _fill(data, key, text)  # its default (if any) then fills nothing
             steps = data["steps"]
             continue
         step_name, dot, field_name = key.rpartition(".")
@@ -346,6 +375,22 @@ def set_fields(data: dict[str, Any], given: dict[str, Any], source: str, flag: s
         for i in hit:
             steps[i][field_name] = value
     return data
+
+
+def input_value(name: str, spec: RecipeInput, text: Any, source: str, flag: str = "--set") -> Any:
+    """What fills "${name}" when `text` is given for it: the value of that choice (or `text` itself
+    for an input without choices).
+
+    Raises:
+        MotorlabError: `text` is none of the input's choices.
+    """
+    if spec.choices is None:
+        return text
+    picked = str(text)
+    if picked not in spec.choices:
+        raise MotorlabError(f"{flag} {name}={picked}: {source} takes {name} = {' | '.join(spec.choices)}"
+                            f"{did_you_mean(picked, spec.choices)}.")
+    return spec.choices[picked]
 
 
 def _fill(value: Any, name: str, text: Any) -> Any:
@@ -370,7 +415,7 @@ def step_fields(step: dict[str, Any]) -> set[str]:
         return set()
 
 
-def _missing_inputs(data: Any, inputs: dict[str, str], source: str) -> None:
+def _missing_inputs(data: Any, inputs: dict[str, str | RecipeInput], source: str) -> None:
     """One line for the first "${NAME}" no --set gave."""
     found = INPUT.findall(repr(data))
     if not found:
@@ -379,4 +424,6 @@ def _missing_inputs(data: Any, inputs: dict[str, str], source: str) -> None:
     if name not in inputs:
         raise MotorlabError(f"{source}: \"${{{name}}}\" is not one of its [inputs]"
                             f"{did_you_mean(name, inputs)}; declare it there, or write the value itself.")
-    raise MotorlabError(f"{source} needs --set {name}=VALUE: {inputs[name]}.")
+    spec = inputs[name]
+    what = spec.help if isinstance(spec, RecipeInput) else spec
+    raise MotorlabError(f"{source} needs --set {name}=VALUE: {what}.")

@@ -28,6 +28,7 @@ then its summary and files when `run` returns; it ends FAILED when `run` raises.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import statistics
 from dataclasses import dataclass
@@ -300,6 +301,15 @@ SCORED_METRICS = (
 
 def scored_numbers(metrics: tuple[Metric, ...], h: dict[str, Any], env_id: str) -> list[Number]:
     """Numbers of an evaluated policy (the IQM with its CI where there are seeds), with episodes
-    that ended early called falls only where the env defines a fall."""
-    relabelled = (Metric(m.key, early_end_label(env_id), m.form, of=m.of) if m.key == "falls" else m for m in metrics)
-    return [n for m in relabelled if (n := m.number(h)) is not None]
+    that ended early called falls only where the env defines a fall, and success named by what
+    it is (h["success_by"]: '"solved" at the final step', "return ≥ 1000")."""
+    by = h.get("success_by")
+
+    def label(m: Metric) -> str:
+        if m.key == "falls":
+            return early_end_label(env_id)
+        if by and m.key in ("success_rate", "train_success_rate_last100"):
+            return f"{m.label[:-1]}, {by})" if m.label.endswith(")") else f"{m.label} ({by})"
+        return m.label
+
+    return [n for m in metrics if (n := dataclasses.replace(m, label=label(m)).number(h)) is not None]

@@ -69,7 +69,7 @@ SECONDS = {
     "tests/test_disturbances.py": 0.7, "tests/test_results.py": 0.6, "tests/test_layers.py": 0.5,
     "tests/test_lqr.py": 0.4, "tests/test_dynamics_collect.py": 0.4, "tests/test_schedules.py": 0.2,
     "tests/test_runner.py": 0.2, "tests/test_sar.py": 0.2, "tests/test_wrappers.py": 0.2, "tests/test_runs.py": 0.05,
-    "tests/test_api.py": 60, "tests/test_docs.py": 35, "tests/test_notebooks.py": 1,
+    "tests/test_api.py": 60, "tests/test_docs.py": 35, "tests/test_notebooks.py": 1, "tests/test_sar_legs.py": 65,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[sar_synergies]": 85,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[your_own_body]": 45,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[robust_pendulum]": 40,

@@ -222,6 +222,9 @@ SCALED = {
                        (r"preview = (\d+)", 4), ONE_WORKER, ONE_GRADIENT_STEP],
     # its collection (5000 episodes), fit (20 epochs) and MPC (10 episodes); the check keeps its 3 episodes
     "reacher-quick": [(r"episodes = (\d{2,})", 5), (r"epochs = (\d+)", 4)],
+    # every step of the legs study: 1000 + 1000 env steps of SAC beside 2000, 4 episodes collected
+    "sar-legs-quick": [(r"timesteps = (\d+)", 5), (r"eval_every = (\d+)", 5), (r"episodes = (\d+)", 5),
+                       (r"preview = (\d+)", 5), ONE_WORKER, ONE_GRADIENT_STEP],
     # ~2 min on 2 cores as bundled
     "sar-ant-quick": [(r"timesteps = (\d+)", 4), (r"eval_every = (\d+)", 4), ONE_WORKER, ONE_GRADIENT_STEP],
 }

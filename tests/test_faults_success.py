@@ -350,3 +350,20 @@ def test_myosuite_run_logs_training_success(hand_play_run):
     assert 0.0 <= s["train_success_rate_last100"] <= 1.0
     assert s["train_success_rate_last100"] == pytest.approx(success[-100:].mean())
     assert s["train_episodes"] == len(eps)
+
+
+def test_tables_show_training_success_only_where_the_env_judges_episodes(ppo_run, hand_play_run):
+    """The pendulum has no success flag: its table has no training-success row (a return target
+    would judge stochastic exploration episodes: 0% beside a solved policy), and its success is
+    said to be the maximum return; the hand's flag ("solved") keeps the row, and is named."""
+    from motorlab.report.results import read_run_results
+
+    labels = {run: {n.key: n.label for n in read_run_results(run).numbers} for run in (ppo_run, hand_play_run)}
+    assert "train_success_rate_last100" not in labels[ppo_run]
+    assert labels[ppo_run]["success_rate"] == "success (return ≥ 1000)"
+    assert read_summary(ppo_run)["train_success_rate_last100"] is None
+    assert labels[hand_play_run]["train_success_rate_last100"] == \
+        'training success (last 100 episodes, "solved" at any step)'
+    assert labels[hand_play_run]["success_rate"] == 'success ("solved" at any step)'
+    header, rows = read_metrics_rows(ppo_run)
+    assert not any(r["episode_success"] for r in episode_rows(rows))  # nor in its metrics.csv

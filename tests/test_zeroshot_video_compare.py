@@ -160,7 +160,7 @@ def test_compare_cli(pendulum_runs, tmp_path):
     assert_png(out / "plots" / "learning_curves.png")
     s = read_summary(out)
     assert s["A.seeds"] == 2 and s["B.seeds"] == 1
-    curves = ("seeds", "final_episode_return", "final_episode_success")
+    curves = ("seeds", "final_episode_return")  # no training success: the pendulum has no success flag
     stats = [f"{m}_{x}" for m in ("final_return", "success_rate") for x in ("iqm", "iqm_ci_low", "iqm_ci_high", "mean")]
     assert set(s) == ({f"{g}.{k}" for g in "AB" for k in (*curves, *stats)}
                       | {"A.final_return_p_better_than[B]", "A.success_rate_p_better_than[B]"})
@@ -171,7 +171,6 @@ def test_compare_cli(pendulum_runs, tmp_path):
     # the final value is a running mean of episode returns, so it lies within them
     returns = [float(r["episode_return"]) for r in episode_rows(read_metrics_rows(r2)[1])]
     assert min(returns) <= s["B.final_episode_return"] <= max(returns)
-    assert 0.0 <= s["A.final_episode_success"] <= 1.0
 
 
 @pytest.mark.parametrize("group", ["A", "A=", "=runs/x"])

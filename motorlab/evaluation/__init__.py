@@ -10,9 +10,10 @@ from motorlab.evaluation.rollouts import (
                                           Rollouts,
                                           evaluate,
                                           step_success,
+                                          success_by,
                                           success_mode,
                                           trained_env_settings,
 )
 
-__all__ = ["EpisodeSuccess", "Evaluator", "Rollouts", "evaluate", "step_success", "success_mode",
+__all__ = ["EpisodeSuccess", "Evaluator", "Rollouts", "evaluate", "step_success", "success_by", "success_mode",
            "trained_env_settings"]

@@ -23,8 +23,8 @@ from motorlab.faults import fault_line
 from motorlab.policies import Policy
 from motorlab.runs import read_config
 
-__all__ = ["SUCCESS_KEYS", "EpisodeSuccess", "Evaluator", "Rollouts", "evaluate", "step_success", "success_mode",
-           "trained_env_settings"]
+__all__ = ["SUCCESS_KEYS", "EpisodeSuccess", "Evaluator", "Rollouts", "evaluate", "step_success", "success_by",
+           "success_mode", "trained_env_settings"]
 
 
 @dataclass
@@ -78,6 +78,27 @@ def success_mode(env_cfg: EnvConfig) -> str:
     if env_cfg.success != "auto":
         return env_cfg.success
     return "final" if _STATE_SUCCESS_IDS.match(env_cfg.id) else "any"
+
+
+def success_by(env_cfg: EnvConfig) -> str | None:
+    """What counts as a successful episode of this env, in the words reports use: its own flag
+    (info["solved"]: '"solved" at the final step'), else reaching the task's maximum return ("return ≥ 1000"),
+    else None (success means nothing here). The flag is found by one step of the env: a flag an env
+    reports only at an episode's end is still used by evaluation, but not named here."""
+    from motorlab.envs import make_env
+
+    env = make_env(env_cfg, shaped=False)
+    try:
+        env.action_space.seed(0)
+        _, reset_info = env.reset(seed=0)
+        _, _, _, _, info = env.step(env.action_space.sample())
+    finally:
+        env.close()
+    key = next((k for k in SUCCESS_KEYS if k in info or k in reset_info), None)
+    if key is not None:
+        return f'"{key}" at the final step' if success_mode(env_cfg) == "final" else f'"{key}" at any step'
+    target = max_return(env_cfg.id)
+    return None if target is None else f"return ≥ {target:g}"
 
 
 class EpisodeSuccess:

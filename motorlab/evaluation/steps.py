@@ -13,7 +13,7 @@ from rich.table import Table
 
 from motorlab.envs import ENV_KEYS, EnvSettings, describe_env, fold_env, make_env, max_return
 from motorlab.errors import MotorlabError
-from motorlab.evaluation.rollouts import evaluate, success_mode, trained_env_settings
+from motorlab.evaluation.rollouts import evaluate, success_by, success_mode, trained_env_settings
 from motorlab.policies import BUILTIN_POLICIES, load_policy, unknown_policy_message
 from motorlab.report.results import Metric, Number, show
 from motorlab.runs import require_run_dir
@@ -44,6 +44,7 @@ class EvaluateSummary(Summary):
     seed: int
     max_return: float | None
     success_mode: str
+    success_by: str | None = None  # what a success is (rollouts.success_by); None in runs before it was kept
     episodes: int
     return_mean: float | None
     return_std: float | None
@@ -122,7 +123,8 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
         run_dir = self.start(out)
         summary = EvaluateSummary(policy=settings.policy, env_id=env_cfg.id, delay=env_cfg.delay,
                                   history=env_cfg.history, seed=settings.seed, max_return=target,
-                                  success_mode=success_mode(env_cfg), **result.summary())
+                                  success_mode=success_mode(env_cfg), success_by=success_by(env_cfg),
+                                  **result.summary())
         return self.finish(run_dir, settings, summary, result.fault_log)
 
     def describe(self, settings: EvaluateSettings, copies: int = 1) -> str:
@@ -135,13 +137,14 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
     def headline(self, s: EvaluateSummary) -> dict[str, Any]:
         head = {"return_mean": s.return_mean, "return_std": s.return_std, "return_min": s.return_min,
                 "success_rate": s.success_rate, "episode_length_mean": s.episode_length_mean, "falls": s.falls,
-                "episodes": s.episodes}
+                "episodes": s.episodes, "success_by": s.success_by}
         return {k: v for k, v in head.items() if v is not None}
 
     def aggregate(self, summaries: list[EvaluateSummary]) -> dict[str, Any]:
         if len(summaries) == 1:
             return self.headline(summaries[0])
         return {**seeds_headline([self.scores(s) for s in summaries]), "falls": sum(s.falls for s in summaries),
+                "success_by": summaries[0].success_by,
                 "episode_length_mean": statistics.fmean(s.episode_length_mean for s in summaries)}
 
     def numbers(self, settings: EvaluateSettings, h: dict[str, Any]) -> list[Number]:

@@ -52,6 +52,7 @@ def mean_and_band(curves: np.ndarray, confidence: float = 0.95) -> tuple[np.ndar
 
 def compare_curves(groups: dict[str, list[Path]], path: Path, title: str = "Learning curves") -> dict:
     """Plot return and success rate vs env steps per group (seeds averaged); write `path` (PNG).
+    The success panel only where the envs have a success flag (else training success means nothing).
 
     Returns:
         Per group: seeds and the final mean return / success rate.
@@ -64,27 +65,32 @@ def compare_curves(groups: dict[str, list[Path]], path: Path, title: str = "Lear
     runs = {g: [require_run_dir(Path(r)) for r in rs] for g, rs in groups.items()}
     last = max(max(r["timesteps"] for r in read_metrics(run)) for rs in runs.values() for run in rs)
     grid = np.linspace(0, last, GRID_POINTS)
+    # training success only where the envs judged episodes (their success flag): else no panel, no number
+    judged = any(np.isfinite(r.get("episode_success", np.nan)) for rs in runs.values() for run in rs
+                 for r in read_metrics(run))
     result = {}
     with plt.rc_context(STYLE):
-        fig, (ax_r, ax_s) = plt.subplots(1, 2, figsize=(11, 4))
+        fig, axes = plt.subplots(1, 2 if judged else 1, figsize=(11 if judged else 6, 4), squeeze=False)
+        panels = list(zip(axes[0], ("episode_return", "episode_success")))
         for label, rs in runs.items():
             n = len(rs)
-            for ax, column in ((ax_r, "episode_return"), (ax_s, "episode_success")):
+            for ax, column in panels:
                 mean, half = mean_and_band(np.array([_curve(r, column, grid) for r in rs]))
                 line, = ax.plot(grid, mean, label=f"{label} ({n} seed{'s' if n > 1 else ''})")
                 ax.fill_between(grid, mean - half, mean + half, color=line.get_color(), alpha=0.2, lw=0)
                 finite = mean[np.isfinite(mean)]
                 result.setdefault(label, {"seeds": n})[f"final_{column}"] = float(finite[-1]) if finite.size else None
-        ax_r.set_ylabel("episode return (running mean of 100)")
-        ax_s.set_ylabel("success rate (last 100 episodes)")
-        ax_s.set_ylim(-0.02, 1.02)
-        for ax in (ax_r, ax_s):
+        axes[0][0].set_ylabel("episode return (running mean of 100)")
+        if judged:
+            axes[0][1].set_ylabel("success rate (last 100 episodes)")
+            axes[0][1].set_ylim(-0.02, 1.02)
+        for ax, _ in panels:
             ax.set_xlabel("environment steps")
             steps_axis(ax.xaxis)
             ax.legend(fontsize=8)
         fig.suptitle(f"{title} — mean and 95% confidence band over seeds", fontsize=11)
-        save_figure(fig, path, "Training return and success (running means over episodes) against environment "
-                               "steps, per setting: the mean over its seeds with a 95% confidence band.")
+        save_figure(fig, path, f"Training return{' and success' if judged else ''} (running means over episodes) "
+                               "against environment steps, per setting: the mean over its seeds with a 95% confidence band.")
     return result
 
 

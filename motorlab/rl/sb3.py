@@ -49,8 +49,9 @@ class TrackingCallback(BaseCallback):
         self.solved = False
 
     def _on_training_start(self) -> None:
-        self.outcome = EpisodeSuccess(self.training_env.num_envs, self.tracker.solve_return,
-                                      success_mode(self.tracker.cfg.env))
+        # training success only where the env says what success is (its flag): without one, a
+        # return target would judge stochastic exploration episodes (0% beside a solved policy)
+        self.outcome = EpisodeSuccess(self.training_env.num_envs, None, success_mode(self.tracker.cfg.env))
         for output in self.logger.output_formats:  # SB3's TensorBoard scalars also go to the tracked run, if any
             if isinstance(output, TensorBoardOutputFormat):
                 trackers.mirror(output.writer)

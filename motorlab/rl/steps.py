@@ -36,6 +36,7 @@ class TrainSummary(Summary):
     train_episodes: int
     train_success_rate_last100: float | None
     success_mode: str
+    success_by: str | None = None  # what a success is (evaluation.success_by); None in runs before it was kept
     numerical_faults: int
     resumed_from: int | None
     eval_seed: int
@@ -98,7 +99,8 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
         head = {"return_mean": e.return_mean, "return_std": e.return_std, "return_min": e.return_min,
                 "success_rate": e.success_rate, "steps_to_success": s.steps_to_success, "timesteps": s.timesteps,
                 "wall_seconds": s.wall_seconds, "episode_length_mean": e.episode_length_mean, "falls": e.falls,
-                "episodes": e.episodes, "train_success_rate_last100": s.train_success_rate_last100}
+                "episodes": e.episodes, "train_success_rate_last100": s.train_success_rate_last100,
+                "success_by": s.success_by}
         return {k: v for k, v in head.items() if v is not None or k == "steps_to_success"}
 
     def aggregate(self, summaries: list[TrainSummary]) -> dict[str, Any]:
@@ -110,6 +112,7 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
                 "train_success_rate_last100": statistics.fmean(rates) if None not in rates else None,
                 # a seed that never solved makes the median unknowable, not smaller
                 "steps_to_success": statistics.median(solved) if None not in solved else None,
+                "success_by": summaries[0].success_by,
                 "timesteps": sum(s.timesteps for s in summaries),
                 "wall_seconds": sum(s.wall_seconds for s in summaries)}
 

@@ -23,7 +23,7 @@ from motorlab import trackers
 from motorlab.control.lqr import learn_lqr
 from motorlab.envs import make_env, max_return
 from motorlab.errors import MotorlabError
-from motorlab.evaluation import success_mode
+from motorlab.evaluation import success_by, success_mode
 from motorlab.policies import load_policy_files, save_controller
 from motorlab.report.run import plot_learning_curve
 from motorlab.rl.config import TrainConfig
@@ -124,6 +124,7 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
         "train_episodes": tracker.episodes,
         "train_success_rate_last100": tracker.success_rate(),
         "success_mode": success_mode(cfg.env),
+        "success_by": success_by(cfg.env),
         "numerical_faults": tracker.faults,
         "resumed_from": record["steps"] if record else None,
         "eval_seed": cfg.seed + EVAL_SEED_OFFSET,

@@ -274,26 +274,33 @@ def _run_steps(recipe: Recipe, study_dir: Path, console: Console, execution: Exe
     t0 = time.perf_counter()
     outputs = _Outputs(recipe.steps)
     overlaps = Overlaps()
+    seconds: dict[str, float] = {}  # each step's wall time (beside others, where steps overlap)
+
+    def timed(step: Step, *args: Any) -> _Outcome:
+        t_step = time.perf_counter()
+        try:
+            return _run_step(step, study_dir, outputs, console, execution, *args)
+        finally:
+            seconds[step.name] = round(time.perf_counter() - t_step, 1)
+
     if parallel_steps > 1:
         console.print(f"      training steps that need nothing from each other run at once, at most {parallel_steps}")
         for kind in {s.kind.name: s.kind for s in recipe.steps}.values():
             kind.warm_up()  # before any thread starts: threads must not import a package at the same time
         results, overlaps = run_overlapped(
-            recipe.steps, lambda step, detached, stop: _run_step(step, study_dir, outputs, console, execution,
-                                                                 detached, stop),
+            recipe.steps, timed,
             parallel_steps, console, lambda step: _progress(step, study_dir), describe,
             lambda step: [step.kind.figures(d) for d in outputs.dirs[step.name]])
     else:
         results = {}
         for i, step in enumerate(recipe.steps, 1):
             console.print(f"[bold][{i}/{len(recipe.steps)}][/bold] {step.name}: {describe(step)}")
-            t_step = time.perf_counter()
-            results[step.name] = _run_step(step, study_dir, outputs, console, execution)
-            console.print(f"      done in {time.perf_counter() - t_step:.1f} s")
+            results[step.name] = timed(step)
+            console.print(f"      done in {seconds[step.name]:.1f} s")
     study_summary: dict[str, Any] = {"recipe": recipe.name, "description": recipe.description,
                                      "steps": [s.name for s in recipe.steps],
                                      "parallel_steps": parallel_steps,
-                                     "wall_seconds": round(time.perf_counter() - t0, 2)}
+                                     "wall_seconds": round(time.perf_counter() - t0, 2), "step_seconds": seconds}
     for name in (s.name for s in recipe.steps):
         study_summary.update({f"{name}.{k}": v for k, v in results[name].headline.items()})
     _figures(recipe, {name: r.headline for name, r in results.items()}, study_dir)
