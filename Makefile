@@ -42,8 +42,9 @@ lint: $(STAMP)  ## ruff (pyflakes, isort, bugbear) and the import layers (lint-i
 # most tests wait on `motorlab` subprocesses, so two files at a time keep both cores busy.
 # tests/conftest.py adjusts loadfile: files sharing an expensive session fixture go to one worker
 # together (SHARED), and files are handed out longest first (SECONDS), not most tests first.
+# The 25 slowest tests are listed at the end: where to look when the suite grows.
 test: lint docs $(VENV)/.browser  ## the whole test suite, as CI runs it (under 15 min on 2 cores)
-	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile
+	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile --durations=25
 
 # The documentation site (mkdocs.yml, docs/): strict, so a warning (a broken link, a docstring griffe
 # cannot read) fails it; docs/reference/cli.md is generated from every command's --help as it builds

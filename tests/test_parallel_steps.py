@@ -240,7 +240,8 @@ def test_bad_parallel_steps_in_a_recipe(tmp_path):
     assert_one_line_error(proc, "parallel_steps")
 
 
-@pytest.mark.parametrize("name", ["sar-hand", "sar-hand-reference", "sar-hand-quick", "sar-legs", "sar-legs-quick"])
+@pytest.mark.parametrize("name", ["sar-hand", "sar-hand-reference", "sar-hand-quick", "sar-legs", "sar-legs-reference",
+                                  "sar-legs-quick"])
 def test_sar_studies_train_their_two_chains_at_once(name):
     from motorlab.recipes import load_recipe
 
