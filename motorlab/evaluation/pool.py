@@ -52,6 +52,15 @@ def step_success(info: dict) -> bool | None:
     return None
 
 
+def success_code(info: dict) -> int:
+    """`step_success` and which key said it, as one small int: -1 no flag, else 2 x the key's
+    index in SUCCESS_KEYS + the flag (so a worker's reply stays one int8 per step)."""
+    for k, key in enumerate(SUCCESS_KEYS):
+        if key in info:
+            return 2 * k + int(bool(info[key]))
+    return -1
+
+
 class Steps(NamedTuple):
     """One time step of the active envs of a batch, as evaluation reads it (not the envs' whole
     `info` dicts): entry j is batch row rows[j]. Plain arrays, so a worker's reply pickles fast."""
@@ -61,7 +70,7 @@ class Steps(NamedTuple):
     reward: np.ndarray  # (k,) float64
     terminated: np.ndarray  # (k,) bool
     truncated: np.ndarray  # (k,) bool
-    success: np.ndarray  # (k,) int8: step_success(info): 1 solved, 0 not, -1 the env has no flag
+    success: np.ndarray  # (k,) int8: success_code(info): -1 the env has no flag, else key and flag
     restarted: np.ndarray  # (k,) bool: the episode ended and the env was reset for the row's next one
     first_obs: np.ndarray  # (k, *observation shape): that next episode's first observation (where restarted)
     fault: dict[int, str]  # batch row -> fault_of(info), for the rows whose step was a numerical fault
@@ -69,7 +78,12 @@ class Steps(NamedTuple):
     def flag(self, j: int) -> bool | None:
         """Entry j's success flag (None: the env reports none)."""
         value = int(self.success[j])
-        return None if value < 0 else bool(value)
+        return None if value < 0 else bool(value & 1)
+
+    def flag_key(self, j: int) -> str | None:
+        """The info key of entry j's success flag (None: the env reports none)."""
+        value = int(self.success[j])
+        return None if value < 0 else SUCCESS_KEYS[value >> 1]
 
 
 def step_envs(envs: Sequence[gym.Env], rows: np.ndarray, actions: np.ndarray, offset: int = 0,
@@ -85,8 +99,7 @@ def step_envs(envs: Sequence[gym.Env], rows: np.ndarray, actions: np.ndarray, of
         reward.append(rew)
         terminated.append(term)
         truncated.append(trunc)
-        flag = step_success(info)
-        success.append(-1 if flag is None else int(flag))
+        success.append(success_code(info))
         if (why := fault_of(info)) is not None:
             fault[int(r) + offset] = why
         again = bool((term or trunc) and restarts is not None and restarts[j] >= 0)

@@ -40,6 +40,7 @@ class Rollouts:
     observations: list[np.ndarray] = field(default_factory=list)  # per episode, when recorded
     actions: list[np.ndarray] = field(default_factory=list)
     dt: float = 0.0
+    success_key: str | None = None  # the info key of the env's success flag (None: it has none)
 
     @property
     def faults(self) -> int:
@@ -80,21 +81,11 @@ def success_mode(env_cfg: EnvConfig) -> str:
     return "final" if _STATE_SUCCESS_IDS.match(env_cfg.id) else "any"
 
 
-def success_by(env_cfg: EnvConfig) -> str | None:
-    """What counts as a successful episode of this env, in the words reports use: its own flag
-    (info["solved"]: '"solved" at the final step'), else reaching the task's maximum return ("return ≥ 1000"),
-    else None (success means nothing here). The flag is found by one step of the env: a flag an env
-    reports only at an episode's end is still used by evaluation, but not named here."""
-    from motorlab.envs import make_env
-
-    env = make_env(env_cfg, shaped=False)
-    try:
-        env.action_space.seed(0)
-        _, reset_info = env.reset(seed=0)
-        _, _, _, _, info = env.step(env.action_space.sample())
-    finally:
-        env.close()
-    key = next((k for k in SUCCESS_KEYS if k in info or k in reset_info), None)
+def success_by(env_cfg: EnvConfig, key: str | None) -> str | None:
+    """What counts as a successful episode of this env, in the words reports use: its own flag,
+    the info `key` evaluation found (Rollouts.success_key), and when ('"solved" at the final
+    step'); else reaching the task's maximum return ("return ≥ 1000"); else None (success means
+    nothing here)."""
     if key is not None:
         return f'"{key}" at the final step' if success_mode(env_cfg) == "final" else f'"{key}" at any step'
     target = max_return(env_cfg.id)
@@ -211,6 +202,7 @@ class Evaluator:
         success = np.zeros(n, dtype=bool)
         done = np.zeros(n, dtype=bool)
         outcome = EpisodeSuccess(rows, self.target, success_mode(self.env_cfg))
+        key: str | None = None  # the env's success flag, once a step reports one
         falls = 0
         faults: list[tuple[int, str]] = []  # (episode, faults.log line): listed in episode order
         traces_o: list[list] = [[] for _ in range(n)] if record else []
@@ -228,6 +220,8 @@ class Evaluator:
                 returns[i] += steps.reward[j]
                 lengths[i] += 1
                 outcome.flag(r, steps.flag(j))
+                if key is None:
+                    key = steps.flag_key(j)
                 if record:
                     traces_o[i].append(steps.obs[j])
                     traces_a[i].append(actions[r])
@@ -242,7 +236,8 @@ class Evaluator:
                 falls += bool(steps.terminated[j]) and not fault
                 if stop_below is not None and returns[i] < stop_below:
                     return Rollouts(returns[done], lengths[done], success[done], aborted=True,
-                                    falls=falls, fault_log=[line for _, line in sorted(faults)], dt=self.dt)
+                                    falls=falls, fault_log=[line for _, line in sorted(faults)], dt=self.dt,
+                                    success_key=key)
                 if steps.restarted[j]:
                     episode[r] = following[r]
                     obs[r] = steps.first_obs[j]
@@ -254,6 +249,7 @@ class Evaluator:
         return Rollouts(
             returns, lengths, success, falls=falls, fault_log=[line for _, line in sorted(faults)], dt=self.dt,
             observations=[np.array(t) for t in traces_o], actions=[np.array(t) for t in traces_a],
+            success_key=key,
         )
 
     def close(self) -> None:
@@ -302,7 +298,8 @@ def join_rollouts(parts: list[Rollouts]) -> Rollouts:
                     np.concatenate([p.success for p in parts]), aborted=any(p.aborted for p in parts),
                     falls=sum(p.falls for p in parts), fault_log=[line for p in parts for line in p.fault_log],
                     observations=[o for p in parts for o in p.observations],
-                    actions=[a for p in parts for a in p.actions], dt=parts[0].dt)
+                    actions=[a for p in parts for a in p.actions], dt=parts[0].dt,
+                    success_key=next((p.success_key for p in parts if p.success_key), None))
 
 
 def trained_env_settings(run_dir: Path) -> dict:

@@ -123,7 +123,7 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
         run_dir = self.start(out)
         summary = EvaluateSummary(policy=settings.policy, env_id=env_cfg.id, delay=env_cfg.delay,
                                   history=env_cfg.history, seed=settings.seed, max_return=target,
-                                  success_mode=success_mode(env_cfg), success_by=success_by(env_cfg),
+                                  success_mode=success_mode(env_cfg), success_by=success_by(env_cfg, result.success_key),
                                   **result.summary())
         return self.finish(run_dir, settings, summary, result.fault_log)
 

@@ -103,7 +103,8 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
             steps = train_sb3(cfg, model, run_dir, tracker)
         wall = time.perf_counter() - t0 + (record["tracker"]["wall"] if record else 0.0)
         # Reload from disk, so the reported numbers are those of the saved files.
-        final = tracker.evaluator.run(load_policy_files(run_dir)).summary()
+        rollouts = tracker.evaluator.run(load_policy_files(run_dir))
+        final = rollouts.summary()
     finally:
         tracker.close()
     summary = {
@@ -124,7 +125,7 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
         "train_episodes": tracker.episodes,
         "train_success_rate_last100": tracker.success_rate(),
         "success_mode": success_mode(cfg.env),
-        "success_by": success_by(cfg.env),
+        "success_by": success_by(cfg.env, rollouts.success_key),
         "numerical_faults": tracker.faults,
         "resumed_from": record["steps"] if record else None,
         "eval_seed": cfg.seed + EVAL_SEED_OFFSET,

@@ -12,9 +12,9 @@ from typing import Any
 import numpy as np
 from rich.progress import Progress
 
-from motorlab.envs import EnvConfig, early_end_label, make_env
+from motorlab.envs import EnvConfig, early_end_label, make_env, max_return
 from motorlab.errors import MotorlabError
-from motorlab.evaluation.rollouts import evaluate, success_by, trained_env_settings
+from motorlab.evaluation.rollouts import evaluate, step_success, trained_env_settings
 from motorlab.evaluation.zeroshot import run_label
 from motorlab.policies import BUILTIN_POLICIES, load_policy, unknown_policy_message
 from motorlab.robustness.grid import Axis
@@ -160,7 +160,13 @@ def subjects(policies: list[str], env: dict[str, Any]) -> list[Subject]:
 def success_measure(env_id: str, cfg: EnvConfig) -> str:
     """What "holds" is judged on: the env's success flag or maximum return where it has one, else
     not falling where early ends are falls, else the return itself."""
-    if success_by(cfg) is not None:  # the env's flag, or its maximum return
+    env = make_env(cfg, shaped=False)
+    try:
+        env.reset(seed=0)
+        flagged = step_success(env.step(env.action_space.sample())[4]) is not None
+    finally:
+        env.close()
+    if flagged or max_return(env_id) is not None:
         return "success"
     return "no fall" if early_end_label(env_id) == "falls" else "return"
 
