@@ -53,8 +53,21 @@ def _portable(e: BaseException) -> Exception:
     return RuntimeError(f"{type(e).__name__}: {e}\n(in the env process)\n{traceback.format_exc()}")
 
 
+# Children come from a fork server: one clean single-threaded process (safe next to torch threads,
+# as "spawn" is), started at the first ProcessEnv with the simulator already imported, which forks
+# each child in milliseconds. With "spawn" every child imported Python, motorlab and the simulator
+# again: ~1.5 s per env, several per evaluation of Upkie. Modules that fail to import are skipped.
+PRELOAD = ["motorlab.envs", "motorlab.envs.upkie", "pybullet", "upkie.envs"]
+
+
+def _context() -> mp.context.BaseContext:
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(PRELOAD)
+    return ctx
+
+
 class ProcessEnv(gym.Env):
-    """`factory()` built and stepped in a child process ("spawn": safe next to torch threads).
+    """`factory()` built and stepped in a child process (forked by a fork server: see PRELOAD).
 
     Args:
         factory: a picklable callable returning the env (e.g. a functools.partial of a
@@ -62,7 +75,7 @@ class ProcessEnv(gym.Env):
     """
 
     def __init__(self, factory: Callable[[], gym.Env]):
-        ctx = mp.get_context("spawn")
+        ctx = _context()
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_serve, args=(child, factory), daemon=True)
         self._proc.start()
