@@ -35,9 +35,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from sar_study import steady_rate  # env steps/s after the warm-up, from metrics.csv (benchmarks/ is on sys.path)
+
 CHAIN_STEPS = {"play + SAR-RL": 1_500_000 + 2_500_000, "RL-E2E": 4_000_000}
-TERRAINS = {"rough": "myoLegRoughTerrainWalk-v0", "hilly": "myoLegHillyTerrainWalk-v0",
-            "stairs": "myoLegStairTerrainWalk-v0"}
 WARM_UP = 1000  # SAC's learning_starts here: env steps before the first update
 
 CANDIDATES = {
@@ -100,16 +100,6 @@ def _train(settings: dict, out: str) -> None:
     train(resolve(settings), Path(out))
 
 
-def steady_rate(run_dir: Path) -> float:
-    """Env steps per second once learning runs, from the episode rows of metrics.csv."""
-    from motorlab.runs import read_metrics
-
-    rows = [r for r in read_metrics(run_dir) if r["timesteps"] >= WARM_UP and r["episode_return"] == r["episode_return"]]
-    if len(rows) < 2:
-        raise SystemExit(f"{run_dir}: too few episodes after warm-up; raise --chain-steps")
-    return (rows[-1]["timesteps"] - rows[0]["timesteps"]) / (rows[-1]["wall_seconds"] - rows[0]["wall_seconds"])
-
-
 def both_chains(name: str, settings: dict, steps: int, terrain: str, tmp: Path) -> dict:
     """Play and RL-E2E trained at once with `settings`, as the study's two chains."""
     common = {**settings, "timesteps": steps, "eval_every": 10**9, "solve_episodes": 1, "progress": False,
@@ -125,7 +115,7 @@ def both_chains(name: str, settings: dict, steps: int, terrain: str, tmp: Path) 
         p.join()
         if p.exitcode != 0:
             raise SystemExit(f"{name} ({chain}) failed with exit code {p.exitcode}")
-    rates = {chain: steady_rate(tmp / name / chain) for chain in envs}
+    rates = {chain: steady_rate(tmp / name / chain, WARM_UP) for chain in envs}
     hours = max(CHAIN_STEPS[c] / rates[c] for c in envs) / 3600
     print(f"{name}: {', '.join(f'{c} {r:.0f}' for c, r in rates.items())} env steps/s -> {hours:.1f} h",
           file=sys.stderr)
@@ -172,22 +162,32 @@ def project(study: dict) -> float:
     return (max(chain_a, chain_b) + rest) / 3600
 
 
+def terrains() -> dict[str, str]:
+    """The terrain input's choices in the sar-legs recipe: name -> env id."""
+    import tomllib
+
+    from motorlab.recipes import find_recipe
+
+    return tomllib.loads(find_recipe("sar-legs").read_text())["inputs"]["terrain"]["choices"]
+
+
 def main() -> None:
+    terrain_ids = terrains()
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--chain-steps", type=int, default=6000, help="env steps per chain per setting (0: skip)")
     parser.add_argument("--only", nargs="*", default=None, help="candidate settings to measure (default: all)")
     parser.add_argument("--scale", type=int, default=10, help="run sar-legs with budgets / SCALE (0: skip)")
-    parser.add_argument("--terrain", choices=sorted(TERRAINS), default="rough")
+    parser.add_argument("--terrain", choices=sorted(terrain_ids), default="rough")
     parser.add_argument("--keep", type=Path, default=None, help="keep the runs in this folder")
     args = parser.parse_args()
-    out: dict = {"benchmark": "sar_legs", "terrain": TERRAINS[args.terrain], "chain_env_steps": CHAIN_STEPS}
+    out: dict = {"benchmark": "sar_legs", "terrain": terrain_ids[args.terrain], "chain_env_steps": CHAIN_STEPS}
     out["machine"] = machine_speed()
     print(f"machine: {out['machine']['speed_vs_noted']} of the noted speeds", file=sys.stderr)
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = args.keep or Path(tmp_name)
         if args.chain_steps:
             out["chain_steps_per_setting"] = args.chain_steps
-            out["settings"] = {name: both_chains(name, settings, args.chain_steps, TERRAINS[args.terrain], tmp)
+            out["settings"] = {name: both_chains(name, settings, args.chain_steps, terrain_ids[args.terrain], tmp)
                                for name, settings in CANDIDATES.items() if args.only is None or name in args.only}
         if args.scale:
             study = scaled_study(args.scale, args.terrain, tmp / "study")

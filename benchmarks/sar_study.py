@@ -42,7 +42,7 @@ def steady_rate(run_dir: Path, warm_up: int) -> float:
 
     rows = [r for r in read_metrics(run_dir) if r["timesteps"] >= warm_up and r["episode_return"] == r["episode_return"]]
     if len(rows) < 2:
-        raise SystemExit(f"{run_dir}: too few episodes after warm-up; raise --steps")
+        raise SystemExit(f"{run_dir}: too few episodes after warm-up; give it more env steps (--steps, --chain-steps)")
     return (rows[-1]["timesteps"] - rows[0]["timesteps"]) / (rows[-1]["wall_seconds"] - rows[0]["wall_seconds"])
 
 

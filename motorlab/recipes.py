@@ -259,10 +259,12 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
         raw = _RecipeFile.model_validate(data)
     except ValidationError as e:
         raise MotorlabError(_explain(e, source, set(_RecipeFile.model_fields))) from None
-    for name, spec in raw.inputs.items():  # inputs no --set gave: their defaults
-        if isinstance(spec, RecipeInput) and spec.default is not None:
-            data = _fill(data, name, input_value(name, spec, spec.default, source))
-    raw = _RecipeFile.model_validate(data)
+    defaults = {name: input_value(name, spec, spec.default, source) for name, spec in raw.inputs.items()
+                if isinstance(spec, RecipeInput) and spec.default is not None}
+    if defaults:  # the inputs no --set gave: their defaults fill the values read again
+        for name, value in defaults.items():
+            data = _fill(data, name, value)
+        raw = _RecipeFile.model_validate(data)
     _missing_inputs({"defaults": raw.defaults, "steps": raw.steps}, raw.inputs, source)
     import_modules(raw.imports, f"{source}: imports")  # before the steps are checked: they register the envs
     all_fields = set().union(*(fields_of(k) for k in KINDS.values()))

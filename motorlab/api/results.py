@@ -29,7 +29,6 @@ from motorlab.rl.steps import TRAIN
 from motorlab.runs import CONFIG, SUMMARY, read_json
 
 if TYPE_CHECKING:
-
     from motorlab.policies import Policy
 
 # The classes folders of a kind open as (the train kind's: motorlab.api.policies.Run, which adds itself)

@@ -53,8 +53,8 @@ def run(kind: StepKind, checked: Settings, out: str | Path | None, progress: boo
         **run_args: Any) -> Result:
     """Run a `kind` step with `checked` settings into `out` and open its folder."""
     trackers.enable(track)
-    summary = kind.run(checked, Path(out) if out is not None else None, console=console(),
-                              progress=progress, **run_args)
+    summary = kind.run(checked, Path(out) if out is not None else None, console=console(), progress=progress,
+                       **run_args)
     return load(summary.run_dir)
 
 

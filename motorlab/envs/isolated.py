@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -53,29 +53,23 @@ def _portable(e: BaseException) -> Exception:
     return RuntimeError(f"{type(e).__name__}: {e}\n(in the env process)\n{traceback.format_exc()}")
 
 
-# Children come from a fork server: one clean single-threaded process (safe next to torch threads,
-# as "spawn" is), started at the first ProcessEnv with the simulator already imported, which forks
-# each child in milliseconds. With "spawn" every child imported Python, motorlab and the simulator
-# again: ~1.5 s per env, several per evaluation of Upkie. Modules that fail to import are skipped.
-PRELOAD = ["motorlab.envs", "motorlab.envs.upkie", "pybullet", "upkie.envs"]
-
-
-def _context() -> mp.context.BaseContext:
-    ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(PRELOAD)
-    return ctx
-
-
 class ProcessEnv(gym.Env):
-    """`factory()` built and stepped in a child process (forked by a fork server: see PRELOAD).
+    """`factory()` built and stepped in a child process, forked by a fork server: one clean
+    single-threaded process (safe next to torch threads, as "spawn" is) started at the first
+    ProcessEnv with the simulator already imported, which forks each child in milliseconds. With
+    "spawn" every child imported Python, motorlab and the simulator again (~1.5 s per Upkie env).
 
     Args:
         factory: a picklable callable returning the env (e.g. a functools.partial of a
             module-level function).
+        preload: modules the fork server imports once (the simulator's); those that fail to
+            import are skipped. The first ProcessEnv of a process starts the server, so its
+            list is the one that counts.
     """
 
-    def __init__(self, factory: Callable[[], gym.Env]):
-        ctx = _context()
+    def __init__(self, factory: Callable[[], gym.Env], preload: Sequence[str] = ()):
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(list(preload))
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_serve, args=(child, factory), daemon=True)
         self._proc.start()

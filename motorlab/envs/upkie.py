@@ -175,6 +175,11 @@ def build(env_id: str, render_mode: str | None, kwargs: dict[str, Any]) -> gym.E
     return env
 
 
+# What the env processes' fork server imports once: each Upkie env beyond a process's first then
+# starts in ~0.5 s instead of ~1.3 s (an evaluation builds one per episode of its batch).
+PRELOAD = ("motorlab.envs", "motorlab.envs.upkie", "pybullet", "upkie.envs")
+
+
 def make_upkie(env_id: str, render_mode: str | None = None, **kwargs: Any) -> gym.Env:
     """`build` in this process if no PyBullet env lives here yet, else in a child process."""
     register_upkie()
@@ -183,4 +188,4 @@ def make_upkie(env_id: str, render_mode: str | None = None, **kwargs: Any) -> gy
     if not pybullet.isConnected(0):  # PyBullet reuses client 0 once it is disconnected
         return build(env_id, render_mode, kwargs)
 
-    return ProcessEnv(functools.partial(build, env_id, render_mode, kwargs))
+    return ProcessEnv(functools.partial(build, env_id, render_mode, kwargs), preload=PRELOAD)

@@ -22,9 +22,10 @@ from motorlab.stats import aggregate, trial_scores
 GRID_POINTS = 100
 
 
-def _curve(run_dir: Path, column: str, grid: np.ndarray, window: int = 100) -> np.ndarray:
-    """Running mean (last `window` episodes) of `column` at each grid step; NaN before the first episode."""
-    rows = [r for r in read_metrics(run_dir) if np.isfinite(r.get(column, np.nan))]
+def _curve(metrics: list[dict], column: str, grid: np.ndarray, window: int = 100) -> np.ndarray:
+    """Running mean (last `window` episodes) of `column` of a run's metrics.csv rows at each grid
+    step; NaN before the first episode."""
+    rows = [r for r in metrics if np.isfinite(r.get(column, np.nan))]
     if not rows:
         return np.full(len(grid), np.nan)
     steps = np.array([r["timesteps"] for r in rows])
@@ -62,12 +63,12 @@ def compare_curves(groups: dict[str, list[Path]], path: Path, title: str = "Lear
     """
     if not groups or any(not runs for runs in groups.values()):
         raise MotorlabError("each comparison group needs at least one run folder.")
-    runs = {g: [require_run_dir(Path(r)) for r in rs] for g, rs in groups.items()}
-    last = max(max(r["timesteps"] for r in read_metrics(run)) for rs in runs.values() for run in rs)
+    # each run's metrics.csv rows, read once
+    runs = {g: [read_metrics(require_run_dir(Path(r))) for r in rs] for g, rs in groups.items()}
+    last = max(max(r["timesteps"] for r in run) for rs in runs.values() for run in rs)
     grid = np.linspace(0, last, GRID_POINTS)
     # training success only where the envs judged episodes (their success flag): else no panel, no number
-    judged = any(np.isfinite(r.get("episode_success", np.nan)) for rs in runs.values() for run in rs
-                 for r in read_metrics(run))
+    judged = any(np.isfinite(r.get("episode_success", np.nan)) for rs in runs.values() for run in rs for r in run)
     result = {}
     with plt.rc_context(STYLE):
         fig, axes = plt.subplots(1, 2 if judged else 1, figsize=(11 if judged else 6, 4), squeeze=False)
