@@ -27,6 +27,7 @@ from motorlab.envs.disturbances import (
     span_text,
 )
 from motorlab.envs.rewards import resolve_reward
+from motorlab.envs.spaces import is_dict, obs_layout
 from motorlab.envs.upkie import is_upkie, make_upkie, register_upkie
 from motorlab.envs.wrappers import DelayOn, LowPassDelay, NumericalGuard, RewardShaping, delay_alpha, env_dt_of
 from motorlab.errors import MotorlabError, did_you_mean
@@ -258,13 +259,18 @@ def check_user_env(env: gym.Env, env_id: str) -> None:
     _checked.add(env_id)
 
 
-def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None, **kwargs: Any) -> gym.Env:
+def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None, dict_obs: bool = False,
+             **kwargs: Any) -> gym.Env:
     """Build the env described by `cfg`.
 
     Args:
         cfg: env id and wrappers.
         shaped: apply reward shaping (evaluation passes False to report the task's return).
         render_mode: passed to `gymnasium.make` (e.g. "rgb_array" for videos).
+        dict_obs: keep a Dict observation space as it is (SB3 training: MultiInputPolicy, HER),
+            unless a wrapper that reads observations as one array is asked for (a delay or latency
+            on observations, observation noise, history). Otherwise a Dict observation is flattened
+            as `gymnasium.spaces.flatten` does (motorlab.envs.spaces: the layout of its keys).
 
     Raises:
         MotorlabError: unknown id, bad delay, unknown reward.
@@ -289,6 +295,9 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
     if cfg.fatigue != "off":
         env = muscle_fatigue(env, cfg.fatigue)
     env = NumericalGuard(env)
+    if is_dict(env.observation_space) and not (dict_obs and not reads_observations(cfg)):
+        obs_layout(env.observation_space)  # Box entries only: one line naming the key otherwise
+        env = gym.wrappers.FlattenObservation(env)
     if shaped and cfg.reward and cfg.reward != "task":
         env = RewardShaping(env, resolve_reward(cfg.reward), name=cfg.reward)
     if cfg.push_body:
@@ -307,6 +316,14 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
         env = gym.wrappers.FrameStackObservation(env, cfg.history, padding_type="reset")
         env = gym.wrappers.FlattenObservation(env)
     return env
+
+
+def reads_observations(cfg: EnvConfig) -> bool:
+    """Whether a wrapper `cfg` asks for works on the observation as one array (a Dict one is then
+    flattened first, even for training)."""
+    on_obs = ("observation", "both")
+    return bool((cfg.delay and cfg.delay_on in on_obs) or (cfg.latency and cfg.latency_on in on_obs)
+                or cfg.obs_noise is not None or cfg.history > 1)
 
 
 def describe_env(env: EnvConfig) -> str:

@@ -167,7 +167,8 @@ class NumericalGuard(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
         fault = None
-        if not np.all(np.isfinite(obs)):
+        arrays = obs.values() if isinstance(obs, dict) else (obs,)  # a Dict observation: every key
+        if not all(np.all(np.isfinite(a)) for a in arrays):
             fault = "non-finite observation"
         elif not np.isfinite(reward):
             fault = "non-finite reward"
@@ -179,5 +180,10 @@ class NumericalGuard(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if fault is None:
             return obs, reward, terminated, truncated, info
         info[FAULT_KEY] = fault
-        obs = np.where(np.isfinite(obs), obs, 0.0).astype(np.asarray(obs).dtype)
+        obs = ({k: _finite(v) for k, v in obs.items()} if isinstance(obs, dict) else _finite(obs))
         return obs, 0.0, True, truncated, info
+
+
+def _finite(a: Any) -> np.ndarray:
+    """`a` with its non-finite entries zeroed, in its own dtype."""
+    return np.where(np.isfinite(a), a, 0.0).astype(np.asarray(a).dtype)

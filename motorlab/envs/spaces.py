@@ -1,0 +1,152 @@
+"""Observation and action spaces beyond one Box: Dict observations (goal-conditioned tasks) and
+discrete actions, in one convention every part of motorlab shares.
+
+- **Dict observations** are flattened the way Gymnasium flattens them
+  (`gymnasium.spaces.flatten`: keys in the Dict's order, each key's array raveled). Everything
+  that only needs numbers (evaluation, robustness, dynamics, MPC, synergies, ONNX) sees that flat
+  vector; `obs_layout` says which slice holds which key, and run folders record it. Only SB3
+  training keeps the Dict (MultiInputPolicy; hindsight relabelling needs the goal keys), and a
+  policy trained on a Dict turns a flat batch back into one (`unflatten_batch`) before it acts.
+- **Spaces in JSON** (`encode_space` / `decode_space`): Box bounds as strings (so +-inf survive),
+  Discrete, MultiDiscrete, MultiBinary and Dict of those; a policy.json or model.json names its spaces.
+- **Who can use which space** (`require_actions`): one line naming the space and what fits it,
+  before any work starts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from motorlab.errors import MotorlabError
+
+GOAL_KEYS = ("observation", "achieved_goal", "desired_goal")
+
+
+@dataclass(frozen=True)
+class KeySlice:
+    """Where one key of a Dict observation lies in the flat vector: [start, stop), with its shape."""
+
+    key: str
+    start: int
+    stop: int
+    shape: tuple[int, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"key": self.key, "start": self.start, "stop": self.stop, "shape": list(self.shape)}
+
+
+def is_dict(space: gym.Space) -> bool:
+    return isinstance(space, gym.spaces.Dict)
+
+
+def obs_layout(space: gym.Space) -> list[KeySlice]:
+    """The slices of a Dict observation's keys in its flat vector (empty for any other space).
+
+    Raises:
+        MotorlabError: a key that is not a Box (nested Dicts, images of other types, text).
+    """
+    if not is_dict(space):
+        return []
+    slices, start = [], 0
+    for key, sub in space.spaces.items():
+        if not isinstance(sub, gym.spaces.Box):
+            raise MotorlabError(f"observation key {key!r} is a {type(sub).__name__}; motorlab handles Dict "
+                                "observations of Box entries (flatten the others in a wrapper of your env).")
+        size = int(np.prod(sub.shape))
+        slices.append(KeySlice(str(key), start, start + size, tuple(int(d) for d in sub.shape)))
+        start += size
+    return slices
+
+
+def layout_json(space: gym.Space) -> list[dict[str, Any]] | None:
+    """`obs_layout` as JSON for run folders (None for a plain Box)."""
+    return [s.to_dict() for s in obs_layout(space)] or None
+
+
+def unflatten_batch(obs: np.ndarray, layout: list[KeySlice]) -> dict[str, np.ndarray]:
+    """A batch of flat observations (n, size) as the Dict the network was trained on."""
+    return {s.key: obs[:, s.start:s.stop].reshape(len(obs), *s.shape) for s in layout}
+
+
+def flatten_batch(obs: dict[str, np.ndarray], layout: list[KeySlice]) -> np.ndarray:
+    """A batch of Dict observations as flat vectors (n, size), in `layout`'s order."""
+    n = len(next(iter(obs.values())))
+    return np.concatenate([np.asarray(obs[s.key]).reshape(n, -1) for s in layout], axis=1)
+
+
+def is_goal_conditioned(env: gym.Env) -> bool:
+    """A goal-conditioned task in Gymnasium-Robotics' sense, which hindsight relabelling (HER) needs:
+    a Dict observation with achieved_goal and desired_goal, and `compute_reward` on the env."""
+    space = env.observation_space
+    return (is_dict(space) and {"achieved_goal", "desired_goal"} <= set(space.spaces)
+            and callable(getattr(env.unwrapped, "compute_reward", None)))
+
+
+def describe_space(space: gym.Space) -> str:
+    """A space in a few words for messages: "Discrete(3)", "Box(6,)", "Dict(achieved_goal, ...)"."""
+    if isinstance(space, gym.spaces.Box):
+        return f"Box{tuple(space.shape)}"
+    if isinstance(space, gym.spaces.Discrete):
+        return f"Discrete({int(space.n)})"
+    if is_dict(space):
+        return f"Dict({', '.join(map(str, space.spaces))})"
+    return str(space)
+
+
+def require_actions(space: gym.Space, user: str, fits: str = "continuous (Box) actions",
+                    instead: str = "") -> None:
+    """Refuse, in one line, a component that needs Box actions on an env whose actions are not.
+
+    Args:
+        user: what refuses, e.g. "SAC", "MPC", "the PID controller".
+        fits: what it needs.
+        instead: what does fit this env, e.g. "use --algo ppo".
+    """
+    if isinstance(space, gym.spaces.Box):
+        return
+    raise MotorlabError(f"{user} needs {fits}, and this env's actions are {describe_space(space)}"
+                        + (f"; {instead}" if instead else "") + ".")
+
+
+# ---- spaces as JSON ------------------------------------------------------------------------
+
+def encode_space(space: gym.Space) -> dict[str, Any]:
+    """A space as JSON (no pickle): its type and what rebuilds it."""
+    if isinstance(space, gym.spaces.Box):
+        # bounds as strings so that +-inf survive JSON ("inf" is not JSON)
+        return {"type": "Box", "shape": list(space.shape), "dtype": str(space.dtype),
+                "low": [repr(float(v)) for v in space.low.ravel()],
+                "high": [repr(float(v)) for v in space.high.ravel()]}
+    if isinstance(space, gym.spaces.Discrete):
+        return {"type": "Discrete", "n": int(space.n), "start": int(space.start)}
+    if isinstance(space, gym.spaces.MultiDiscrete):
+        return {"type": "MultiDiscrete", "nvec": space.nvec.tolist()}
+    if isinstance(space, gym.spaces.MultiBinary):
+        return {"type": "MultiBinary", "n": np.asarray(space.n).tolist()}
+    if is_dict(space):
+        return {"type": "Dict", "spaces": {str(k): encode_space(v) for k, v in space.spaces.items()}}
+    raise MotorlabError(f"{type(space).__name__} spaces cannot be saved by motorlab; "
+                        "use Box, Discrete, MultiDiscrete, MultiBinary or a Dict of them.")
+
+
+def decode_space(d: dict[str, Any]) -> gym.Space:
+    """The space `encode_space` wrote (policy.json files older than Dict support hold a bare Box)."""
+    kind = d.get("type", "Box")
+    if kind == "Box":
+        shape, dtype = tuple(d["shape"]), np.dtype(d["dtype"])
+        low = np.array([float(v) for v in d["low"]], dtype=dtype).reshape(shape)
+        high = np.array([float(v) for v in d["high"]], dtype=dtype).reshape(shape)
+        return gym.spaces.Box(low=low, high=high, dtype=dtype)
+    if kind == "Discrete":
+        return gym.spaces.Discrete(int(d["n"]), start=int(d.get("start", 0)))
+    if kind == "MultiDiscrete":
+        return gym.spaces.MultiDiscrete(d["nvec"])
+    if kind == "MultiBinary":
+        return gym.spaces.MultiBinary(d["n"])
+    if kind == "Dict":
+        return gym.spaces.Dict({k: decode_space(v) for k, v in d["spaces"].items()})
+    raise ValueError(f"unknown space type {kind!r}")
