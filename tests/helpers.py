@@ -246,3 +246,16 @@ def scaled_recipe(name: str, folder: Path) -> Path:
     path = Path(folder) / f"{name}.toml"
     path.write_text(text)
     return path
+
+
+def snapshot(*roots: Path) -> dict[str, str]:
+    """Every file under `roots` with the SHA-256 of its bytes: take one before a mistake and one
+    after, and assert they are equal (no earlier file changed, none appeared or went away)."""
+    import hashlib
+
+    files = {}
+    for root in map(Path, roots):
+        paths = [root] if root.is_file() else sorted(p for p in root.rglob("*") if p.is_file())
+        for p in paths:
+            files[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
+    return files
