@@ -44,7 +44,7 @@ from motorlab.report.steps import COMPARE, VIDEO, CompareSettings  # noqa: E402
 from motorlab.rl.config import TrainConfig  # noqa: E402
 from motorlab.rl.steps import TRAIN  # noqa: E402
 from motorlab.robustness.steps import ROBUSTNESS, RobustnessSettings  # noqa: E402
-from motorlab.runs import is_complete, read_text_file  # noqa: E402
+from motorlab.runs import folder_mode, is_complete, read_text_file, run_folders  # noqa: E402
 from motorlab.settings import Settings, help_text  # noqa: E402
 from motorlab.stepkind import StepKind  # noqa: E402
 from motorlab.synergy.steps import COLLECT, FIT, VAF  # noqa: E402
@@ -140,14 +140,18 @@ def kind_command(kind: StepKind, argument: str, epilog: str = "", flags: dict[st
                                             annotation=annotation))
         params.append(inspect.Parameter("out", inspect.Parameter.KEYWORD_ONLY, default=None, annotation=Annotated[
             Optional[Path], typer.Option("--out", help=out_help)]))
+        params.append(inspect.Parameter("overwrite", inspect.Parameter.KEYWORD_ONLY, default=False,
+                                        annotation=Overwrite))
         if track:
             params.append(inspect.Parameter("track", inspect.Parameter.KEYWORD_ONLY, default=None, annotation=Track))
 
         def run_command(**given: Any) -> None:
-            out, tracked = given.pop("out"), given.pop("track", None)
+            out, tracked, overwrite = given.pop("out"), given.pop("track", None), given.pop("overwrite")
             settings = kind.make(**{k: convert[k](v) for k, v in given.items() if v is not None})
             trackers.enable(tracked)
-            report(kind.run(settings, out), settings)
+            with run_folders("overwrite" if overwrite else "new"):
+                summary = kind.run(settings, out)
+            report(summary, settings)
 
         run_command.__signature__ = inspect.Signature(params)
         run_command.__annotations__ = {p.name: p.annotation for p in params}
@@ -181,6 +185,10 @@ def _cli_type(annotation: Any, flag: str) -> tuple[type, Any]:
 
 
 Out = Annotated[Optional[Path], typer.Option("--out", help="Run folder to write (default: runs/<step>-<timestamp>).")]
+Overwrite = Annotated[bool, typer.Option(
+    "--overwrite", help="Replace the finished run in --out, whole (TensorBoard events too). Without it, a folder "
+                        "holding a finished run is refused. The old run is deleted only once the new one finishes; "
+                        "if the new one fails or is interrupted, the old one is put back.")]
 Seed = Annotated[Optional[int], typer.Option("--seed", min=0, help="Random seed (default 0).")]
 Track = Annotated[Optional[list[str]], typer.Option(
     "--track", help="Also log the run, live, to an experiment tracker (repeatable): mlflow (a SQLite store: "
@@ -236,6 +244,24 @@ def disturbance_options(fn):
     return command
 
 
+def overwrite_option(fn):
+    """Give a hand-written command --overwrite (see `Overwrite`): it runs inside
+    `run_folders("overwrite")`, else `run_folders("new")`, which refuses to write into a finished run."""
+    signature = inspect.signature(fn)
+    hints = get_type_hints(fn, include_extras=True)
+    params = [p.replace(annotation=hints.get(p.name, p.annotation)) for p in signature.parameters.values()]
+    params.append(inspect.Parameter("overwrite", inspect.Parameter.KEYWORD_ONLY, default=False, annotation=Overwrite))
+
+    @functools.wraps(fn)
+    def command(**given: Any):
+        with run_folders("overwrite" if given.pop("overwrite") else "new"):
+            return fn(**given)
+
+    command.__signature__ = signature.replace(parameters=params)
+    command.__annotations__ = {p.name: p.annotation for p in params}
+    return command
+
+
 def _parse_sets(items: list[str], flag: str = "--set") -> dict:
     params = {}
     for item in items:
@@ -281,6 +307,7 @@ T = TrainConfig
                        "--history 10 --delay 0.2\n\n"
                        "  motorlab train Upkie-PyBullet-Pendulum --n-envs 2 --timesteps 150000 "
                        "--env-arg 'init_rand={\"pitch\": 0.1}'")
+@overwrite_option
 @disturbance_options
 def train(
     env_id: Annotated[Optional[str], typer.Argument(
@@ -366,6 +393,8 @@ def train(
 def _resume_run(run_dir: Path, settings: dict, config: Path | None, out: Path | None,
                 track: list[str] | None = None) -> None:
     given = [k for k, v in settings.items() if k not in ("progress", "env") or (k == "env" and v)]
+    if folder_mode() == "overwrite":
+        raise MotorlabError(f"--resume continues {run_dir} and --overwrite replaces it; give one of them.")
     if given or config is not None or out is not None:
         raise MotorlabError(f"--resume continues {run_dir} with the settings in its config.toml; "
                             "drop the other settings (and --out, --config).")
@@ -397,6 +426,7 @@ def _merge_config(path: Path, flags: dict) -> dict:
 @command(EVALUATE, epilog="Examples:\n\n  motorlab evaluate runs/ppo --delay 0.2 --episodes 20\n\n"
                           "  motorlab evaluate pid --env InvertedPendulum-v5\n\n"
                           "  motorlab evaluate 'pid:kp=[1,20,0,0],kd=[1,3,0,0]' --env InvertedPendulum-v5")
+@overwrite_option
 @disturbance_options
 def evaluate(
     policy: Annotated[str, arg(EvaluateSettings, "policy")],
@@ -433,6 +463,7 @@ def evaluate(
 
 @command(ZEROSHOT, epilog="Example:\n\n  motorlab zeroshot runs/sar-rl runs/rl-e2e --envs myoHandReorientID-v0 "
                           "myoHandReorientOOD-v0 --episodes 500")
+@overwrite_option
 def zeroshot(
     run_dirs: Annotated[list[Path], arg(ZeroshotSettings, "runs")],
     envs: Annotated[list[str], opt(ZeroshotSettings, "--envs")],
@@ -460,6 +491,7 @@ def zeroshot(
                             "  motorlab robustness runs/ppo --vary obs-noise=0:0.05:6 --vary latency=0:4:5\n\n"
                             "  motorlab robustness pid runs/ppo --vary push-force=0:40:5 --push-body pole "
                             "--push-direction x")
+@overwrite_option
 @disturbance_options
 def robustness(
     policies: Annotated[list[str], arg(RobustnessSettings, "policies")],
@@ -500,6 +532,7 @@ def video(s, settings) -> None:
 
 @command(COMPARE, epilog="Example:\n\n  motorlab compare --group SAR-RL=runs/sar-s0,runs/sar-s1 "
                          "--group RL-E2E=runs/e2e-s0,runs/e2e-s1")
+@overwrite_option
 def compare(
     group: Annotated[list[str], typer.Option("--group", help="LABEL=RUN_DIR[,RUN_DIR...]: one setting, its seeds.")],
     title: Annotated[Optional[str], opt(CompareSettings, "--title")] = None,
@@ -677,7 +710,10 @@ def plot(run_dir: Annotated[Path, typer.Argument(help="A run folder from train o
 
 
 @app.command(epilog="Examples:\n\n  motorlab run pendulum --out runs/pendulum\n\n  motorlab run my_study.toml\n\n"
-                    "Re-running into the same --out keeps steps that already finished with the same settings.")
+                    "Re-running an interrupted study into the same --out keeps the steps that finished with the "
+                    "same settings (a train step continues from its checkpoint); a finished one needs --resume "
+                    "(keep its finished steps, redo the rest) or --overwrite (replace it).")
+@overwrite_option
 def run(
     recipe: Annotated[str, typer.Argument(help="A bundled recipe name (pendulum) or a path to a TOML recipe.")],
     out: Out = None,
@@ -689,7 +725,11 @@ def run(
     parallel_steps: Annotated[Optional[int], typer.Option(
         help="Train steps that need nothing from each other (e.g. SAR-RL's chain and RL-E2E) run at once, "
              "each its own process, at most this many (default: the recipe's parallel_steps, else 1).")] = None,
-    check: Annotated[bool, typer.Option("--check", help="Only validate the recipe and list its steps; run nothing.")] = False,
+    check: Annotated[bool, typer.Option("--check", help="Only validate the recipe and list its steps; run nothing. "
+                                                       "Validating imports the recipe's `imports`, env modules and "
+                                                       "reward files (it says which first).")] = False,
+    resume: Annotated[bool, typer.Option("--resume", help="Run again into a finished study's --out: steps that "
+                                                         "finished with the same settings are kept.")] = False,
     given: Annotated[Optional[list[str]], typer.Option(
         "--set", help="KEY=VALUE, repeatable: set a field of the recipe (VALUE as TOML reads it). KEY: FIELD (every "
                       "step that has it), STEP.FIELD (one step), or one of the recipe's [inputs] (--set sar=sar.npz).")
@@ -704,14 +744,17 @@ def run(
     """
     from motorlab.studies import Execution, run_study
 
-    study = load_recipe(recipe, _key_values(given or [], "--set"))
+    if resume and folder_mode() == "overwrite":
+        raise MotorlabError("--resume keeps the finished steps in --out and --overwrite replaces them; give one.")
+    study = load_recipe(recipe, _key_values(given or [], "--set"), announce=_announce_imports if check else None)
     if check:
         stdout.print(f"{study.source}: valid, {len(study.steps)} steps: "
                      + ", ".join(f"{st.name} ({st.kind.name})" for st in study.steps))
         return
     trackers.enable(track)
-    summary = run_study(study, out, console=stdout,
-                        execution=Execution(backend, address, max_parallel, parallel_steps))
+    with run_folders("resume" if resume else folder_mode()):
+        summary = run_study(study, out, console=stdout,
+                            execution=Execution(backend, address, max_parallel, parallel_steps))
     stdout.print(f"\n[bold]Results:[/bold] {summary['study_dir']}  (report.html, table.txt, summary.json, plots/*.png, "
                  "one folder per step)")
 
@@ -723,6 +766,7 @@ def run(
                     "  motorlab sweep pendulum --seeds 3 --grid ppo.timesteps=50000,100000   # a whole study per seed\n\n"
                     "  motorlab sweep \"train Reacher-v5 --algo sac\" --seeds 8 --backend ray --address 10.0.0.5:6379\n\n"
                     "Run the same command again (same --out) to resume: finished trials are kept.")
+@overwrite_option
 def sweep(
     target: Annotated[str, typer.Argument(
         help="A recipe (bundled name or .toml file: each trial runs the whole study) or a motorlab command line "
@@ -767,6 +811,7 @@ def sweep(
                     "# Ray Tune: OptunaSearch and ASHA\n\n"
                     "Run the same command again (same --out) to resume; several processes with the same --out "
                     "(or --storage) share one search.")
+@overwrite_option
 def tune(
     target: Annotated[str, typer.Argument(
         help="A motorlab command line in quotes (train ...) or a recipe; each trial adds --seed and --out.")],
@@ -829,6 +874,7 @@ def tune(
                     "  motorlab export sac.zip --vecnormalize vec_normalize.pkl --trust --env Hopper-v5 --out runs/sac\n\n"
                     "  motorlab export runs/ppo --onnx --out deploy/ppo     # policy.onnx for a robot "
                     "(docs/deployment.md)")
+@overwrite_option
 def export(
     source: Annotated[Path, typer.Argument(help="A run folder, or an SB3 zip written by model.save.")],
     out: Annotated[Path, typer.Option("--out", help="The folder to write.")],
@@ -900,6 +946,12 @@ def recipes(
         stdout.print(f"[bold]{name}[/bold]: {r.description} ({len(r.steps)} steps)")
 
 
+def _announce_imports(code: list[str]) -> None:
+    """What validating a recipe runs, said before it runs (docs: Safety)."""
+    if code:
+        stdout.print("validating imports (runs) this code: " + ", ".join(code), highlight=False, soft_wrap=True)
+
+
 def _field_line(model: type[Settings], name: str) -> str:
     info = model.model_fields.get(name)
     if info is None:
@@ -931,6 +983,9 @@ def main() -> None:
         _error(e.format_message(), e.exit_code)
     except MotorlabError as e:
         _error(str(e))
+    except PermissionError as e:  # a folder or file this user may not write (or read), wherever it was met
+        _error(f"permission denied: {e.filename or e}; check its permissions, or choose an --out folder you can "
+               "write to.")
     except KeyboardInterrupt:
         _interrupted()
     if code == 130:  # typer turns Ctrl-C into exit code 130

@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import re
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -244,12 +245,47 @@ def _without_refs(step_kind: StepKind, fields: dict[str, Any]) -> dict[str, Any]
     return out
 
 
-def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
+Announce = Callable[[list[str]], None]  # told what validating a recipe will import
+
+# A step's name is its run folder's name inside the study: a slug, never a path
+STEP_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+RESERVED_NAMES = ("plots", "logs")  # folders the study itself writes
+
+
+def check_step_name(name: str, where: str) -> None:
+    """A step name is a safe folder name: letters, digits, '-', '_' and '.', not a study folder's own."""
+    if not STEP_NAME.fullmatch(name) or name in RESERVED_NAMES or len(name) > 100:
+        why = (f"{name!r} is a folder the study writes itself" if name in RESERVED_NAMES
+               else f"{name!r} is not a plain folder name")
+        raise MotorlabError(f"{where}: step name {why}; name steps with letters, digits, '-', '_' and '.' "
+                            "(e.g. name = \"ppo-delay\"), not 'plots' or 'logs'.")
+
+
+def code_it_imports(data: dict[str, Any]) -> list[str]:
+    """The Python code validating a recipe runs (see docs/concepts.md, Safety): its `imports`, the
+    modules of env ids written MODULE:ID, and reward functions (a module's, or a .py file's)."""
+    steps = [data.get("defaults") or {}, *(s for s in data.get("steps") or [] if isinstance(s, dict))]
+    found = [str(m) for m in data.get("imports") or []]
+    for fields in steps:
+        env = fields.get("env")
+        if isinstance(env, str) and ":" in env:
+            found.append(env.split(":", 1)[0])
+        reward = fields.get("reward")
+        if isinstance(reward, str) and ":" in reward:
+            found.append(reward.rsplit(":", 1)[0])
+    return list(dict.fromkeys(found))
+
+
+def parse_recipe(text: str, source: str = "<recipe>", announce: Announce | None = None) -> Recipe:
     """Validate a recipe's text; every step is checked before any runs.
+
+    Args:
+        announce: called with the modules and files validating imports (its `imports`, env
+            modules, reward functions), before any is imported (`motorlab run --check` prints them).
 
     Raises:
         MotorlabError: TOML syntax, unknown or mistyped field (named with file and step),
-            reference to an unknown or later step.
+            reference to an unknown or later step, a step name that is not a plain folder name.
     """
     try:
         data = tomllib.loads(text)
@@ -266,6 +302,10 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
             data = _fill(data, name, value)
         raw = _RecipeFile.model_validate(data)
     _missing_inputs({"defaults": raw.defaults, "steps": raw.steps}, raw.inputs, source)
+    for i, given in enumerate(raw.steps):  # names first: they become folders
+        check_step_name(str(given.get("name", f"step{i + 1}")), f"{source}: steps[{i}]")
+    if announce is not None:
+        announce(code_it_imports({"imports": raw.imports, "defaults": raw.defaults, "steps": raw.steps}))
     import_modules(raw.imports, f"{source}: imports")  # before the steps are checked: they register the envs
     all_fields = set().union(*(fields_of(k) for k in KINDS.values()))
     unknown_defaults = [k for k in raw.defaults if k not in all_fields]
@@ -308,9 +348,9 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
                   steps=steps, findings=raw.findings)
 
 
-def load_recipe(name_or_path: str, given: dict[str, Any] | None = None) -> Recipe:
+def load_recipe(name_or_path: str, given: dict[str, Any] | None = None, announce: Announce | None = None) -> Recipe:
     """Load a bundled recipe by name, or a recipe file by path, with the fields and inputs
-    `given` on the command line (`--set KEY=VALUE`) set."""
+    `given` on the command line (`--set KEY=VALUE`) set (`announce`: see `parse_recipe`)."""
     path = find_recipe(name_or_path)
     try:
         text = path.read_text()
@@ -324,7 +364,7 @@ def load_recipe(name_or_path: str, given: dict[str, Any] | None = None) -> Recip
         except tomllib.TOMLDecodeError as e:
             raise MotorlabError(f"{path}: not valid TOML ({e}).") from None
         text = tomli_w.dumps(set_fields(data, given, str(path)))
-    return parse_recipe(text, str(path))
+    return parse_recipe(text, str(path), announce)
 
 
 def toml_value(text: Any) -> Any:

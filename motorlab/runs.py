@@ -1,23 +1,32 @@
-"""Run folders: one per step, written so that nothing is ever half-written.
+"""Run folders: one per step, written so that nothing is ever half-written, and never lost.
 
 A run folder holds `config.toml` (resolved settings), `summary.json` (headline
 numbers, flat keys), `metrics.csv`, `tensorboard/`, artifacts, `plots/`.
-`summary.json` is written last: a folder without it is an unfinished run.
+`summary.json` is written last: a folder without a summary.json that parses is an unfinished run.
+
+A folder that holds a finished run is never written into by accident: a new run there is
+refused unless the command runs under `run_folders("overwrite")` (--overwrite: the old run is
+moved aside, and deleted only once the new one has finished; if the new one fails or is
+interrupted, the old one comes back) or `run_folders("resume")` (--resume: the command
+continues what is there).
 """
 
 from __future__ import annotations
 
 import contextlib
 import csv
+import errno
 import io
 import json
 import math
 import os
+import shutil
 import tempfile
 import time
 import tomllib
+from contextvars import ContextVar
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import tomli_w
@@ -172,7 +181,12 @@ def write_summary(run_dir: Path, summary: dict[str, Any]) -> None:
 
 
 def is_complete(run_dir: Path) -> bool:
-    return (Path(run_dir) / SUMMARY).is_file()
+    """True when `run_dir` holds a finished run: a summary.json that parses as a JSON object (a
+    damaged one, e.g. cut short by a full disk, is an unfinished run)."""
+    try:
+        return isinstance(json.loads((Path(run_dir) / SUMMARY).read_bytes()), dict)
+    except (OSError, ValueError):
+        return False
 
 
 def run_path(out: Path | None, step: str) -> Path:
@@ -183,14 +197,158 @@ def run_path(out: Path | None, step: str) -> Path:
     return run_dir
 
 
+# ---- what a command may do to a folder that holds a finished run ---------------------------
+
+FolderMode = Literal["new", "resume", "overwrite"]
+_MODE: ContextVar[FolderMode] = ContextVar("motorlab_run_folder_mode", default="new")
+_REPLACED: ContextVar[list[tuple[Path, Path]] | None] = ContextVar("motorlab_replaced_runs", default=None)
+ASIDE = ".replaced-"  # a run --overwrite moved aside: <parent>/.<name>.replaced-<time>
+
+
+@contextlib.contextmanager
+def run_folders(mode: FolderMode = "new"):
+    """The run folders made inside the block (`prepare_run_dir`) treat a finished run in their way:
+    "new" refuses to write there, "resume" continues it (the command knows how), "overwrite"
+    replaces it whole. A replaced run is moved aside, not deleted, until the block ends: deleted
+    when the new run finished, moved back when it did not (an error, Ctrl-C). Old TensorBoard
+    events therefore never mix with new ones, and a failed --overwrite loses nothing."""
+    replaced: list[tuple[Path, Path]] = []
+    tokens = _MODE.set(mode), _REPLACED.set(replaced)
+    try:
+        yield
+    except BaseException:
+        for run_dir, aside in reversed(replaced):
+            _restore(run_dir, aside)
+        raise
+    else:
+        for run_dir, aside in replaced:
+            if is_complete(run_dir):
+                shutil.rmtree(aside, ignore_errors=True)
+            else:
+                _restore(run_dir, aside)
+    finally:
+        _MODE.reset(tokens[0])
+        _REPLACED.reset(tokens[1])
+
+
+def folder_mode() -> FolderMode:
+    """The mode of the `run_folders` block this code runs in ("new" outside any)."""
+    return _MODE.get()
+
+
+def replacements() -> list[tuple[Path, Path]] | None:
+    """The runs the current `run_folders` block moved aside (None outside any): code that hands work
+    to threads (which do not inherit the block) passes it on to `move_aside`."""
+    return _REPLACED.get()
+
+
+def move_aside(run_dir: Path, replaced: list[tuple[Path, Path]]) -> Path:
+    """Move a run out of the way of the run that replaces it, recorded in `replaced` (a
+    `run_folders` block's list: deleted when the block ends well, put back otherwise)."""
+    aside = run_dir.parent / f".{run_dir.name}{ASIDE}{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+    os.replace(run_dir, aside)  # one rename: the old run is whole, either here or there
+    replaced.append((run_dir, aside))
+    return aside
+
+
+def _restore(run_dir: Path, aside: Path) -> None:
+    """Put a replaced run back where it was (the run that was to replace it did not finish)."""
+    if aside.is_dir():
+        shutil.rmtree(run_dir, ignore_errors=True)
+        os.replace(aside, run_dir)
+
+
+def _asides(run_dir: Path) -> list[Path]:
+    """Runs an --overwrite of `run_dir` moved aside and left there: its process was killed (one
+    still running owns its aside, named with its process id)."""
+    if not run_dir.parent.is_dir():
+        return []
+    return [a for a in sorted(run_dir.parent.glob(f".{run_dir.name}{ASIDE}*")) if not _alive(a.name.rsplit("-", 1)[-1])]
+
+
+def _alive(pid: str) -> bool:
+    try:
+        os.kill(int(pid), 0)
+    except (ValueError, ProcessLookupError):
+        return False
+    except PermissionError:
+        return True  # another user's process
+    return True
+
+
+def recover(run_dir: Path) -> None:
+    """Settle an --overwrite of `run_dir` that was killed: the old run comes back where the new one
+    did not finish; where it did, the old one is deleted."""
+    for aside in _asides(Path(run_dir)):
+        if is_complete(run_dir):
+            shutil.rmtree(aside, ignore_errors=True)
+        else:
+            _restore(Path(run_dir), aside)
+
+
+def finished_run_message(run_dir: Path, resumable: bool = False) -> str:
+    """The one line refusing to write into a finished run."""
+    resume = "--resume to continue it, " if resumable else ""
+    return (f"{run_dir} holds a finished run (its summary.json); give another --out, or {resume}--overwrite "
+            "to replace it.")
+
+
+def refuse_finished(run_dir: Path, resumable: bool = False) -> None:
+    """Raise unless `run_dir` may be written: it holds no finished run, or the command resumes or
+    overwrites (see `run_folders`). Call it before any work, so a refusal costs nothing."""
+    run_dir = Path(run_dir)
+    recover(run_dir)
+    if folder_mode() == "new" and is_complete(run_dir):
+        raise MotorlabError(finished_run_message(run_dir, resumable))
+
+
 def prepare_run_dir(out: Path | None, step: str) -> Path:
     """Create the run folder; a stale summary.json is removed so the folder
     does not look complete until this run finishes. Call it only once the
-    settings are known to be valid, so a mistake never spoils a finished run."""
+    settings are known to be valid, so a mistake never spoils a finished run.
+
+    Raises:
+        MotorlabError: the folder holds a finished run (unless resuming or overwriting it), or
+            it cannot be written.
+    """
     run_dir = run_path(out, step)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    refuse_finished(run_dir)
+    replaced = _REPLACED.get()
+    if folder_mode() == "overwrite" and run_dir.is_dir() and any(run_dir.iterdir()) and replaced is not None:
+        move_aside(run_dir, replaced)
+    make_folder(run_dir)
     (run_dir / SUMMARY).unlink(missing_ok=True)
     return run_dir
+
+
+def make_folder(path: Path) -> Path:
+    """mkdir -p, with one line for a folder that cannot be made (permissions, a read-only disk)."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise PermissionError(errno.EACCES, "permission denied", str(path))
+    except OSError as e:
+        raise MotorlabError(unwritable_message(path, e)) from None
+    return path
+
+
+def unwritable_message(path: Path, e: OSError) -> str:
+    reason = os.strerror(e.errno).lower() if e.errno else type(e).__name__
+    return f"cannot write {e.filename or path}: {reason}; choose an --out folder you can write to."
+
+
+def inside(root: Path, path: Path, what: str) -> Path:
+    """`path`, checked to resolve inside `root` (a study writes nowhere else, whatever a recipe says).
+
+    Raises:
+        MotorlabError: naming `what` wrote outside.
+    """
+    resolved, top = Path(path).resolve(), Path(root).resolve()
+    if resolved != top and top not in resolved.parents:
+        raise MotorlabError(f"{what} would write to {path}, outside {root}; name it with letters, digits, '-', "
+                            "'_' and '.' only.")
+    return Path(path)
 
 
 def require_run_dir(path: Path) -> Path:
@@ -202,9 +360,12 @@ def require_run_dir(path: Path) -> Path:
         raise MotorlabError(f"{path} is not a folder; pass a run folder written by `motorlab train`.")
     if not os.access(path, os.R_OK | os.X_OK):
         raise MotorlabError(f"run folder {path} is not readable; check its permissions.")
+    recover(path)
     if not is_complete(path):
+        damaged = (path / SUMMARY).is_file()
         raise MotorlabError(
-            f"{path} has no {SUMMARY}: the run did not finish (or this is not a run folder); re-run it."
+            f"{path} has {'a damaged' if damaged else 'no'} {SUMMARY}: the run did not finish (or this is not a run "
+            "folder); re-run it."
         )
     recall_imports(path)
     return path

@@ -125,7 +125,8 @@ class StepKind(Generic[S, R]):
 
     def run(self, settings: S, out: Path | None = None, console: Console | None = None, progress: bool = True) -> R:
         """Run the step into the run folder `out` (default: runs/<kind>-<time>); `console` gets its
-        tables, `progress` says whether to show progress bars."""
+        tables, `progress` says whether to show progress bars. A kind that can continue an
+        interrupted run (its `resume_argv` names a command for a folder) also takes `resume=True`."""
         raise NotImplementedError
 
     def validate(self, fields: dict[str, Any]) -> S:
@@ -145,6 +146,20 @@ class StepKind(Generic[S, R]):
 
     def check(self, settings: S) -> None:
         """Checks a recipe runs before any step does (e.g. that the env exists)."""
+
+    def inputs(self, settings: S) -> list[Path]:
+        """The folders this run reads, from its reference fields (a file stands for its folder;
+        built-in names such as "pid" are no folders)."""
+        folders = []
+        for ref in self.refs:
+            value = getattr(settings, ref.field, None)
+            if value is None and hasattr(settings, "env"):  # flat env settings (sar) live in settings.env
+                value = getattr(settings.env, ref.field, None)
+            for text in _strings(value):
+                path = Path(text)
+                if path.exists():
+                    folders.append(path if path.is_dir() else path.parent)
+        return folders
 
     def prepare(self, fields: dict[str, Any], referenced: dict[str, Settings]) -> dict[str, Any]:
         """A recipe step's fields before validation, given the settings of the steps it names."""
@@ -242,6 +257,8 @@ def _tracked(run):
 
     @functools.wraps(run)
     def tracked_run(self, settings, out=None, *args, **kwargs):
+        if out is not None:
+            refuse_input_folder(self, settings, Path(out))
         with trackers.step(self.name, settings) as tracked:
             summary = run(self, settings, out, *args, **kwargs)
             if tracked:
@@ -250,6 +267,27 @@ def _tracked(run):
 
     tracked_run._motorlab_tracked = True
     return tracked_run
+
+
+def refuse_input_folder(kind: StepKind, settings: Settings, out: Path) -> None:
+    """A step never writes into the folder it reads (`dynamics fit X --out X` would replace the
+    collect run's config.toml and summary.json)."""
+    target = out.resolve()
+    for folder in kind.inputs(settings):
+        if folder.resolve() == target:
+            raise MotorlabError(f"--out {out} is the folder of this step's input; a step writes a folder of its "
+                                "own: choose another --out.")
+
+
+def _strings(value: Any) -> list[str]:
+    """Every string in a field value (a string, a list, or a dict of lists)."""
+    if isinstance(value, (str, Path)):
+        return [str(value)]
+    if isinstance(value, dict):
+        value = list(value.values())
+    if isinstance(value, (list, tuple)):
+        return [s for v in value for s in _strings(v)]
+    return []
 
 
 def option_error(e: ValidationError) -> str:

@@ -337,7 +337,7 @@ def test_study_writes_summary_table_plots_and_step_folders(study):
 def test_study_rerun_keeps_finished_steps(study):
     path, out, _ = study
     before = step_mtimes(out)
-    proc = run_cli("run", path, "--out", out)
+    proc = run_cli("run", path, "--out", out, "--resume")
     assert_ok(proc)
     assert proc.stdout.count("already done") == len(STEPS)
     assert step_mtimes(out) == before
@@ -349,8 +349,9 @@ def test_study_rerun_redoes_only_changed_steps(study, tmp_path):
     before = step_mtimes(out)
     changed = tmp_path / "small.toml"
     changed.write_text(path.read_text().replace('policy = "pid"', 'policy = "pid"\nepisodes = 2'))
-    proc = run_cli("run", changed, "--out", out)
+    proc = run_cli("run", changed, "--out", out, "--resume")
     assert_ok(proc)
+    assert "settings or inputs changed; its earlier run is replaced" in proc.stdout
     after = step_mtimes(out)
     assert after["pid"] != before["pid"]  # its settings changed: run again
     kept = [name for name in STEPS if name != "pid"]

@@ -16,7 +16,7 @@ from motorlab import kinds
 from motorlab.errors import MotorlabError
 from motorlab.recipes import parse_recipe
 from motorlab.report.results import Metric
-from motorlab.runs import read_json
+from motorlab.runs import read_json, run_folders
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind
 from motorlab.studies import run_study
@@ -98,11 +98,17 @@ def test_a_registered_kind_runs_in_a_study(registered, tmp_path):
 
 def test_finished_steps_are_kept_and_changed_inputs_redone(registered, tmp_path):
     run_study(parse_recipe(RECIPE.format(value=3), "doubling.toml"), tmp_path / "study", console=quiet())
-    run_study(parse_recipe(RECIPE.format(value=3), "doubling.toml"), tmp_path / "study", console=quiet())
+    with pytest.raises(MotorlabError, match="finished run.*--resume"):  # a finished study is not redone by accident
+        run_study(parse_recipe(RECIPE.format(value=3), "doubling.toml"), tmp_path / "study", console=quiet())
+    with run_folders("resume"):
+        run_study(parse_recipe(RECIPE.format(value=3), "doubling.toml"), tmp_path / "study", console=quiet())
     assert RUNS == ["a", "b"]  # the second run kept both
-    summary = run_study(parse_recipe(RECIPE.format(value=5), "doubling.toml"), tmp_path / "study", console=quiet())
+    with run_folders("resume"):
+        summary = run_study(parse_recipe(RECIPE.format(value=5), "doubling.toml"), tmp_path / "study",
+                            console=quiet())
     assert RUNS == ["a", "b", "a", "b"]  # a changed, so b (which reads it) ran again
     assert summary["b.result"] == 20
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["study"]  # the replaced runs are gone
 
 
 def test_a_reference_to_a_kind_that_provides_something_else_is_refused(registered):

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from helpers import snapshot
 from motorlab.errors import MotorlabError
 from motorlab.runs import (
     MetricsWriter,
@@ -18,6 +19,7 @@ from motorlab.runs import (
     read_json,
     read_metrics,
     require_run_dir,
+    run_folders,
     write_config,
     write_json,
     write_summary,
@@ -64,15 +66,69 @@ def test_read_config_errors(tmp_path):
         read_config(tmp_path)
 
 
-def test_prepare_run_dir_marks_folder_unfinished(tmp_path):
+def test_prepare_run_dir_refuses_a_finished_run_and_resume_marks_it_unfinished(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
     write_summary(run, {"x": 1})
     (run / "artifact.bin").write_bytes(b"keep")
-    assert is_complete(run)
-    assert prepare_run_dir(run, "train") == run
+    before = snapshot(run)
+    with pytest.raises(MotorlabError, match="finished run.*--overwrite"):
+        prepare_run_dir(run, "train")
+    assert snapshot(run) == before  # refused before anything was touched
+    with run_folders("resume"):
+        assert prepare_run_dir(run, "train") == run
     assert not is_complete(run)  # a stale summary would make a half-written run look finished
     assert (run / "artifact.bin").read_bytes() == b"keep"
+
+
+def test_a_damaged_summary_is_no_finished_run(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "summary.json").write_text('{"x": 1')  # cut short
+    assert not is_complete(run)
+    (run / "summary.json").write_text("[1, 2]")  # JSON, but not a summary
+    assert not is_complete(run)
+    assert prepare_run_dir(run, "train") == run  # an unfinished run may be written into
+
+
+def test_overwrite_replaces_the_folder_whole_once_the_new_run_finished(tmp_path):
+    run = tmp_path / "run"
+    (run / "tensorboard").mkdir(parents=True)
+    (run / "tensorboard" / "events.old").write_bytes(b"old curves")
+    write_summary(run, {"x": 1})
+    with run_folders("overwrite"):
+        prepare_run_dir(run, "train")
+        assert not (run / "tensorboard").exists()  # old events never mix with the new run's
+        write_summary(run, {"x": 2})
+    assert read_json(run / "summary.json") == {"x": 2}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # the old run is gone, nothing left aside
+
+
+@pytest.mark.parametrize("failure", [RuntimeError, KeyboardInterrupt])
+def test_overwrite_puts_the_old_run_back_when_the_new_one_fails(tmp_path, failure):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "policy.json").write_text("{}")
+    write_summary(run, {"x": 1})
+    before = snapshot(tmp_path)
+    with pytest.raises(failure), run_folders("overwrite"):
+        prepare_run_dir(run, "train")
+        (run / "policy.json").write_text('{"half": "written"}')
+        raise failure()
+    assert snapshot(tmp_path) == before
+
+
+def test_a_killed_overwrite_is_settled_by_the_next_command(tmp_path):
+    # what a SIGKILL leaves: the old run aside (its process gone), the new one unfinished
+    run = tmp_path / "run"
+    aside = tmp_path / ".run.replaced-20260101-000000-999999999"
+    aside.mkdir()
+    write_summary(aside, {"x": 1})
+    run.mkdir()
+    (run / "metrics.csv").write_text("half")
+    with pytest.raises(MotorlabError, match="finished run"):
+        prepare_run_dir(run, "train")  # the old run is back, and finished: refused as ever
+    assert read_json(run / "summary.json") == {"x": 1} and not aside.exists()
 
 
 def test_prepare_run_dir_rejects_a_file(tmp_path):

@@ -26,7 +26,7 @@ PolicyLike = str | Path | Result
 
 def train(env: str, algo: str | None = None, timesteps: int | None = None, *, preset: str | None = None,
           seed: int | None = None, out: str | Path | None = None, progress: bool = True, track: Track = None,
-          **settings: Any) -> Run:
+          overwrite: bool = False, **settings: Any) -> Run:
     """Train a policy on `env` (`motorlab train ENV`) and return its run.
 
     Args:
@@ -38,6 +38,7 @@ def train(env: str, algo: str | None = None, timesteps: int | None = None, *, pr
         out: the run folder (default `runs/train-<time>`).
         progress: show a progress bar (in Jupyter too).
         track: "mlflow", "wandb" (or "mlflow=URI", "wandb=PROJECT"): log the run there too.
+        overwrite: replace a finished run in `out` (without it, one there is refused).
         **settings: any other `motorlab train` option, named as in `motorlab recipes --kinds`:
             until_solved=True, delay=0.2, history=10, n_envs=4, lr="linear:3e-4,0", reward=...,
             `sar=<a fit result or sar.npz>`, env_kwargs={...}, hyperparams={"n_steps": 1024}, ...
@@ -55,12 +56,12 @@ def train(env: str, algo: str | None = None, timesteps: int | None = None, *, pr
     fields = {"env": env, "algo": algo, "timesteps": timesteps, "preset": preset, "seed": seed,
               "progress": progress, **settings}
     checked = steps.settings(TRAIN, **fields)
-    return steps.run(TRAIN, checked, out, progress, track)  # type: ignore[return-value]
+    return steps.run(TRAIN, checked, out, progress, track, overwrite)  # type: ignore[return-value]
 
 
 def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None = None, seed: int | None = None,
              workers: int | None = None, out: str | Path | None = None, progress: bool = True,
-             **env_settings: Any) -> Result:
+             overwrite: bool = False, **env_settings: Any) -> Result:
     """Evaluate a policy deterministically (`motorlab evaluate POLICY`).
 
     Args:
@@ -70,6 +71,7 @@ def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None
         episodes: evaluation episodes (default 10).
         seed: the first episode's reset seed (default 0).
         workers: env processes (default: as many as help).
+        overwrite: replace a finished run in `out` (without it, one there is refused).
         **env_settings: the env as evaluated, on top of the run's own: delay=0.2, delay_on="action",
             history, obs_noise, latency, push_force, kwargs={...}, success=...
 
@@ -81,7 +83,7 @@ def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None
     env_fields = {"id": env, **{_env_field(k): steps.path_of(v) for k, v in env_settings.items()}}
     checked = settings_for(steps.path_of(policy), {k: v for k, v in env_fields.items() if v is not None},
                            episodes, seed, workers)
-    return steps.run(EVALUATE, checked, out, progress)
+    return steps.run(EVALUATE, checked, out, progress, overwrite=overwrite)
 
 
 def video(run: PolicyLike, episodes: int | None = None, *, out: str | Path | None = None,

@@ -26,7 +26,7 @@ import numpy as np
 from motorlab.errors import MotorlabError
 from motorlab.report.results import Number, read_run_results, read_study_results
 from motorlab.rl.steps import TRAIN
-from motorlab.runs import CONFIG, SUMMARY, read_json
+from motorlab.runs import CONFIG, SUMMARY, is_complete, read_json
 
 if TYPE_CHECKING:
     from motorlab.policies import Policy
@@ -172,9 +172,9 @@ class Study(Result):
         found: dict[str, Result | list[Result]] = {}
         for name in self.config.get("steps", []):
             folder = self.path / name
-            if (folder / SUMMARY).is_file():
+            if is_complete(folder):
                 found[name] = load(folder)
-            elif seeds := sorted(p for p in folder.glob("seed*") if (p / SUMMARY).is_file()):
+            elif seeds := sorted(p for p in folder.glob("seed*") if is_complete(p)):
                 found[name] = [load(p) for p in seeds]
         return found
 
@@ -233,7 +233,7 @@ def load(path: str | Path) -> Result:
         MotorlabError: the folder does not exist or has not finished (no summary.json).
     """
     folder = Path(path)
-    if not (folder / SUMMARY).is_file():
+    if not is_complete(folder):
         if not folder.exists():
             raise MotorlabError(f"{folder} does not exist; give a folder written by motorlab (its --out).")
         raise MotorlabError(f"{folder} has no {SUMMARY}: it is not a motorlab run folder, or it did not finish; "

@@ -15,6 +15,7 @@ from rich.console import Console
 from motorlab import trackers
 from motorlab.api.results import Result, as_path, load
 from motorlab.kinds import KINDS
+from motorlab.runs import run_folders
 from motorlab.settings import Settings
 from motorlab.stepkind import StepKind
 
@@ -50,18 +51,21 @@ def settings(kind: StepKind, **fields: Any) -> Settings:
 
 
 def run(kind: StepKind, checked: Settings, out: str | Path | None, progress: bool, track: Track = None,
-        **run_args: Any) -> Result:
-    """Run a `kind` step with `checked` settings into `out` and open its folder."""
+        overwrite: bool = False, **run_args: Any) -> Result:
+    """Run a `kind` step with `checked` settings into `out` and open its folder (`overwrite`: replace
+    a finished run there, as --overwrite does; without it, a finished run in `out` is refused)."""
     trackers.enable(track)
-    summary = kind.run(checked, Path(out) if out is not None else None, console=console(), progress=progress,
-                       **run_args)
+    with run_folders("overwrite" if overwrite else "new"):
+        summary = kind.run(checked, Path(out) if out is not None else None, console=console(), progress=progress,
+                           **run_args)
     return load(summary.run_dir)
 
 
 def run_kind(kind: StepKind, out: str | Path | None = None, progress: bool = True, track: Track = None,
              **fields: Any) -> Result:
-    """`settings` then `run`: one step from keyword arguments."""
-    return run(kind, settings(kind, **fields), out, progress, track)
+    """`settings` then `run`: one step from keyword arguments (`overwrite=True`: see `run`)."""
+    overwrite = bool(fields.pop("overwrite", False))
+    return run(kind, settings(kind, **fields), out, progress, track, overwrite)
 
 
 def console() -> Console:

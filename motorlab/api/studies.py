@@ -12,14 +12,17 @@ from motorlab.api.steps import Track, console
 
 def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: str = "local",
                address: str | None = None, max_parallel: int | None = None, parallel_steps: int | None = None,
-               track: Track = None, **fields: Any) -> Study:
+               track: Track = None, resume: bool = False, overwrite: bool = False, **fields: Any) -> Study:
     """Run a study from a recipe (`motorlab run RECIPE`): its steps, table, findings and report.
 
     Args:
         recipe: a bundled recipe's name ("pendulum", "sar-hand-quick", "reacher-quick"; see
             `motorlab recipes`) or a TOML file.
         out: the study folder (default `runs/<recipe>-<time>`). Running again into the same folder
-            keeps the steps that finished with the same settings.
+            keeps the steps that finished with the same settings; a finished study needs `resume`.
+        resume: run again into a finished study's folder, keeping the steps that finished with the
+            same settings (`motorlab run --resume`).
+        overwrite: replace the study in `out` whole (`--overwrite`).
         backend: where a train step's seeds run: "local" (processes here) or "ray".
         max_parallel: seeds trained at once.
         parallel_steps: independent train steps run at once.
@@ -31,13 +34,18 @@ def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: st
         The study: `.table`, `.summary` (`"<step>.<key>"`), `.steps` (each step's `Result`),
         `.report()`; in Jupyter its findings and figures.
     """
+    from motorlab.errors import MotorlabError
     from motorlab.recipes import load_recipe
+    from motorlab.runs import run_folders
     from motorlab.studies import Execution, run_study
 
+    if resume and overwrite:
+        raise MotorlabError("resume keeps the finished steps in out and overwrite replaces them; give one.")
     study = load_recipe(str(recipe), fields)
     trackers.enable(track)
-    summary = run_study(study, Path(out) if out is not None else None, console=console(),
-                        execution=Execution(backend, address, max_parallel, parallel_steps))
+    with run_folders("resume" if resume else "overwrite" if overwrite else "new"):
+        summary = run_study(study, Path(out) if out is not None else None, console=console(),
+                            execution=Execution(backend, address, max_parallel, parallel_steps))
     return Study(summary["study_dir"])
 
 

@@ -31,7 +31,7 @@ from motorlab.environment import describe
 from motorlab.errors import MotorlabError
 from motorlab.report.plots import figure_caption
 from motorlab.report.results import Finding, Number, StepResults, read_run_results, read_study_results
-from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, read_json
+from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, is_complete, read_json
 
 REPORT = "report.html"
 # Headline keys of a comparison, in the order readers scan them; other numbers shared
@@ -199,11 +199,11 @@ class _Collector:
         runs = []
         for step in steps:
             step_dir = path / step
-            if (step_dir / SUMMARY).is_file():
+            if is_complete(step_dir):
                 runs.append(self.run(step_dir, step))
             elif step_dir.is_dir():  # several seeds: <step>/seed<k>/
                 runs += [self.run(d, f"{step}/{d.name}") for d in sorted(step_dir.iterdir())
-                         if (d / SUMMARY).is_file()]
+                         if is_complete(d)]
         table = path / "table.txt"
         name = config.get("recipe") or (f"sweep of {config['sweep']}" if "sweep" in config else path.name)
         return StudyView(name=name, path=path, description=summary.get("description", ""),
@@ -239,7 +239,7 @@ class _Collector:
         runs = []
         for label, folder in ((f"trial-{best}", path / "trials" / str(best)), ("fresh", path / "fresh")):
             if best is not None and folder.is_dir():
-                runs += [self.run(d, f"{label}/{d.name}") for d in sorted(folder.glob("seed*")) if (d / SUMMARY).is_file()]
+                runs += [self.run(d, f"{label}/{d.name}") for d in sorted(folder.glob("seed*")) if is_complete(d)]
         counts = ", ".join(f"{n} {state}" for state, n in (summary.get("n_trials") or {}).items())
         best_params = ", ".join(f"{k}={fmt(v)}" for k, v in (summary.get("best_params") or {}).items())
         description = (f"Optuna search ({config.get('sampler', 'tpe')} sampler, {config.get('pruner', 'median')} "
@@ -300,7 +300,7 @@ def _kind(path: Path) -> str | None:
 def _check_path(path: Path) -> Path:
     if not path.exists():
         raise MotorlabError(f"{path} does not exist; give run folders or study folders (motorlab run --out DIR).")
-    if not path.is_dir() or not (path / SUMMARY).is_file():
+    if not path.is_dir() or not is_complete(path):
         raise MotorlabError(f"{path} is not a finished run or study folder (no {SUMMARY}); "
                             "give folders written by motorlab train/evaluate/run.")
     return path

@@ -9,7 +9,12 @@
     <study>/report.html        all of it in one self-contained page (motorlab report)
 
 Re-running a study into the same folder keeps steps that finished with the same
-settings, so an interrupted study resumes where it stopped. The runner knows no step kind
+settings, so an interrupted study resumes where it stopped (a train step from its last
+checkpoint). A finished study is run again only with --resume (keep the steps that finished
+with the same settings; a step whose settings or inputs changed is replaced whole, its old
+folder deleted only once the study finishes) or --overwrite (replace the study whole);
+without either, a step that finished with other settings is refused, never overwritten.
+Every folder a study writes is checked to lie inside it. The runner knows no step kind
 by name: each step's kind (motorlab.stepkind) says how it runs and what the table shows.
 """
 
@@ -41,10 +46,18 @@ from motorlab.report.results import (
 )
 from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import (
+    atomic_write_bytes,
     atomic_write_text,
     finished_with,
+    folder_mode,
+    inside,
+    is_complete,
+    move_aside,
     prepare_run_dir,
     read_json,
+    refuse_finished,
+    replacements,
+    toml_holds,
     write_config,
     write_summary,
     write_toml,
@@ -85,6 +98,11 @@ class _Outputs:
     def __init__(self, steps: list[Step]):
         self.kinds = {s.name: s.kind for s in steps}
         self.dirs: dict[str, list[Path]] = {}
+        self.ran: set[str] = set()  # steps that ran to their end (not kept) in this invocation
+        # what may replace a step that finished with other settings (captured here: steps may run in
+        # threads, which do not inherit the run_folders block)
+        self.mode = folder_mode()
+        self.replaced = replacements()
 
     def paths(self, name: str) -> list[str]:
         """What "@name" stands for: each of its run folders, or the file in it that its kind provides."""
@@ -116,7 +134,8 @@ def _fan_out(step: Step, outputs: _Outputs) -> str | None:
 
 def _run_dirs(step: Step, study_dir: Path) -> list[Path]:
     """A step's run folders by its own seeds: <step>/, or <step>/seed<k>/ for each of several."""
-    return [study_dir / step.name / f"seed{s}" for s in step.seeds] if step.seeds else [study_dir / step.name]
+    dirs = [study_dir / step.name / f"seed{s}" for s in step.seeds] if step.seeds else [study_dir / step.name]
+    return [inside(study_dir, d, f"step {step.name!r}") for d in dirs]
 
 
 def _runs(step: Step, study_dir: Path, outputs: _Outputs) -> list[tuple[Path, Settings]]:
@@ -129,11 +148,11 @@ def _runs(step: Step, study_dir: Path, outputs: _Outputs) -> list[tuple[Path, Se
         return [(d, settings.model_copy(update={"seed": s})) for d, s in zip(_run_dirs(step, study_dir), step.seeds)]
     fan = _fan_out(step, outputs)
     if fan is None:
-        return [(study_dir / step.name, k.validate(fields))]
+        return [(_run_dirs(step, study_dir)[0], k.validate(fields))]
     runs = []
     for i, d in enumerate(outputs.dirs[fan]):  # one run per seed of the step it names
         each = {f: outputs.resolve(step.fields[f], i) if f in is_ref else v for f, v in fields.items()}
-        runs.append((study_dir / step.name / d.name, k.validate(each)))
+        runs.append((inside(study_dir, study_dir / step.name / d.name, f"step {step.name!r}"), k.validate(each)))
     return runs
 
 
@@ -161,6 +180,17 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
     for d in kept:
         console.print(f"      {f'{d.name}: ' if len(runs) > 1 else ''}already done with these settings; kept")
     todo = [(d, settings) for d, settings in runs if d not in kept]
+    changed = [d for d, _ in todo if is_complete(d)]  # finished, but with other settings or inputs
+    if changed and (outputs.mode != "resume" or outputs.replaced is None):
+        raise MotorlabError(f"step {step.name}: {changed[0]} finished with other settings; give --resume to redo "
+                            "the changed steps (keeping the others), --overwrite to redo the whole study, or "
+                            "another --out.")
+    for d in changed:  # --resume: replaced whole, the old run put back if the study does not finish
+        move_aside(d, outputs.replaced)
+        console.print(f"      {f'{d.name}: ' if len(runs) > 1 else ''}settings or inputs changed; its earlier run "
+                      "is replaced")
+    # an interrupted run of these very settings continues from its checkpoint, as `train --resume` does
+    resuming = {d for d, _ in todo if toml_holds(d / STEP_FILE, asked[d]) and k.resume_argv(d) is not None}
     for d, _ in todo:
         # What the study asks is written first, and any older summary removed: a summary.json
         # from now on is this run's, even when Ctrl-C lands between it and the run's exit.
@@ -170,7 +200,13 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
         _run_processes(step, todo, execution, console, stop)
     else:
         for d, settings in todo:
-            k.run(settings, d, console=console)
+            if d in resuming:
+                console.print("      continuing the interrupted run from its last checkpoint")
+                k.run(settings, d, console=console, resume=True)
+            else:
+                k.run(settings, d, console=console)
+    if todo:
+        outputs.ran.add(step.name)
     if not detached:  # matplotlib is not thread-safe: a background step's figures are drawn by the study's thread
         for d, _ in runs:
             k.figures(d)
@@ -222,7 +258,7 @@ def _run_processes(step: Step, todo: list[tuple[Path, Settings]], execution: Exe
                          todo[0][0].parent / "ray", on_done)
     else:
         backends.run_local(trials, parallel, on_done, stop)
-    failed = [t for t in trials if not (Path(t["run_dir"]) / "summary.json").is_file()]
+    failed = [t for t in trials if not is_complete(Path(t["run_dir"]))]
     if failed:
         raise MotorlabError(f"step {step.name}: {', '.join(Path(t['run_dir']).name for t in failed)} failed: "
                             f"{backends.last_line(failed[0]['log'])}.")
@@ -258,21 +294,31 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
         console.print(f"      the recipe's parallel_steps = {parallel_steps} applies on this machine only; with "
                       f"--backend {execution.backend} its steps run one after another")
         parallel_steps = 1
+    if out is not None:
+        refuse_finished(Path(out), resumable=True)  # before anything runs: a finished study needs --resume
+    finished = {f: (Path(out) / f).read_bytes() for f in ("summary.json", "config.toml")} \
+        if out is not None and is_complete(Path(out)) else {}
     study_dir = prepare_run_dir(out, recipe.name)
     config = {"recipe": recipe.name, "source": recipe.source, "steps": [s.name for s in recipe.steps]}
     write_config(study_dir, config)
-    # --track: the study is a parent run; each step's run (here, or in its own process) nests under it
-    with trackers.parent("study", study_dir, config):
-        summary = _run_steps(recipe, study_dir, console, execution, parallel_steps)
-        trackers.outputs(study_dir, summary)  # summary.json, results.json, table.txt, plots, report.html
+    outputs = _Outputs(recipe.steps)
+    try:
+        # --track: the study is a parent run; each step's run (here, or in its own process) nests under it
+        with trackers.parent("study", study_dir, config):
+            summary = _run_steps(recipe, study_dir, console, execution, parallel_steps, outputs)
+            trackers.outputs(study_dir, summary)  # summary.json, results.json, table.txt, plots, report.html
+    except BaseException:
+        if finished and not outputs.ran:  # --resume of a finished study stopped before any step ran: still finished
+            for name, data in finished.items():
+                atomic_write_bytes(study_dir / name, data)
+        raise
     return summary
 
 
 def _run_steps(recipe: Recipe, study_dir: Path, console: Console, execution: Execution,
-               parallel_steps: int) -> dict[str, Any]:
+               parallel_steps: int, outputs: _Outputs) -> dict[str, Any]:
     """The study's steps, then its table, findings, figures, summary.json and report (see run_study)."""
     t0 = time.perf_counter()
-    outputs = _Outputs(recipe.steps)
     overlaps = Overlaps()
     seconds: dict[str, float] = {}  # each step's wall time (beside others, where steps overlap)
 
