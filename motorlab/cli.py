@@ -36,7 +36,7 @@ from motorlab.dynamics.steps import (  # noqa: E402
     DYNAMICS_FIT,
 )
 from motorlab.envs import DISTURBANCES, EnvConfig, describe_env, early_end_label, register_myosuite  # noqa: E402
-from motorlab.errors import MotorlabError  # noqa: E402
+from motorlab.errors import MotorlabError, mask_url  # noqa: E402
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT, EvaluateSettings, ZeroshotSettings, settings_for  # noqa: E402
 from motorlab.kinds import KINDS  # noqa: E402
 from motorlab.recipes import bundled, fields_of, load_recipe, step_union  # noqa: E402
@@ -866,7 +866,9 @@ def tune(
     summary = run_tune(spec, console=stdout, commands=app_commands())
     stdout.print(f"\n[bold]Results:[/bold] {summary['tune_dir']}  (best.toml, trials.csv, table.txt, summary.json, "
                  "plots/*.png, report.html, study.db)")
-    stdout.print(f"The study in a browser: optuna-dashboard {shlex.quote(spec.storage)}")
+    shown = mask_url(spec.storage)
+    stdout.print(f"The study in a browser: optuna-dashboard {shlex.quote(shown)}"
+                 + (" (with the password in place of ***)" if shown != spec.storage else ""))
 
 
 @app.command(epilog="Examples:\n\n  motorlab export runs/ppo --out share/ppo          # only the files safe to send\n\n"

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from motorlab import trackers
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_url, redact
 from motorlab.extras import missing
 from motorlab.sweeps.trials import launch_argv, mark_finished, mark_started
 from motorlab.user_modules import ENV_VAR, imported_names
@@ -129,13 +129,14 @@ def check_address(address: str) -> None:
     if address == "auto":
         return
     host, sep, port = address.removeprefix("ray://").rpartition(":")
+    host = host.rpartition("@")[2]  # ray://USER:PASSWORD@HOST:PORT: the host is what answers
     if not sep or not host or not port.isdigit():
-        raise MotorlabError(f"--address {address!r}: write HOST:PORT as `ray start --head` prints it, "
+        raise MotorlabError(f"--address {mask_url(address)!r}: write HOST:PORT as `ray start --head` prints it, "
                             "e.g. 10.0.0.5:6379.")
     try:
         socket.create_connection((host, int(port)), timeout=5).close()
     except OSError as e:
-        raise MotorlabError(f"no Ray cluster answers at {address} ({e.strerror or e}); start one with "
+        raise MotorlabError(f"no Ray cluster answers at {mask_url(address)} ({e.strerror or e}); start one with "
                             f"`ray start --head --port {port}` or check --address.") from None
 
 
@@ -188,7 +189,8 @@ def init_ray(address: str | None) -> Any:
             ray.init(num_cpus=os.cpu_count(), include_dashboard=False, logging_level="ERROR", log_to_driver=False,
                      runtime_env=runtime_env)
     except (ConnectionError, RuntimeError, ValueError) as e:
-        raise MotorlabError(f"cannot reach a Ray cluster at {address}: {str(e).splitlines()[0]} "
+        raise MotorlabError(f"cannot reach a Ray cluster at {address and mask_url(address)}: "
+                            f"{redact(str(e).splitlines()[0], address)} "
                             "Start one with `ray start --head` or check --address (HOST:PORT).") from None
     return ray
 

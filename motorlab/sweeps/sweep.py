@@ -23,7 +23,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from motorlab import trackers
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_url
 from motorlab.report import sweep_plots
 from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
@@ -89,7 +89,7 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
     trials = plan(target, seeds, grid, sweep_dir, threads, commands)
     labels = list(dict.fromkeys(t["setting"] for t in trials))
     config = {"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [], "settings": labels,
-              "backend": backend, "address": address, "max_parallel": max_parallel}
+              "backend": backend, "address": mask_url(address) if address else None, "max_parallel": max_parallel}
     write_config(sweep_dir, config)
     (sweep_dir / "summary.json").unlink(missing_ok=True)  # unfinished until the aggregate is written
     todo = [t for t in trials if not is_finished(t)]

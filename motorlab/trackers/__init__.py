@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
 
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_url, redact
 from motorlab.extras import require
 
 ENV_VAR = "MOTORLAB_TRACK"  # the trackers, e.g. "mlflow=sqlite:////home/me/mlflow.db wandb"
@@ -98,7 +98,8 @@ def parse(values: list[str] | tuple[str, ...] | str | None) -> list[Target]:
         backend, sep, where = value.strip().partition("=")
         backend = backend.lower()
         if backend not in BACKENDS or (sep and not where):
-            raise MotorlabError(f"--track {value!r}: choose mlflow, mlflow=URI (sqlite:///PATH, file:///PATH, "
+            shown = value.strip().partition("=")[0] + sep + mask_url(where)
+            raise MotorlabError(f"--track {shown!r}: choose mlflow, mlflow=URI (sqlite:///PATH, file:///PATH, "
                                 "http://HOST:PORT), wandb or wandb=PROJECT.")
         if backend in targets:
             raise MotorlabError(f"--track {backend} is given twice; give each tracker once.")
@@ -206,6 +207,8 @@ _lock = threading.Lock()
 
 
 def _warn_once(key: str, message: str) -> None:
+    # a tracker's error may quote its URI: its credentials are not shown
+    message = redact(message, *(value.partition("=")[2] for value in os.environ.get(ENV_VAR, "").split()))
     with _lock:
         if key in _warned:
             return

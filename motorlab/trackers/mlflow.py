@@ -9,16 +9,18 @@ $MLFLOW_EXPERIMENT_NAME, else "motorlab"; a sweep's, study's or tune's runs to i
 
 from __future__ import annotations
 
+import base64
 import logging
 import os
 import re
 import socket
 import urllib.error
+import urllib.parse
 import urllib.request
 from pathlib import Path
 from typing import Any
 
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_url, redact
 from motorlab.trackers import RunInfo, Target, flat, numbers
 
 LABEL = "MLflow"
@@ -67,6 +69,18 @@ def _writable(path: Path) -> str | None:
     return None if os.access(existing, os.W_OK | os.X_OK) else f"{existing} is not writable"
 
 
+def _health_request(uri: str) -> urllib.request.Request:
+    """The tracking server's /health, asked with the URI's user and password as HTTP basic auth, as
+    MLflow's client (requests) sends them; urllib would take `user:password@` for part of the host."""
+    parts = urllib.parse.urlsplit(uri)
+    headers = {}
+    if parts.username is not None:
+        pair = f"{urllib.parse.unquote(parts.username)}:{urllib.parse.unquote(parts.password or '')}"
+        headers["Authorization"] = "Basic " + base64.b64encode(pair.encode()).decode()
+        parts = parts._replace(netloc=parts.netloc.rpartition("@")[2])
+    return urllib.request.Request(urllib.parse.urlunsplit(parts).rstrip("/") + "/health", headers=headers)
+
+
 def check(target: Target) -> Target:
     """The resolved target, once its store can be written or its server answers (seconds, not MLflow's retries).
 
@@ -79,17 +93,17 @@ def check(target: Target) -> Target:
     if local is not None:
         why = _writable(local)
         if why:
-            raise MotorlabError(f"--track mlflow={uri}: cannot write the MLflow store at {local} ({why}); choose "
+            raise MotorlabError(f"--track mlflow={mask_url(uri)}: cannot write the MLflow store at {local} ({why}); choose "
                                 "a path you can write, e.g. --track mlflow=sqlite:///$HOME/mlflow.db.")
     elif uri.startswith(("http://", "https://")):
         try:
-            urllib.request.urlopen(uri.rstrip("/") + "/health", timeout=CHECK_SECONDS).close()
+            urllib.request.urlopen(_health_request(uri), timeout=CHECK_SECONDS).close()
         except urllib.error.HTTPError:
             pass  # the server answered (an old one may have no /health)
         except (urllib.error.URLError, OSError, socket.timeout) as e:
             reason = getattr(e, "reason", e)
-            reason = getattr(reason, "strerror", None) or str(reason)
-            raise MotorlabError(f"--track mlflow={uri}: no MLflow tracking server answers there ({reason}); start "
+            reason = redact(getattr(reason, "strerror", None) or str(reason), uri)
+            raise MotorlabError(f"--track mlflow={mask_url(uri)}: no MLflow tracking server answers there ({reason}); start "
                                 "one (mlflow server --port 5000) or check the URI.") from None
     return t
 
@@ -205,4 +219,5 @@ class Sink:
         return {"run_id": self.run_id, "experiment_id": self.experiment_id}
 
     def where(self) -> str:
-        return f"MLflow run {self.run_id} in {self.uri} (mlflow ui --backend-store-uri {self.uri})"
+        uri = mask_url(self.uri)  # printed: a server's password is not
+        return f"MLflow run {self.run_id} in {uri} (mlflow ui --backend-store-uri {uri})"

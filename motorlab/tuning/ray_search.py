@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Any
 
 import optuna
 
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_url
 from motorlab.sweeps import backends
 from motorlab.tuning.search import COUNTED, TuneSpec, open_storage, resume_study
 
@@ -121,7 +121,8 @@ def run_ray_search(spec: TuneSpec, planner: Planner, console: Console) -> optuna
         scheduler, name = make_scheduler(spec, study.get_trials(deepcopy=False, states=COUNTED))
         # the study's sampler: --sampler, seeded by --sampler-seed (and where a resumed search left it)
         search = StudySearch(spec, open_storage(spec), study.sampler, planner, console, parallel=cpus, scheduler=name)
-        console.print(f"tune: Ray Tune at {spec.address or 'a Ray instance started here'}: {name}, "
+        where = mask_url(spec.address) if spec.address else "a Ray instance started here"
+        console.print(f"tune: Ray Tune at {where}: {name}, "
                       f"{at_once} trial{'s' * (at_once > 1)} at a time ({cpus} CPU{'s' * (cpus > 1)} each); "
                       f"Tune's records in {spec.out / 'ray'}")
         tuner = tune.Tuner(

@@ -17,6 +17,7 @@ level: this module is imported only once Ray is known to be there (backends.init
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -29,7 +30,7 @@ from ray.tune.schedulers import AsyncHyperBandScheduler
 from ray.tune.search import Searcher
 from ray.tune.search.optuna import OptunaSearch
 
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_url
 from motorlab.tuning.outputs import number
 from motorlab.tuning.ray_trial import JOB, STEPS
 from motorlab.tuning.search import COUNTED, HEARTBEAT_SECONDS, MAX_FAILURES_IN_A_ROW, Counters, counted
@@ -65,8 +66,14 @@ class StudySearch(OptunaSearch):
         self._beat = 0.0
         self._wait_until = 0.0
 
-    def __getstate__(self) -> dict[str, Any]:  # Tune pickles its settings; the planner and console stay here
-        return {k: v for k, v in self.__dict__.items() if k not in ("_planner", "_console")}
+    def __getstate__(self) -> dict[str, Any]:
+        """What Tune pickles of this search into OUT/ray/tune/tuner.pkl with its settings. Not the
+        planner and console (they stay here), nor the storage, the study and its trials: they hold
+        the database URL, password and all; the search's state is the study itself (see `save`)."""
+        unpickled = ("_planner", "_console", "_storage", "_ot_study", "_ot_trials")
+        state = {k: v for k, v in self.__dict__.items() if k not in unpickled}
+        state["spec"] = dataclasses.replace(self.spec, storage=mask_url(self.spec.storage))
+        return state
 
     def save(self, checkpoint_path: str) -> None:
         raise NotImplementedError  # the study in the database is the search's state: the same command resumes it

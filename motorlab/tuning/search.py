@@ -34,7 +34,7 @@ from optuna.storages import RDBStorage, RetryHeartbeatStaleTrialCallback
 from optuna.trial import FrozenTrial, TrialState
 from sqlalchemy.exc import IntegrityError, OperationalError
 
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_url, redact
 from motorlab.runs import SUMMARY, read_json
 from motorlab.stats import iqm_with_ci
 from motorlab.tuning.objective import Objective, Reporter, budget_of, steps_run, trial_horizon
@@ -150,11 +150,13 @@ def open_study(spec: TuneSpec) -> optuna.Study:
             # a resumed seeded search goes on from where its sampler was, not from its first samples again
             study.sampler = make_sampler(spec.sampler, spec.sampler_seed + n)
         return study
-    except (ImportError, ValueError) as e:
-        raise MotorlabError(f"--storage {spec.storage}: {_first_line(e)} (give a database URL such as "
-                            "sqlite:///runs/tune/study.db or postgresql://user@host/db, with its driver installed).") from None
+    except (ImportError, ValueError) as e:  # the driver's or SQLAlchemy's words may quote the URL: masked
+        raise MotorlabError(f"--storage {mask_url(spec.storage)}: {redact(_first_line(e), spec.storage)} (give a "
+                            "database URL such as sqlite:///runs/tune/study.db or postgresql://user@host/db, with "
+                            "its driver installed).") from None
     except Exception as e:  # noqa: BLE001 - SQLAlchemy's connection errors have no common public base here
-        raise MotorlabError(f"cannot open the study storage {spec.storage}: {_first_line(e)}") from None
+        raise MotorlabError(f"cannot open the study storage {mask_url(spec.storage)}: "
+                            f"{redact(_first_line(e), spec.storage)}") from None
 
 
 def open_storage(spec: TuneSpec) -> RDBStorage:
@@ -306,7 +308,7 @@ def resume_study(spec: TuneSpec, console: Console) -> tuple[optuna.Study, bool]:
     queued = retry_interrupted(study)
     have = counted(study)
     running = len(study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)))
-    console.print(f"tune: study {spec.study_name} in {spec.storage}: {have} of {spec.trials} trials finished"
+    console.print(f"tune: study {spec.study_name} in {mask_url(spec.storage)}: {have} of {spec.trials} trials finished"
                   + (f", {running} running elsewhere" if running else "")
                   + (f", {queued} interrupted trial{'s' * (queued > 1)} queued again" if queued else ""))
     return study, have + running < spec.trials

@@ -14,10 +14,25 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.sweeps import backends
-from motorlab.sweeps.trials import command_trials, recipe_path, recipe_trials
+from motorlab.sweeps.trials import (
+    ALGORITHM_FIELDS,
+    CONFIG,
+    HYPERPARAMETERS,
+    algorithm,
+    check_hyperparameters,
+    command_of,
+    command_trials,
+    hyperparameter_value,
+    parse_options,
+    recipe_path,
+    recipe_trials,
+    takes_hyperparameters,
+)
 from motorlab.tuning.space import Dist
+
+FLAG = "--space"  # where a trial's settings come from, as errors name it
 
 if TYPE_CHECKING:
     from typer.core import TyperGroup
@@ -36,17 +51,64 @@ class Planner:
 
     def check(self) -> None:
         """Plan (not run) trials with every choice and both bounds of every key, so that a key the
-        command or recipe does not have, or a value its command line cannot parse (a word for an
-        integer option), fails before the search starts rather than as failed trials. (Values the
-        command parses but its settings refuse, such as history 0, fail in the trial.)"""
+        command or recipe does not have, an SB3 hyperparameter its algorithm does not have, or a
+        value its command line cannot parse (a word for an integer option), fails before the
+        search starts (before its database is made) rather than as failed trials. (Values the
+        command parses but its settings refuse, such as history 0, fail in the trial.)
+
+        Raises:
+            MotorlabError: one line naming the --space key and the fix.
+        """
         edges = {k: list(d.choices) if d.kind == "choice" else
                  [str(int(v)) if d.kind == "int" else repr(v) for v in (d.low, d.high)] for k, d in self.space.items()}
+        if self.recipe is None:
+            self._check_passed_on(edges)
         with tempfile.TemporaryDirectory() as scratch:
             base = {k: values[0] for k, values in edges.items()}
             self.plan(base, [0], Path(scratch))
             for key, values in edges.items():
                 for value in values[1:]:
                     self.plan({**base, key: value}, [0], Path(scratch))
+
+    def passes_on(self, dist: Dist) -> bool:
+        """The key goes to the command line as `--set KEY=VALUE` (an SB3 hyperparameter), not as an option."""
+        return dist.is_hyperparam or dist.name.replace("_", "-") not in self.options
+
+    def _check_passed_on(self, edges: dict[str, list[str]]) -> None:
+        """The keys passed on as SB3 hyperparameters, with their edge values, against the command and
+        the algorithm its target trains, each named in its own error. A name that is no option gets
+        the close options too: it may be a misspelt one. (When the space searches what chooses the
+        algorithm, --algo or a preset, each planned trial's command line is checked as it is planned.)"""
+        passed = [d for d in self.space.values() if self.passes_on(d)]
+        if not passed:
+            return
+        if self.commands is None:
+            raise ValueError("a command-line target needs the motorlab command group to check it against")
+        cmd, step_kind, head, args = command_of(self.commands, self.target)
+        name = " ".join(head)
+        options = sorted(f"--{o}" for o in self.options)
+        if HYPERPARAMETERS not in options:
+            d = passed[0]
+            flag = "--" + d.name.replace("_", "-")
+            what = (f"`motorlab {name}` takes no SB3 hyperparameters" if d.is_hyperparam else
+                    f"`motorlab {name}` has no option {flag}{did_you_mean(flag, options)}")
+            raise MotorlabError(f"--space {d.key}: {what}; see motorlab {name} --help.")
+        searched = {d.name for d in self.space.values() if not self.passes_on(d)}
+        if step_kind is None or searched & {*ALGORITHM_FIELDS, CONFIG}:
+            return
+        where = f"motorlab tune {self.target!r}"
+        algo = algorithm(step_kind, parse_options(cmd, [*args, "--seed", "0", "--out", "x"], where), where)
+        for d in passed:
+            flag = "--" + d.name.replace("_", "-")
+            problems = [] if d.is_hyperparam else [f"`motorlab {name}` has no option {flag}{did_you_mean(flag, options)}"]
+            if algo is None or not takes_hyperparameters(algo):
+                problems.append(f"{str(algo).upper()} takes no SB3 hyperparameters (--set)")
+                raise MotorlabError(f"--space {d.key}: {'; '.join(problems)}; see motorlab {name} --help.")
+            for value in edges[d.key]:
+                try:
+                    check_hyperparameters(algo, {d.name: hyperparameter_value(value)})
+                except MotorlabError as e:
+                    raise MotorlabError(f"--space {d.key}: {'; '.join([*problems, str(e)])}") from None
 
     def plan(self, values: dict[str, str], seeds: list[int], trial_dir: Path) -> list[dict[str, Any]]:
         """One sweep trial per seed, with run folders trial_dir/seed<k>/.
@@ -55,18 +117,18 @@ class Planner:
             MotorlabError: a key the command (or recipe) does not have, a value it refuses.
         """
         if self.recipe is not None:
-            planned = recipe_trials(self.recipe, [values], seeds, trial_dir, self.threads)
+            planned = recipe_trials(self.recipe, [values], seeds, trial_dir, self.threads, flag=FLAG)
         else:
             command, options = self.target, {}
             for key, value in values.items():
                 dist = self.space[key]
-                if dist.is_hyperparam or dist.name.replace("_", "-") not in self.options:
-                    command += " --set " + shlex.quote(f"{dist.name}={value}")  # an SB3 hyperparameter
+                if self.passes_on(dist):
+                    command += f" {HYPERPARAMETERS} " + shlex.quote(f"{dist.name}={value}")  # an SB3 hyperparameter
                 else:
                     options[dist.name] = value
             if self.commands is None:
                 raise ValueError("a command-line target needs the motorlab command group to check it against")
-            planned = command_trials(self.commands, command, [options], seeds, trial_dir, self.threads)
+            planned = command_trials(self.commands, command, [options], seeds, trial_dir, self.threads, flag=FLAG)
         return [_relocated(t, trial_dir / f"seed{t['seed']}", trial_dir / "logs" / f"seed{t['seed']}.log")
                 for t in planned]
 

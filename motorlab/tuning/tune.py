@@ -23,7 +23,7 @@ from optuna.trial import TrialState
 from rich.console import Console
 
 from motorlab import trackers
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_url
 from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import SUMMARY, read_json, run_path, write_config
@@ -93,7 +93,7 @@ def run_tune(spec: TuneSpec, console: Console | None = None, commands: TyperGrou
         spec.out.mkdir(parents=True, exist_ok=True)
     config = {"tune": spec.target, "space": {k: d.describe() for k, d in spec.space.items()},
               "objective": spec.objective.key, "direction": spec.objective.direction,
-              "trials": spec.trials, "seeds": spec.seeds, "storage": spec.storage,
+              "trials": spec.trials, "seeds": spec.seeds, "storage": mask_url(spec.storage),  # no password in files
               "study_name": spec.study_name, "sampler": spec.sampler, "pruner": spec.pruner,
               **({"sampler_seed": spec.sampler_seed} if spec.sampler_seed is not None else {})}
     # --track: the search is a parent run, each seed's run nests under it
@@ -172,7 +172,7 @@ def write_results(spec: TuneSpec, study: optuna.Study, planner: Planner, console
     steps = sum(t.user_attrs.get("env_steps", 0) for t in trials)
     summary: dict[str, Any] = {
         "tune": spec.target, "objective": spec.objective.key, "direction": spec.objective.direction,
-        "study_name": spec.study_name, "storage": spec.storage, "trials": spec.trials, "seeds": spec.seed_list,
+        "study_name": spec.study_name, "storage": mask_url(spec.storage), "trials": spec.trials, "seeds": spec.seed_list,
         "n_trials": {k: v for k, v in by_state.items() if v}, "best_trial": best.number if best else None,
         "best_value": best.value if best else None, "best_params": best.params if best else None,
         "best_seed_values": best.user_attrs.get("seed_values") if best else None,
