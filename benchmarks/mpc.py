@@ -118,8 +118,8 @@ def main() -> None:
         env = make_env(EnvConfig(id="Reacher-v5"), shaped=False)
         plan = MpcSettings(env="Reacher-v5", model=str(tmp / "model")).plan()  # motorlab mpc's defaults
         policy = build_policy(env, "Reacher-v5", tmp / "model", seed=args.seed, **plan)
-        returns, distances, _, per_env_ms, _ = run_episodes("Reacher-v5", policy, args.episodes, 10_000 + args.seed, 1,
-                                                         progress=False)
+        result = run_episodes("Reacher-v5", policy, args.episodes, 10_000 + args.seed, 1, progress=False)
+        returns, distances, per_env_ms = result.returns, result.distances, result.per_env_ms
         pipeline = time.perf_counter() - start
         ours = {"return_mean": float(returns.mean()), "return_std": float(returns.std()),
                 "final_distance_mean": float(distances[:, -1].mean()), "plan_ms_median": float(np.median(per_env_ms)),

@@ -288,8 +288,11 @@ def _key_values(items: list[str], flag: str) -> dict[str, str]:
 
 
 def _warn_faults(summary: Any) -> None:
-    """One line when episodes ended on a numerical fault (they are counted and listed, not fatal)."""
-    n = getattr(summary, "numerical_faults", 0) or 0
+    """One line when episodes ended on a numerical fault (they are counted and listed, not fatal). The
+    planner's rejected candidates are warned about by the planning kinds themselves."""
+    n = getattr(summary, "episode_faults", None)
+    if n is None:
+        n = getattr(summary, "numerical_faults", 0) or 0
     if n:
         err.print(f"[yellow]warning[/yellow]: {n} episode{'s' if n > 1 else ''} ended on a numerical fault "
                   f"(NaN/Inf or a diverging simulation); reasons in {summary.run_dir}/faults.log", soft_wrap=True)
@@ -683,6 +686,7 @@ def mbrl(s, settings) -> None:
                if s.resumed_rounds else "")
     stdout.print(f"{final} after {s.rounds} rounds, {s.env_steps:,} env steps{resumed}; planning "
                  f"{s.plan_ms_median or float('nan'):.1f} ms/step -> {s.run_dir}/curve.csv, plots/learning_curve.png")
+    _warn_faults(s)
 
 
 # ---- studies, sweeps, reports ------------------------------------------------------------------
@@ -744,15 +748,14 @@ def run(
     """
     from motorlab.studies import Execution, run_study
 
-    if resume and folder_mode() == "overwrite":
-        raise MotorlabError("--resume keeps the finished steps in --out and --overwrite replaces them; give one.")
+    mode = _resume_mode(resume)
     study = load_recipe(recipe, _key_values(given or [], "--set"), announce=_announce_imports if check else None)
     if check:
         stdout.print(f"{study.source}: valid, {len(study.steps)} steps: "
                      + ", ".join(f"{st.name} ({st.kind.name})" for st in study.steps))
         return
     trackers.enable(track)
-    with run_folders("resume" if resume else folder_mode()):
+    with run_folders(mode):
         summary = run_study(study, out, console=stdout,
                             execution=Execution(backend, address, max_parallel, parallel_steps))
     stdout.print(f"\n[bold]Results:[/bold] {summary['study_dir']}  (report.html, table.txt, summary.json, plots/*.png, "
@@ -781,6 +784,8 @@ def sweep(
     max_parallel: Annotated[Optional[int], typer.Option(
         help="Trials at once (default: one per core locally; as many as the cluster's CPUs fit with ray).")] = None,
     out: Out = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Run again into a finished sweep's --out (e.g. with "
+                                                         "more seeds): its finished trials are kept.")] = False,
     track: Track = None,
 ):
     """Run a command or a study for several seeds (and settings), then aggregate across seeds.
@@ -793,8 +798,9 @@ def sweep(
     from motorlab.sweeps.sweep import run_sweep
 
     trackers.enable(track)
-    summary = run_sweep(target, seeds, grid, backend, address, max_parallel, out, console=stdout,
-                        commands=app_commands())
+    with run_folders(_resume_mode(resume)):
+        summary = run_sweep(target, seeds, grid, backend, address, max_parallel, out, console=stdout,
+                            commands=app_commands())
     stdout.print(f"\n[bold]Results:[/bold] {summary['sweep_dir']}  (report.html, table.txt, summary.json, "
                  "aggregate.json, plots/*.png, <setting>/seed<k>/)")
 
@@ -849,6 +855,8 @@ def tune(
     backend: Backend = "local",
     address: RayAddress = None,
     out: Out = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Go on with a finished search in --out (e.g. with more "
+                                                         "--trials): its trials are kept.")] = False,
     track: Track = None,
 ):
     """Search settings with Optuna, judging each trial by the IQM of its objective over several seeds.
@@ -863,7 +871,8 @@ def tune(
                      prune_startup, report_every, max_parallel, fresh_seeds, backend=backend,
                      address=address, sampler_seed=sampler_seed)
     trackers.enable(track)
-    summary = run_tune(spec, console=stdout, commands=app_commands())
+    with run_folders(_resume_mode(resume)):
+        summary = run_tune(spec, console=stdout, commands=app_commands())
     stdout.print(f"\n[bold]Results:[/bold] {summary['tune_dir']}  (best.toml, trials.csv, table.txt, summary.json, "
                  "plots/*.png, report.html, study.db)")
     shown = mask_url(spec.storage)
@@ -946,6 +955,13 @@ def recipes(
     for name in sorted(bundled()):
         r = load_recipe(name)
         stdout.print(f"[bold]{name}[/bold]: {r.description} ({len(r.steps)} steps)")
+
+
+def _resume_mode(resume: bool):
+    """The run-folder mode of a command with --resume and --overwrite (`overwrite_option`)."""
+    if resume and folder_mode() == "overwrite":
+        raise MotorlabError("--resume keeps what finished in --out and --overwrite replaces it; give one of them.")
+    return "resume" if resume else folder_mode()
 
 
 def _announce_imports(code: list[str]) -> None:

@@ -262,7 +262,7 @@ def test_study_with_seeds_trains_them_in_parallel_and_evaluates_each(tmp_path):
     assert summary["on-delay.return_iqm_ci_low"] <= summary["on-delay.return_iqm"] <= summary["on-delay.return_iqm_ci_high"]
     assert summary["fast.seeds"] == 3 and "fast.return_iqm" in summary
 
-    again = run_cli("run", recipe, "--out", out)  # resumes: every seed kept
+    again = run_cli("run", recipe, "--out", out, "--resume")  # resumes: every seed kept
     assert_ok(again)
     assert again.stdout.count("already done with these settings; kept") == 6
 

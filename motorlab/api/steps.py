@@ -14,6 +14,7 @@ from rich.console import Console
 
 from motorlab import trackers
 from motorlab.api.results import Result, as_path, load
+from motorlab.errors import MotorlabError
 from motorlab.kinds import KINDS
 from motorlab.runs import run_folders
 from motorlab.settings import Settings
@@ -66,6 +67,14 @@ def run_kind(kind: StepKind, out: str | Path | None = None, progress: bool = Tru
     """`settings` then `run`: one step from keyword arguments (`overwrite=True`: see `run`)."""
     overwrite = bool(fields.pop("overwrite", False))
     return run(kind, settings(kind, **fields), out, progress, track, overwrite)
+
+
+def folders(resume: bool = False, overwrite: bool = False):
+    """The `run_folders` block of a study, sweep or search: `resume` keeps what finished in its
+    folder, `overwrite` replaces it; neither refuses a folder that holds a finished one."""
+    if resume and overwrite:
+        raise MotorlabError("resume keeps what finished in out and overwrite replaces it; give one of them.")
+    return run_folders("resume" if resume else "overwrite" if overwrite else "new")
 
 
 def console() -> Console:

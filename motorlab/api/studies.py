@@ -7,7 +7,7 @@ from typing import Any
 
 from motorlab import trackers
 from motorlab.api.results import Study, Sweep, Tune
-from motorlab.api.steps import Track, console
+from motorlab.api.steps import Track, console, folders
 
 
 def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: str = "local",
@@ -34,16 +34,13 @@ def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: st
         The study: `.table`, `.summary` (`"<step>.<key>"`), `.steps` (each step's `Result`),
         `.report()`; in Jupyter its findings and figures.
     """
-    from motorlab.errors import MotorlabError
     from motorlab.recipes import load_recipe
-    from motorlab.runs import run_folders
     from motorlab.studies import Execution, run_study
 
-    if resume and overwrite:
-        raise MotorlabError("resume keeps the finished steps in out and overwrite replaces them; give one.")
+    block = folders(resume, overwrite)
     study = load_recipe(str(recipe), fields)
     trackers.enable(track)
-    with run_folders("resume" if resume else "overwrite" if overwrite else "new"):
+    with block:
         summary = run_study(study, Path(out) if out is not None else None, console=console(),
                             execution=Execution(backend, address, max_parallel, parallel_steps))
     return Study(summary["study_dir"])
@@ -51,7 +48,7 @@ def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: st
 
 def sweep(target: str | Path, seeds: int | list[int] = 5, grid: list[str] | dict[str, list[Any]] | None = None, *,
           backend: str = "local", address: str | None = None, max_parallel: int | None = None,
-          out: str | Path | None = None, track: Track = None) -> Sweep:
+          out: str | Path | None = None, track: Track = None, resume: bool = False, overwrite: bool = False) -> Sweep:
     """Run a command or a study for several seeds and settings, then aggregate with rliable
     (`motorlab sweep`): IQMs with 95% CIs, probabilities of improvement, performance profiles.
 
@@ -61,6 +58,8 @@ def sweep(target: str | Path, seeds: int | list[int] = 5, grid: list[str] | dict
         seeds: seeds per setting (0..N-1), or the seeds themselves.
         grid: settings to cross: ["lr=3e-4,1e-3", "n_envs=1,2"] or {"lr": [3e-4, 1e-3]}.
         backend: "local" (a pool of processes) or "ray" (a cluster at `address`).
+        resume: run again into a finished sweep's `out`, keeping its finished trials.
+        overwrite: replace the sweep in `out` whole.
 
     Returns:
         The sweep: `.aggregate`, `.table`, `.summary`, `.report()`.
@@ -69,8 +68,9 @@ def sweep(target: str | Path, seeds: int | list[int] = 5, grid: list[str] | dict
     from motorlab.sweeps.sweep import run_sweep
 
     trackers.enable(track)
-    summary = run_sweep(str(target), seeds, _pairs(grid), backend, address, max_parallel,
-                        Path(out) if out is not None else None, console=console(), commands=app_commands())
+    with folders(resume, overwrite):
+        summary = run_sweep(str(target), seeds, _pairs(grid), backend, address, max_parallel,
+                            Path(out) if out is not None else None, console=console(), commands=app_commands())
     return Sweep(summary["sweep_dir"])
 
 
@@ -79,7 +79,7 @@ def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int =
          storage: str | None = None, study_name: str | None = None, sampler: str = "tpe",
          sampler_seed: int | None = None, pruner: str = "median", prune_startup: int = 5, report_every: int = 1000,
          fresh_seeds: int | None = None, max_parallel: int | None = None, backend: str = "local",
-         address: str | None = None, track: Track = None) -> Tune:
+         address: str | None = None, track: Track = None, resume: bool = False, overwrite: bool = False) -> Tune:
     """Search settings with Optuna, each trial judged by the IQM of `objective` over `seeds` seeds
     (`motorlab tune`); the best settings are re-run on fresh seeds.
 
@@ -90,7 +90,9 @@ def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int =
             {"lr": "loguniform:1e-5,1e-2"} (loguniform, uniform, int or choice).
         objective: steps_to_success, final_return, success_rate, or any summary number
             (a study's: "STEP.METRIC").
-        out: the search's folder; the same `out` resumes it.
+        out: the search's folder; the same `out` resumes an unfinished search.
+        resume: go on with a finished search in `out` (e.g. with more `trials`).
+        overwrite: replace the search's folder whole (a study in an external `storage` stays there).
 
     Returns:
         The search: `.best` (best.toml), `.trials`, `.summary` (with the fresh seeds' numbers).
@@ -103,7 +105,7 @@ def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int =
                      report_every, max_parallel, fresh_seeds, backend=backend, address=address,
                      sampler_seed=sampler_seed)
     trackers.enable(track)
-    with trackers.parent("tune", spec.out, {"tune": str(target), "space": _pairs(space) or [], "trials": trials,
+    with folders(resume, overwrite), trackers.parent("tune", spec.out, {"tune": str(target), "space": _pairs(space) or [], "trials": trials,
                                             "seeds": seeds, "objective": objective, "sampler": sampler,
                                             "pruner": pruner}):
         summary = run_tune(spec, console=console(), commands=app_commands())

@@ -27,7 +27,16 @@ from motorlab.errors import MotorlabError, mask_url
 from motorlab.report import sweep_plots
 from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
-from motorlab.runs import atomic_write_text, read_json, run_path, write_config, write_json, write_summary
+from motorlab.runs import (
+    atomic_write_text,
+    prepare_run_dir,
+    read_json,
+    refuse_finished,
+    run_path,
+    write_config,
+    write_json,
+    write_summary,
+)
 from motorlab.stats import aggregate, trial_scores
 from motorlab.sweeps import backends
 from motorlab.sweeps.grid import parse_grid, settings
@@ -86,12 +95,13 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
     # Several trials per machine: one math thread each, or they fight over the cores.
     threads = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if parallel != 1 else {}
     sweep_dir = run_path(out, "sweep")
+    refuse_finished(sweep_dir, resumable=True)  # a finished sweep is continued (--resume) or replaced, never by accident
     trials = plan(target, seeds, grid, sweep_dir, threads, commands)
     labels = list(dict.fromkeys(t["setting"] for t in trials))
     config = {"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [], "settings": labels,
               "backend": backend, "address": mask_url(address) if address else None, "max_parallel": max_parallel}
+    prepare_run_dir(sweep_dir, "sweep")  # unfinished until the aggregate is written (--overwrite: a fresh folder)
     write_config(sweep_dir, config)
-    (sweep_dir / "summary.json").unlink(missing_ok=True)  # unfinished until the aggregate is written
     todo = [t for t in trials if not is_finished(t)]
     kept = len(trials) - len(todo)
     console.print(f"sweep: {len(trials)} trials ({len(labels)} setting{'s' * (len(labels) > 1)} × "

@@ -26,7 +26,16 @@ from motorlab import trackers
 from motorlab.errors import MotorlabError, mask_url
 from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
-from motorlab.runs import SUMMARY, read_json, run_path, write_config
+from motorlab.runs import (
+    SUMMARY,
+    folder_mode,
+    make_folder,
+    prepare_run_dir,
+    read_json,
+    refuse_finished,
+    run_path,
+    write_config,
+)
 from motorlab.stats import iqm_with_ci
 from motorlab.sweeps import backends
 from motorlab.sweeps.sweep import MAX_SEEDS
@@ -89,8 +98,11 @@ def run_tune(spec: TuneSpec, console: Console | None = None, commands: TyperGrou
                else {})
     planner = Planner(spec.target, spec.space, commands, threads)
     planner.check()
+    refuse_finished(spec.out, resumable=True)  # a finished search goes on with --resume, or is replaced
+    if folder_mode() == "overwrite":
+        prepare_run_dir(spec.out, "tune")  # the old folder (and its study.db) aside until this search ends
     if spec.storage.startswith("sqlite:///") and spec.storage == f"sqlite:///{spec.out / 'study.db'}":
-        spec.out.mkdir(parents=True, exist_ok=True)
+        make_folder(spec.out)
     config = {"tune": spec.target, "space": {k: d.describe() for k, d in spec.space.items()},
               "objective": spec.objective.key, "direction": spec.objective.direction,
               "trials": spec.trials, "seeds": spec.seeds, "storage": mask_url(spec.storage),  # no password in files
