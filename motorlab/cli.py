@@ -342,6 +342,7 @@ def train(
     lr: Annotated[Optional[str], opt(T, "--lr")] = None,
     clip_range: Annotated[Optional[str], opt(T, "--clip-range")] = None,
     until_solved: Annotated[bool, opt(T, "--until-solved")] = False,
+    her: Annotated[bool, opt(T, "--her")] = False,
     solve_episodes: Annotated[Optional[int], opt(T, "--solve-episodes")] = None,
     solve_return: Annotated[Optional[float], opt(T, "--solve-return")] = None,
     eval_every: Annotated[Optional[int], opt(T, "--eval-every")] = None,
@@ -367,7 +368,7 @@ def train(
     settings = {
         "algo": algo, "preset": preset, "preset_file": str(preset_file.resolve()) if preset_file else None,
         "timesteps": timesteps, "seed": seed, "lr": lr, "clip_range": clip_range,
-        "until_solved": until_solved or None, "solve_episodes": solve_episodes, "solve_return": solve_return,
+        "until_solved": until_solved or None, "her": her or None, "solve_episodes": solve_episodes, "solve_return": solve_return,
         "eval_every": eval_every, "n_envs": n_envs, "normalize": normalize, "device": device, "progress": progress,
         "checkpoint_every": checkpoint_every,
         "env": _env_flags(env_id, delay, delay_on, history, reward, sar, phi, env_arg, success, disturbances),

@@ -7,13 +7,20 @@ The graph holds everything between the robot's raw observation and the command i
         ─► SAR decode (runs acting in synergy space) ─► action
 
 so that onnxruntime and numpy are all a robot needs (docs/deployment.md; examples/onnx_runner.py).
-Inputs and outputs (float32, dynamic batch dimension "batch"):
+Inputs and outputs (float32 unless said, dynamic batch dimension "batch"):
 
     obs             [batch, D]     the newest observation, as the env gives it (not normalized)
     obs_stack       [batch, K*D]   K > 1 only: the last stack, oldest observation first; at an
                                    episode's start, the first observation repeated K times
-    action          [batch, A]     what the env (robot) takes
+    action          [batch, A]     what the env (robot) takes; int64 [batch] for Discrete actions:
+                                   the index of the deterministic policy's action (the most likely)
     next_obs_stack  [batch, K*D]   K > 1 only: feed it back as obs_stack at the next step
+
+A policy trained on a Dict observation (goal-conditioned tasks) takes it flattened, one input:
+`obs` is the keys' values one after another in `obs_layout` order (the Dict's key order,
+`gymnasium.spaces.flatten`'s), each raveled; the sidecar lists each key's slice. The graph splits
+it into the keys its network was trained on. One flat input, rather than one input per key, keeps
+the interface of every motorlab graph the same and the history stack (flat by then) possible.
 
 The stack lives in the graph, not in the caller: the order and the reset padding are the
 training env's (Gymnasium's FrameStackObservation, padding_type="reset"), and a caller cannot
@@ -42,6 +49,7 @@ import gymnasium as gym
 import numpy as np
 
 from motorlab.envs import EnvConfig, env_dt, make_env
+from motorlab.envs.spaces import KeySlice, describe_space, layout_json
 from motorlab.errors import MotorlabError
 from motorlab.extras import missing
 from motorlab.policies import BUILTIN_POLICIES, POLICY_JSON, SB3Policy, load_policy_files
@@ -104,16 +112,19 @@ def export_onnx(run_dir: Path, out: Path, seed: int = 0) -> dict[str, Any]:
     stacks = np.concatenate([stacks, _random_stacks(policy, stacks, RANDOM_OBSERVATIONS, seed)])
     error = _check(ort, model.SerializeToString(), policy, decode, stacks, history, obs_size)
 
-    action_size = int(decode.size if decode else policy.policy.action_space.shape[0])
-    inputs, outputs = _interface(obs_size, history, action_size)
+    space = policy.policy.action_space
+    discrete = isinstance(space, gym.spaces.Discrete)
+    action_size = int(decode.size if decode else 1 if discrete else space.shape[0])
+    inputs, outputs = _interface(obs_size, history, action_size, policy.layout, space)
     not_in_graph = _not_in_graph(env_cfg)
     info = {
         "format": FORMAT, "onnx": ONNX_FILE, "inputs": inputs, "outputs": outputs, "opset": OPSET,
         "ir_version": int(model.ir_version), "algo": meta.get("algo"), "env_id": env_cfg.id if env_cfg else None,
         "history": history, "dt": dt, "observation_size": obs_size, "action_size": action_size,
+        "action_space": describe_space(space), "obs_layout": layout_json(policy.policy.observation_space),
         "normalized": policy.obs_mean is not None, "sar": env_cfg.sar if env_cfg else None,
         "phi": env_cfg.phi if env_cfg and env_cfg.sar else None, "not_in_graph": not_in_graph,
-        "max_abs_error": error, "tolerance": TOLERANCE, "checked_observations": len(stacks),
+        "max_abs_error": error, "tolerance": 0.0 if discrete else TOLERANCE, "checked_observations": len(stacks),
         "env_observations": len(stacks) - RANDOM_OBSERVATIONS, "exported_from": str(run_dir.resolve()),
         "versions": {name: _version(name) for name in ("torch", "onnx", "onnxruntime", "stable-baselines3")},
     }
@@ -187,13 +198,14 @@ def _env_config(run_dir: Path) -> EnvConfig | None:
 
 
 def _observation_size(policy: SB3Policy, history: int) -> int:
-    shape = policy.policy.observation_space.shape
+    shape = policy.observation_space.shape  # flat: a Dict observation's keys one after another
     if len(shape) != 1 or shape[0] % history:
         raise MotorlabError(f"the policy's observations have shape {shape}, which is not {history} stacked "
-                            "flat observations; --onnx exports policies on flat (Box) observations.")
-    if not isinstance(policy.policy.action_space, gym.spaces.Box) or len(policy.policy.action_space.shape) != 1:
-        raise MotorlabError(f"the policy's action space is {policy.policy.action_space}; --onnx exports flat Box "
-                            "actions.")
+                            "flat observations; --onnx exports policies on flat (Box) or Dict observations.")
+    space = policy.policy.action_space
+    if not (isinstance(space, gym.spaces.Box) and len(space.shape) == 1) and not isinstance(space, gym.spaces.Discrete):
+        raise MotorlabError(f"the policy's action space is {describe_space(space)}; --onnx exports flat Box and "
+                            "Discrete actions.")
     return shape[0] // history
 
 
@@ -238,6 +250,7 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
     """A torch module computing what `SB3Policy.act` (and the SAR decode) computes, stack included."""
     import torch
     from stable_baselines3.common.distributions import (
+        CategoricalDistribution,
         DiagGaussianDistribution,
         SquashedDiagGaussianDistribution,
         StateDependentNoiseDistribution,
@@ -249,8 +262,9 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
 
     sb3 = policy.policy
     dist = getattr(sb3, "action_dist", None) or getattr(getattr(sb3, "actor", None), "action_dist", None)
-    if isinstance(sb3, TD3Policy):
-        squash = False  # the actor ends in tanh itself
+    discrete = isinstance(dist, CategoricalDistribution)  # its deterministic action: the most likely index
+    if isinstance(sb3, TD3Policy) or discrete:
+        squash = False  # TD3's actor ends in tanh itself
     elif isinstance(dist, SquashedDiagGaussianDistribution):
         squash = True
     elif isinstance(dist, StateDependentNoiseDistribution):
@@ -259,8 +273,10 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
         squash = False
     else:
         raise MotorlabError(f"the policy's action distribution is {type(dist).__name__}; --onnx exports Gaussian "
-                            "policies (PPO, A2C, SAC, TD3 on Box actions).")
+                            "policies (PPO, A2C, SAC, TD3 on Box actions) and categorical ones (PPO, A2C on Discrete "
+                            "actions).")
     space = sb3.action_space
+    layout = policy.layout  # a Dict observation: each key's slice of the flat input
 
     def f64(a: Any) -> torch.Tensor:
         return torch.as_tensor(np.asarray(a, dtype=np.float64))
@@ -274,8 +290,9 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
                 # float64, as SB3Policy.act normalizes (numpy promotes to the statistics' float64)
                 self.register_buffer("mean", f64(policy.obs_mean))
                 self.register_buffer("std", f64(np.sqrt(policy.obs_var + policy.epsilon)))
-            self.register_buffer("low", torch.as_tensor(space.low, dtype=torch.float32))
-            self.register_buffer("high", torch.as_tensor(space.high, dtype=torch.float32))
+            if not discrete:
+                self.register_buffer("low", torch.as_tensor(space.low, dtype=torch.float32))
+                self.register_buffer("high", torch.as_tensor(space.high, dtype=torch.float32))
             if decode is not None:
                 self.register_buffer("decode_matrix", f64(decode.matrix))
                 self.register_buffer("decode_bias", f64(decode.bias))
@@ -285,6 +302,8 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
         def act(self, x: torch.Tensor) -> torch.Tensor:
             if self.normalized:
                 x = torch.clamp((x.double() - self.mean) / self.std, -policy.clip_obs, policy.clip_obs).float()
+            if layout:  # the flat vector as the Dict the network was trained on (SB3Policy.act's unflatten_batch)
+                x = {s.key: x[:, s.start:s.stop].reshape(-1, *s.shape) for s in layout}
             x = preprocess_obs(x, sb3.observation_space, normalize_images=sb3.normalize_images)
             if isinstance(sb3, ActorCriticPolicy):
                 features = sb3.pi_features_extractor(x)
@@ -293,6 +312,8 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
                 a, _, _ = sb3.actor.get_action_dist_params(x)
             else:
                 a = sb3.actor(x)
+            if discrete:
+                return torch.argmax(a, dim=1)  # the logits' largest: CategoricalDistribution.mode()
             if squash:
                 a = torch.tanh(a)
             # what SB3's predict does with a Box action, in the same float32 operations
@@ -336,13 +357,22 @@ def _to_onnx(module, history: int, obs_size: int) -> bytes:
     return buffer.getvalue()
 
 
-def _interface(obs_size: int, history: int, action_size: int) -> tuple[list[dict], list[dict]]:
+def _interface(obs_size: int, history: int, action_size: int, layout: list[KeySlice],
+               space: gym.Space) -> tuple[list[dict], list[dict]]:
     """The graph's inputs and outputs as the sidecar and metadata_props describe them."""
     stack = history * obs_size
-    inputs = [{"name": "obs", "shape": [DYNAMIC, obs_size], "dtype": "float32",
-               "description": "the newest observation, as the env gives it (not normalized)"}]
-    outputs = [{"name": "action", "shape": [DYNAMIC, action_size], "dtype": "float32",
-                "description": "the action to send to the env (robot), in the env's action units"}]
+    what = "the newest observation, as the env gives it (not normalized)"
+    if layout:
+        what = (f"the newest observation, as the env gives it (not normalized), its Dict flattened: "
+                f"{', '.join(f'{s.key} [{s.start}:{s.stop}]' for s in layout)} (obs_layout)")
+    inputs = [{"name": "obs", "shape": [DYNAMIC, obs_size], "dtype": "float32", "description": what}]
+    if isinstance(space, gym.spaces.Discrete):
+        outputs = [{"name": "action", "shape": [DYNAMIC], "dtype": "int64",
+                    "description": f"the index of the action to send to the env (robot), 0..{int(space.n) - 1}: "
+                                   "the deterministic policy's most likely action"}]
+    else:
+        outputs = [{"name": "action", "shape": [DYNAMIC, action_size], "dtype": "float32",
+                    "description": "the action to send to the env (robot), in the env's action units"}]
     if history > 1:
         inputs.append({"name": "obs_stack", "shape": [DYNAMIC, stack], "dtype": "float32",
                        "description": f"the last {history} observations, oldest first: the previous step's "
@@ -395,7 +425,7 @@ def _random_stacks(policy: SB3Policy, seen: np.ndarray, n: int, seed: int) -> np
     """Stacked observations around the ones the policy knows (its normalization statistics, else
     the env's), inside the observation box, a sixteenth of them far enough out to hit the clip."""
     rng = np.random.default_rng(seed)
-    space = policy.policy.observation_space
+    space = policy.observation_space  # flat, a Dict's keys one after another
     if policy.obs_mean is not None:
         center, scale = policy.obs_mean, np.sqrt(policy.obs_var + policy.epsilon)
     elif len(seen) > 1:
@@ -424,13 +454,15 @@ def _check(ort: ModuleType, model: bytes, policy: SB3Policy, decode: _Decode | N
     if decode is not None:
         expected = decode(expected)
     got = results[0]
-    if got.shape != expected.shape or got.dtype != np.float32:
+    discrete = isinstance(policy.policy.action_space, gym.spaces.Discrete)
+    dtype, tolerance = (np.int64, 0.0) if discrete else (np.float32, TOLERANCE)  # action indices must be equal
+    if got.shape != expected.shape or got.dtype != dtype:
         raise MotorlabError(f"onnxruntime gives actions of shape {got.shape} ({got.dtype}), torch {expected.shape}; "
                             "policy.onnx not written (a motorlab bug: please report it).")
     error = float(np.max(np.abs(got.astype(np.float64) - expected.astype(np.float64)), initial=0.0))
-    if not error <= TOLERANCE:  # NaN fails too
+    if not error <= tolerance:  # NaN fails too
         raise MotorlabError(f"onnxruntime's actions differ from torch's by up to {error:.3g} (tolerance "
-                            f"{TOLERANCE:g}) on {len(stacks)} observations; policy.onnx not written (a motorlab "
+                            f"{tolerance:g}) on {len(stacks)} observations; policy.onnx not written (a motorlab "
                             "bug: please report it).")
     if history > 1 and not np.array_equal(results[1], stacks):
         raise MotorlabError("the graph's next_obs_stack is not the training env's observation stack; policy.onnx "

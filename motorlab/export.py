@@ -22,8 +22,16 @@ from typing import Any
 import gymnasium as gym
 
 from motorlab.envs import EnvConfig, make_env
+from motorlab.envs.spaces import describe_space, flat_space, is_dict, obs_layout
 from motorlab.errors import MotorlabError
-from motorlab.policies import decode_classes, encode_classes, policy_classes, save_sb3_policy
+from motorlab.policies import (
+    decode_classes,
+    encode_classes,
+    normalization,
+    policy_class_name,
+    policy_classes,
+    save_sb3_policy,
+)
 from motorlab.runs import CONFIG, SUMMARY, atomic_path, prepare_run_dir, require_run_dir, write_config, write_summary
 
 # Files of a run folder that hold no pickle: what `export` copies and what is safe to send.
@@ -154,26 +162,37 @@ def _load_vecnormalize(path: Path):
 
 
 def _check_exportable(model, env_id: str | None, vecnorm) -> None:
-    if type(model.policy).__name__ not in policy_classes():
+    if policy_class_name(model.policy) is None:
         raise MotorlabError(f"the policy is a {type(model.policy).__name__}; motorlab exports MLP policies "
                             f"({', '.join(policy_classes())}).")
-    for name, space in (("observation", model.observation_space), ("action", model.action_space)):
-        if not isinstance(space, gym.spaces.Box):
-            raise MotorlabError(f"the policy's {name} space is {space}; motorlab exports Box (continuous) spaces.")
+    obs, act = model.observation_space, model.action_space
+    if not (isinstance(obs, gym.spaces.Box) or is_dict(obs)):
+        raise MotorlabError(f"the policy's observation space is {describe_space(obs)}; motorlab exports Box and Dict "
+                            "observations.")
+    obs_layout(obs)  # a Dict of Box entries only (one line naming the key otherwise)
+    if not isinstance(act, (gym.spaces.Box, gym.spaces.Discrete)):
+        raise MotorlabError(f"the policy's action space is {describe_space(act)}; motorlab exports Box (continuous) "
+                            "and Discrete actions.")
     try:
         decode_classes(encode_classes(dict(model.policy_kwargs)))
     except MotorlabError as e:
         raise MotorlabError(f"the policy's policy_kwargs cannot be exported: {e}") from None
-    if vecnorm is not None and vecnorm.norm_obs and vecnorm.obs_rms.mean.shape != model.observation_space.shape:
+    if vecnorm is not None and vecnorm.norm_obs and not is_dict(obs) and vecnorm.obs_rms.mean.shape != obs.shape:
         raise MotorlabError(f"the VecNormalize statistics have shape {vecnorm.obs_rms.mean.shape}, the policy's "
-                            f"observations {model.observation_space.shape}; give the file saved with this model.")
+                            f"observations {obs.shape}; give the file saved with this model.")
+    if vecnorm is not None and is_dict(obs) and not isinstance(vecnorm.obs_rms, dict):
+        raise MotorlabError("the VecNormalize statistics are of one array, the policy's observations a Dict; give the "
+                            "file saved with this model.")
+    normalization(vecnorm, obs)  # every key normalized, or one line
     if env_id:
-        env = make_env(EnvConfig(id=env_id), shaped=False)
+        env = make_env(EnvConfig(id=env_id), shaped=False)  # its observations flat, as the policy will be given them
         try:
-            for name, have, want in (("observation", env.observation_space, model.observation_space),
-                                     ("action", env.action_space, model.action_space)):
-                if have.shape != want.shape:
-                    raise MotorlabError(f"{env_id} has {name}s of shape {have.shape}, the policy {want.shape}; "
-                                        "give the env it was trained on.")
+            for name, have, want in (("observation", env.observation_space, flat_space(obs)),
+                                     ("action", env.action_space, act)):
+                if have.shape != want.shape or describe_space(have) != describe_space(want):
+                    what = ((f"of shape {have.shape}", want.shape) if isinstance(have, gym.spaces.Box)
+                            and isinstance(want, gym.spaces.Box) else (describe_space(have), describe_space(want)))
+                    raise MotorlabError(f"{env_id} has {name}s {what[0]}, the policy {what[1]}; give the env it "
+                                        "was trained on.")
         finally:
             env.close()

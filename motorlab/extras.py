@@ -1,7 +1,8 @@
 """The optional stacks (pip extras) and the one-line error when one is missing.
 
 The core install runs the pendulum and Reacher workflows; MyoSuite, Upkie, Ray Tune,
-EvoTorch, ONNX export and the experiment trackers (MLflow, W&B: `--track`) come with
+EvoTorch, ONNX export, the experiment trackers (MLflow, W&B: `--track`) and Gymnasium-Robotics'
+goal-conditioned tasks come with
 `pip install 'motorlab[EXTRA]'` (`motorlab[all]`: all of them). A module
 that needs one imports it through `require`, which turns a missing stack into a
 `MotorlabError` naming the pip command. Ground floor: imports nothing of motorlab's but
@@ -26,6 +27,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "mlflow": ("mlflow-skinny==3.17.2",),
     "wandb": ("wandb==0.31.0",),
     "notebook": ("ipykernel==7.4.0", "ipywidgets==8.1.9"),  # Jupyter: the kernel, live progress bars
+    "robotics": ("gymnasium-robotics==1.4.2",),  # goal-conditioned tasks (mazes, Adroit hand): Dict observations
 }
 
 

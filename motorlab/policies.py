@@ -9,6 +9,12 @@ Run folders store policies pickle-free: `policy.json` (type, architecture,
 spaces) and, for neural policies, `policy.safetensors` (weights and observation
 normalization). SB3's `model.zip` is kept for continuing training but never
 unpickled here.
+
+Spaces beyond one Box (motorlab.envs.spaces): a policy trained on a Dict observation
+(MultiInputPolicy) records its `obs_layout` and is given FLAT observations, as every evaluation
+env gives them (a Dict flattened key by key); it turns them back into the Dict its network was
+trained on. Its observation normalization is stored per key (`obs_rms.<key>.mean`, `.var`).
+Discrete actions come out as action indices (int64).
 """
 
 from __future__ import annotations
@@ -21,7 +27,18 @@ import gymnasium as gym
 import numpy as np
 
 from motorlab.control.lqr import LQRPolicy
-from motorlab.control.pid import make_pid
+from motorlab.control.pid import pid_for_env
+from motorlab.envs.spaces import (
+    KeySlice,
+    decode_space,
+    encode_space,
+    flat_space,
+    is_dict,
+    layout_json,
+    obs_layout,
+    require_actions,
+    unflatten_batch,
+)
 from motorlab.errors import MotorlabError
 from motorlab.runs import atomic_write_bytes, read_json, require_run_dir, write_json
 
@@ -42,7 +59,14 @@ POLICY_WEIGHTS = "policy.safetensors"
 
 
 class ZeroPolicy:
-    def __init__(self, action_space: gym.spaces.Box):
+    """The zero command (clipped into the action box) at every step: the "do nothing" baseline.
+
+    Raises:
+        MotorlabError: actions that are not a Box (an action index has no "zero").
+    """
+
+    def __init__(self, action_space: gym.Space, env_id: str | None = None):
+        require_actions(action_space, "the zero policy", instead="use the random policy", env_id=env_id)
         self.action = np.clip(np.zeros(action_space.shape), action_space.low, action_space.high).astype(np.float32)
 
     def reset(self, n: int) -> None:
@@ -56,8 +80,19 @@ class ZeroPolicy:
 
 
 class RandomPolicy:
-    def __init__(self, action_space: gym.spaces.Box, seed: int = 0):
-        self.low, self.high = action_space.low, action_space.high
+    """Uniform random actions: in the action box, or among a Discrete space's actions.
+
+    Raises:
+        MotorlabError: an action space that is neither.
+    """
+
+    def __init__(self, action_space: gym.Space, seed: int = 0, env_id: str | None = None):
+        self.discrete = isinstance(action_space, gym.spaces.Discrete)
+        if self.discrete:
+            self.start, self.n = int(action_space.start), int(action_space.n)
+        else:
+            require_actions(action_space, "the random policy", "Box or Discrete actions", env_id=env_id)
+            self.low, self.high = action_space.low, action_space.high
         self.rng = np.random.default_rng(seed)
 
     def reset(self, n: int) -> None:
@@ -67,17 +102,30 @@ class RandomPolicy:
         pass
 
     def act(self, obs: np.ndarray) -> np.ndarray:
+        if self.discrete:
+            return self.rng.integers(self.start, self.start + self.n, size=len(obs), dtype=np.int64)
         return self.rng.uniform(self.low, self.high, size=(len(obs), *self.low.shape)).astype(np.float32)
 
 
 # ---- SB3 policies, pickle-free -------------------------------------------------
 
 def policy_classes() -> dict[str, type]:
-    from stable_baselines3.common.policies import ActorCriticPolicy
+    """The SB3 policy classes a policy.json may name, by the name it writes (`policy_class_name`).
+    SAC's and TD3's multi-input classes are both called MultiInputPolicy: they are named by algorithm."""
+    from stable_baselines3.common.policies import ActorCriticPolicy, MultiInputActorCriticPolicy
+    from stable_baselines3.sac.policies import MultiInputPolicy as SACMultiInputPolicy
     from stable_baselines3.sac.policies import SACPolicy
+    from stable_baselines3.td3.policies import MultiInputPolicy as TD3MultiInputPolicy
     from stable_baselines3.td3.policies import TD3Policy
 
-    return {"ActorCriticPolicy": ActorCriticPolicy, "SACPolicy": SACPolicy, "TD3Policy": TD3Policy}
+    return {"ActorCriticPolicy": ActorCriticPolicy, "SACPolicy": SACPolicy, "TD3Policy": TD3Policy,
+            "MultiInputActorCriticPolicy": MultiInputActorCriticPolicy, "SACMultiInputPolicy": SACMultiInputPolicy,
+            "TD3MultiInputPolicy": TD3MultiInputPolicy}
+
+
+def policy_class_name(policy: Any) -> str | None:
+    """The name policy.json gives the class of an SB3 policy network (None: not one motorlab saves)."""
+    return next((name for name, cls in policy_classes().items() if type(policy) is cls), None)
 
 
 def encode_classes(value: Any) -> Any:
@@ -103,21 +151,14 @@ def decode_classes(value: Any) -> Any:
     return value
 
 
-def _box(space: gym.spaces.Box) -> dict:
-    # Bounds as strings so that +-inf survive JSON ("inf" is not JSON).
-    return {"shape": list(space.shape), "dtype": str(space.dtype),
-            "low": [repr(float(v)) for v in space.low.ravel()], "high": [repr(float(v)) for v in space.high.ravel()]}
-
-
-def _unbox(d: dict) -> gym.spaces.Box:
-    shape, dtype = tuple(d["shape"]), np.dtype(d["dtype"])
-    low = np.array([float(v) for v in d["low"]], dtype=dtype).reshape(shape)
-    high = np.array([float(v) for v in d["high"]], dtype=dtype).reshape(shape)
-    return gym.spaces.Box(low=low, high=high, dtype=dtype)
-
-
 class SB3Policy:
-    """An SB3 policy network with optional observation normalization; deterministic actions."""
+    """An SB3 policy network with optional observation normalization; deterministic actions.
+
+    It acts on flat observation batches, as evaluation envs give them: a network trained on a Dict
+    observation (MultiInputPolicy) gets them back as that Dict (`obs_layout`). Normalization
+    statistics (`obs_mean`, `obs_var`) are flat too, each key's in its slice, so that normalizing
+    the flat vector normalizes every key with its own statistics.
+    """
 
     def __init__(self, policy, obs_mean=None, obs_var=None, clip_obs: float = 10.0, epsilon: float = 1e-8,
                  deterministic: bool = True):
@@ -126,6 +167,8 @@ class SB3Policy:
         self.policy.set_training_mode(False)
         self.obs_mean, self.obs_var = obs_mean, obs_var
         self.clip_obs, self.epsilon = clip_obs, epsilon
+        self.layout: list[KeySlice] = obs_layout(policy.observation_space)  # empty: a Box observation
+        self.observation_space = flat_space(policy.observation_space)  # what act() takes
 
     def reset(self, n: int) -> None:
         pass
@@ -135,7 +178,7 @@ class SB3Policy:
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float32)
-        expected = self.policy.observation_space.shape
+        expected = self.observation_space.shape
         if obs.shape[1:] != expected:
             raise MotorlabError(
                 f"this policy expects observations of shape {expected} but the env gives {obs.shape[1:]}; "
@@ -144,29 +187,67 @@ class SB3Policy:
         if self.obs_mean is not None:
             obs = np.clip((obs - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon), -self.clip_obs, self.clip_obs)
             obs = obs.astype(np.float32)
-        action, _ = self.policy.predict(obs, deterministic=self.deterministic)
+        action, _ = self.policy.predict(unflatten_batch(obs, self.layout) if self.layout else obs,
+                                        deterministic=self.deterministic)
         return action
 
 
+def normalization(vecnorm, observation_space: gym.Space) -> dict[str, tuple[np.ndarray, np.ndarray]] | None:
+    """VecNormalize's observation statistics as {key: (mean, var)} ("" for a Box observation), in
+    the order of the observation's flat layout; None when it does not normalize observations.
+
+    Raises:
+        MotorlabError: statistics of some keys of a Dict observation only.
+    """
+    if vecnorm is None or not vecnorm.norm_obs:
+        return None
+    if not is_dict(observation_space):
+        return {"": (np.asarray(vecnorm.obs_rms.mean), np.asarray(vecnorm.obs_rms.var))}
+    keys = [s.key for s in obs_layout(observation_space)]
+    if set(vecnorm.norm_obs_keys or []) != set(keys):
+        raise MotorlabError(f"VecNormalize normalizes the observation keys {vecnorm.norm_obs_keys}, not all of "
+                            f"{keys}; motorlab saves statistics of every key.")
+    return {k: (np.asarray(vecnorm.obs_rms[k].mean), np.asarray(vecnorm.obs_rms[k].var)) for k in keys}
+
+
+def flat_statistics(stats: dict[str, tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Per-key statistics as one flat mean and variance, each key's in its slice of the flat observation."""
+    return (np.concatenate([m.ravel() for m, _ in stats.values()]).astype(np.float64),
+            np.concatenate([v.ravel() for _, v in stats.values()]).astype(np.float64))
+
+
 def save_sb3_policy(run_dir: Path, model, algo: str, vecnorm=None) -> None:
-    """Write policy.safetensors + policy.json for an SB3 model (no pickle)."""
+    """Write policy.safetensors + policy.json for an SB3 model (no pickle).
+
+    Raises:
+        MotorlabError: a policy class or space motorlab cannot save.
+    """
     from safetensors.numpy import save
 
+    name = policy_class_name(model.policy)
+    if name is None:
+        raise MotorlabError(f"the policy is a {type(model.policy).__name__}; motorlab saves "
+                            f"{', '.join(policy_classes())}.")
     tensors = {f"policy.{k}": v.detach().cpu().numpy() for k, v in model.policy.state_dict().items()}
     meta: dict[str, Any] = {
         "type": "sb3",
         "algo": algo,
-        "policy_class": type(model.policy).__name__,
+        "policy_class": name,
         "policy_kwargs": encode_classes(dict(model.policy_kwargs)),
         "use_sde": bool(getattr(model, "use_sde", False)) if algo == "ppo" else None,
-        "observation_space": _box(model.observation_space),
-        "action_space": _box(model.action_space),
+        "observation_space": encode_space(model.observation_space),
+        "action_space": encode_space(model.action_space),
+        "obs_layout": layout_json(model.observation_space),  # the flat observation it acts on, key by key
         "obs_norm": None,
     }
-    if vecnorm is not None and vecnorm.norm_obs:
-        tensors["obs_rms.mean"] = vecnorm.obs_rms.mean.astype(np.float64)
-        tensors["obs_rms.var"] = vecnorm.obs_rms.var.astype(np.float64)
-        meta["obs_norm"] = {"clip_obs": float(vecnorm.clip_obs), "epsilon": float(vecnorm.epsilon)}
+    stats = normalization(vecnorm, model.observation_space)
+    if stats is not None:
+        for key, (mean, var) in stats.items():
+            prefix = f"obs_rms.{key}." if key else "obs_rms."  # "obs_rms.mean", or per key "obs_rms.<key>.mean"
+            tensors[prefix + "mean"] = mean.astype(np.float64)
+            tensors[prefix + "var"] = var.astype(np.float64)
+        meta["obs_norm"] = {"clip_obs": float(vecnorm.clip_obs), "epsilon": float(vecnorm.epsilon),
+                            "keys": [k for k in stats if k] or None}
     atomic_write_bytes(Path(run_dir) / POLICY_WEIGHTS, save({k: np.ascontiguousarray(v) for k, v in tensors.items()}))
     write_json(Path(run_dir) / POLICY_JSON, meta)
 
@@ -194,7 +275,8 @@ def _load_sb3(run_dir: Path, meta: dict) -> SB3Policy:
     if meta.get("use_sde") is not None:
         kwargs["use_sde"] = meta["use_sde"]
     try:
-        policy = cls(_unbox(meta["observation_space"]), _unbox(meta["action_space"]), lambda _: 0.0, **kwargs)
+        spaces = decode_space(meta["observation_space"]), decode_space(meta["action_space"])
+        policy = cls(*spaces, lambda _: 0.0, **kwargs)
     except (RuntimeError, MemoryError, TypeError, ValueError, KeyError, AssertionError) as e:
         # a damaged policy.json (a negative or absurd layer width, a wrong keyword) fails in torch or SB3
         raise MotorlabError(f"{run_dir / POLICY_JSON} does not describe a network SB3 can build "
@@ -211,7 +293,15 @@ def _load_sb3(run_dir: Path, meta: dict) -> SB3Policy:
         raise MotorlabError(f"{path} does not match {POLICY_JSON} ({str(e).splitlines()[0]}); re-run training.") from None
     norm = meta.get("obs_norm")
     if norm:
-        return SB3Policy(policy, tensors["obs_rms.mean"], tensors["obs_rms.var"], norm["clip_obs"], norm["epsilon"])
+        keys = [s.key for s in obs_layout(policy.observation_space)]
+        try:
+            stats = {k: (tensors[f"obs_rms.{k}.mean"], tensors[f"obs_rms.{k}.var"]) for k in keys} if keys else \
+                {"": (tensors["obs_rms.mean"], tensors["obs_rms.var"])}
+        except KeyError as e:
+            raise MotorlabError(f"{path} lacks the normalization statistics {e} that {POLICY_JSON} announces; "
+                                "re-run training.") from None
+        mean, var = flat_statistics(stats)
+        return SB3Policy(policy, mean, var, norm["clip_obs"], norm["epsilon"])
     return SB3Policy(policy)
 
 
@@ -255,12 +345,11 @@ def load_policy(spec: str, env: gym.Env, env_id: str, seed: int = 0) -> Policy:
     """
     head = spec.split(":", 1)[0]
     if head == "pid":
-        return make_pid(spec, env_id, int(np.prod(env.observation_space.shape)), float(env.unwrapped.dt),
-                        env.action_space.low, env.action_space.high)
+        return pid_for_env(spec, env, env_id)  # Box actions only, one line otherwise
     if spec == "zero":
-        return ZeroPolicy(env.action_space)
+        return ZeroPolicy(env.action_space, env_id)
     if spec == "random":
-        return RandomPolicy(env.action_space, seed)
+        return RandomPolicy(env.action_space, seed, env_id)
     path = Path(spec)
     if not path.exists():
         raise MotorlabError(unknown_policy_message(spec))

@@ -21,6 +21,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from motorlab.envs import EnvConfig, make_env
+from motorlab.envs.spaces import require_actions
 from motorlab.errors import MotorlabError
 
 
@@ -105,6 +106,13 @@ class LQRPolicy:
                    low=np.asarray(d["low"]), high=np.asarray(d["high"]))
 
 
+def require_bounded(space, user: str, env_id: str) -> None:
+    """Refuse a Box of actions without finite bounds: exploration noise and clipping are scaled by them."""
+    if not (np.isfinite(space.low).all() and np.isfinite(space.high).all()):
+        raise MotorlabError(f"{user} scales its exploration by the action bounds, and {env_id}'s are unbounded "
+                            f"({space}); give your env finite action bounds (its action_space's low and high).")
+
+
 def fit_linear_model(Z: np.ndarray, U: np.ndarray, O_next: np.ndarray, ridge: float = 1e-6):
     """Least-squares ARX fit. Returns (A_top, B_top, mse): O_next ~ Z A_top^T + U B_top^T."""
     X = np.hstack([Z, U])
@@ -162,6 +170,13 @@ def learn_lqr(
     """
     rng = np.random.default_rng(seed)
     env = make_env(env_cfg)
+    try:  # a linear model of continuous commands, and actions clipped to finite bounds
+        require_actions(env.action_space, "the LQR learner (--algo lqr)", env_id=env_cfg.id,
+                        instead="use --algo ppo")
+        require_bounded(env.action_space, "the LQR learner (--algo lqr)", env_cfg.id)
+    except MotorlabError:
+        env.close()
+        raise
     space = env.action_space
     obs_dim = int(np.prod(env.observation_space.shape))
     act_dim = int(np.prod(space.shape))

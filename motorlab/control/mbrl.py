@@ -12,6 +12,11 @@ A killed loop resumes (`resume=True`) from the first round without round.json, r
 the phase that was cut: collection and fitting are deterministic given the seed, so a resumed
 loop ends with the numbers an uninterrupted one would have.
 
+Numerical faults: episodes that ended on one (a diverging simulation) and the non-finite predictions
+and rewards the planner rejected are counted per round (round.json, curve.csv's episode_faults and
+planner_faults; a round's collection keeps its own in its transitions' meta, so a resumed loop counts
+them too) and listed in the run's faults.log.
+
 Held-out episodes: of the episodes numbered 0, 1, 2, ... across rounds, every `holdout_every`-th
 (see `holdout`) is never trained on. "valid_mse" is the model's error on all of them so far,
 "valid_mse_first" on those of the first round that held one out, the same set every round.
@@ -20,7 +25,7 @@ Held-out episodes: of the episodes numbered 0, 1, 2, ... across rounds, every `h
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -29,10 +34,11 @@ import torch
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from motorlab import trackers
-from motorlab.control.mpc_episodes import build_policy, run_episodes
+from motorlab.control.mpc import FaultCounts
+from motorlab.control.mpc_episodes import MPCEpisodes, build_policy, planner_fault_line, require_plannable, run_episodes
 from motorlab.dynamics.collection import collect_transitions, episode_arrays
 from motorlab.dynamics.model import MODEL_JSON, ForwardModel, load_model
-from motorlab.dynamics.state import layout_for
+from motorlab.dynamics.state import env_layout
 from motorlab.dynamics.train import evaluate_rows, fit_model
 from motorlab.dynamics.transitions import TRANSITIONS, Transitions, concatenate, load_transitions
 from motorlab.envs import EnvConfig, make_env
@@ -64,6 +70,38 @@ class RoundRecord:
     collect_seconds: float
     fit_seconds: float
     eval_seconds: float
+    episode_faults: int = 0  # episodes of this round (collected and evaluated) that ended on a numerical fault
+    planner_faults: int = 0  # plans of this round that met non-finite predictions or rewards (rejected)
+
+
+@dataclass
+class PhaseFaults:
+    """The numerical faults of a round's collection or evaluation: its episodes' faults.log lines, and
+    what the planner met (see motorlab.control.mpc.PlannerFaults)."""
+
+    log: list[str] = field(default_factory=list)
+    episodes: int = 0  # episodes that ended on a numerical fault (one line each in `log`)
+    planner: FaultCounts = FaultCounts()
+
+    @classmethod
+    def of(cls, result: MPCEpisodes, where: str, reward: str, model: str) -> PhaseFaults:
+        """The faults of an MPC phase, its lines prefixed with `where` ("round 2 collect")."""
+        log = [f"{where}: {line}" for line in result.fault_log]
+        if result.planner.faulty_plans:
+            log.append(f"{where}: {planner_fault_line(result.planner, reward, model, result.first_planner_fault)}")
+        return cls(log, len(result.fault_log), result.planner)
+
+    def __add__(self, other: PhaseFaults) -> PhaseFaults:
+        return PhaseFaults(self.log + other.log, self.episodes + other.episodes, self.planner + other.planner)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"log": self.log, "episodes": self.episodes, "planner": asdict(self.planner)}
+
+    @classmethod
+    def from_json(cls, d: dict[str, Any] | None) -> PhaseFaults:
+        """What `to_json` wrote (nothing: no faults, as in folders written before faults were kept)."""
+        d = d or {}
+        return cls(list(d.get("log", [])), int(d.get("episodes", 0)), FaultCounts(**d.get("planner", {})))
 
 
 @dataclass(frozen=True)
@@ -108,17 +146,23 @@ def _planner(plan: LoopPlan, model: ForwardModel, r: int):
         env.close()
 
 
-def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | None, progress: bool) -> Transitions:
+COLLECT_FAULTS = "collect_faults"  # the key of a round's collection faults in its transitions' meta
+
+
+def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | None,
+             progress: bool) -> tuple[Transitions, PhaseFaults]:
     """Round r's episodes: random actions in round 1, else MPC on the last round's model."""
     base = plan.seed * SEED_STRIDE + first_episode
     n = plan.episodes_per_round
     if model is None:
         data = collect_transitions(plan.env_id, n, "random", workers=1, seed=base, state=plan.state, progress=False)
         data.episode = data.episode + first_episode
-        return data
+        return data, PhaseFaults([f"round {r + 1} collect: {line}" for line in data.meta["fault_log"]],
+                                 data.meta["numerical_faults"])
     policy = _planner(plan, model, r)
     result = run_episodes(plan.env_id, policy, n, base, min(plan.parallel, n), progress=progress,
                           seeds=[base + i for i in range(n)], record=True)
+    faults = PhaseFaults.of(result, f"round {r + 1} collect", policy.task.reward_source, f"rounds/{r - 1:02d}/model")
     # an episode whose simulation diverged is no transition of the dynamics: it is left out
     kept = [i for i, p in enumerate(result.paths)
             if np.isfinite(p.observations).all() and np.isfinite(p.rewards).all()]
@@ -127,18 +171,21 @@ def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | N
                             f"({result.fault_log[0] if result.fault_log else 'non-finite observations'}).")
     arrays = episode_arrays(*zip(*[tuple(result.paths[i]) for i in kept]), layout=policy.layout,
                             episode_ids=[first_episode + i for i in kept])
-    return Transitions(**arrays, meta={})
+    return Transitions(**arrays, meta={}), faults
 
 
-def _evaluate(plan: LoopPlan, model: ForwardModel, r: int, progress: bool) -> dict[str, float | None]:
+def _evaluate(plan: LoopPlan, model: ForwardModel, r: int, progress: bool) -> tuple[dict[str, float | None],
+                                                                                   PhaseFaults]:
     if plan.eval_episodes == 0:
-        return {"eval_return_mean": None, "eval_return_std": None, "plan_ms_median": None, "disagreement_mean": None}
+        return {"eval_return_mean": None, "eval_return_std": None, "plan_ms_median": None,
+                "disagreement_mean": None}, PhaseFaults()
     policy = _planner(plan, model, r)
     base = plan.seed * SEED_STRIDE + EVAL_OFFSET
     result = run_episodes(plan.env_id, policy, plan.eval_episodes, base, min(plan.parallel, plan.eval_episodes),
                           progress=progress)
-    return {"eval_return_mean": float(result.returns.mean()), "eval_return_std": float(result.returns.std()),
-            "plan_ms_median": float(np.median(result.per_env_ms)), "disagreement_mean": policy.disagreement_mean()}
+    return ({"eval_return_mean": float(result.returns.mean()), "eval_return_std": float(result.returns.std()),
+             "plan_ms_median": float(np.median(result.per_env_ms)), "disagreement_mean": policy.disagreement_mean()},
+            PhaseFaults.of(result, f"round {r + 1} eval", policy.task.reward_source, f"rounds/{r:02d}/model"))
 
 
 def _held_out_mse(model: ForwardModel, data: Transitions, episodes: np.ndarray) -> float | None:
@@ -186,6 +233,7 @@ class LoopResult:
     model: ForwardModel  # the last round's
     transitions: Transitions  # every round's
     task: Any  # the reward and termination the planner scored (motorlab.dynamics.rewards.Task)
+    faults: PhaseFaults = field(default_factory=PhaseFaults)  # every round's
 
 
 def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool = False) -> LoopResult:
@@ -195,6 +243,7 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
     write_json(run_dir / LOOP_JSON, _comparable(asdict(plan)))
     records: list[RoundRecord] = []
     parts: list[Transitions] = []
+    faults = PhaseFaults()
     meta: dict[str, Any] | None = None
     model: ForwardModel | None = None
     first_valid: np.ndarray | None = None
@@ -211,13 +260,15 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                 start = time.perf_counter()
                 if (folder / TRANSITIONS).is_file():
                     data = load_transitions(folder / TRANSITIONS)
+                    collected = PhaseFaults.from_json(data.meta.pop(COLLECT_FAULTS, None))
                 else:
                     bar.update(task, status="collecting" if r else "collecting (random actions)")
-                    data = _collect(plan, r, first_episode, model, progress=False)
+                    data, collected = _collect(plan, r, first_episode, model, progress=False)
                     if meta is None:
                         meta = dict(data.meta, policy="random, then MPC on each round's model")
-                    data.meta = meta
+                    data.meta = {**meta, COLLECT_FAULTS: collected.to_json()}
                     data.save(folder / TRANSITIONS)
+                    data.meta = meta
                 meta = meta or data.meta
                 collect_seconds = time.perf_counter() - start
                 parts.append(data)
@@ -240,10 +291,13 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                 # 3. evaluate the planner on the new model
                 start = time.perf_counter()
                 if (folder / ROUND_JSON).is_file():
-                    record = RoundRecord(**read_json(folder / ROUND_JSON)["record"])
+                    done = read_json(folder / ROUND_JSON)
+                    record = RoundRecord(**done["record"])
+                    round_faults = PhaseFaults.from_json(done.get("faults"))
                 else:
                     bar.update(task, status="evaluating")
-                    numbers = _evaluate(plan, model, r, progress=False)
+                    numbers, evaluated = _evaluate(plan, model, r, progress=False)
+                    round_faults = collected + evaluated
                     record = RoundRecord(
                         round=r + 1, env_steps=len(everything), episodes=len(np.unique(everything.episode)),
                         collect_return_mean=float(np.bincount(data.episode - first_episode, weights=data.rewards)[
@@ -251,9 +305,11 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                         valid_mse=fit_result.get("valid_mse"), valid_mse_first=_held_out_mse(model, everything,
                                                                                              first_valid),
                         collect_seconds=collect_seconds, fit_seconds=fit_seconds,
-                        eval_seconds=time.perf_counter() - start, **numbers)
+                        eval_seconds=time.perf_counter() - start, **numbers,
+                        episode_faults=round_faults.episodes,
+                        planner_faults=round_faults.planner.faulty_plans)
                     write_json(folder / ROUND_JSON, {
-                        "record": asdict(record),
+                        "record": asdict(record), "faults": round_faults.to_json(),
                         "collected_with": "random actions" if r == 0 else {
                             "model": f"rounds/{r - 1:02d}/model", "optimizer": plan.optimizer, **plan.plan,
                             **plan.scoring, "seed": plan.seed * 1000 + r - 1},
@@ -263,6 +319,7 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                         "fit": {k: (list(v) if isinstance(v, tuple) else v) for k, v in plan.fit.items()},
                         "held_out_episodes": valid.tolist()})
                 records.append(record)
+                faults = faults + round_faults
                 curve.write(asdict(record))
                 # the tracked run (--track), live: curve.csv's row, against the env steps collected so far
                 trackers.scalars({f"round/{k}": v for k, v in asdict(record).items() if k != "env_steps"},
@@ -274,13 +331,15 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                     break
     finally:
         curve.close()
-    return LoopResult(records, model, concatenate(parts, meta), _planner(plan, model, len(records)).task)
+    return LoopResult(records, model, concatenate(parts, meta), _planner(plan, model, len(records)).task, faults)
 
 
 def layout_name(env_id: str, state: str) -> str:
-    """The state layout the loop's transitions use (checked against the env)."""
+    """The state layout the loop's transitions use (checked against the env), after refusing an env
+    the planner cannot act on (one line, before any folder is touched)."""
     env = make_env(EnvConfig(id=env_id), shaped=False)
     try:
-        return layout_for(env_id, env.observation_space.shape[0], state).name
+        require_plannable(env, env_id, "mbrl (MPC on a learned model)")
+        return env_layout(env, env_id, state).name
     finally:
         env.close()

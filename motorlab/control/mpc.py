@@ -12,12 +12,20 @@ one env at a time, for users of the reference notebook.
 A sequence's score is its return under the model: each of `particles` copies rolls out
 (TS-inf: a copy keeps its ensemble member; a probabilistic member samples its next state),
 rewards after a predicted termination count nothing, and the copies' returns are averaged.
+
+Non-finite numbers: a candidate whose predicted states or rewards went NaN or Inf (a model off its
+data, a reward that is NaN outside some range) is rejected: its score is -inf, so it is never an
+elite nor weighted. An env whose every candidate was rejected keeps its previous plan (the warm
+start's first action). `PlannerFaults` counts both, on the planner's device (counting never waits
+for it; on the CPU the usual all-finite case is one check per scoring), for the run's summary.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
@@ -26,12 +34,88 @@ from motorlab.dynamics.model import stepwise_rollout
 from motorlab.errors import MotorlabError
 from motorlab.extras import require
 
-# (states (N, S), actions (N, H, A), goals (N, G)) -> returns (N,)
+# (states (N, S), actions (N, H, A), goals (N, G)) -> returns (N,), -inf for a rejected candidate
 Scorer = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
 
 
+@dataclass(frozen=True)
+class FaultCounts:
+    """What a planner met of non-finite numbers over a run (see `PlannerFaults`)."""
+
+    plans: int = 0  # plans made: one env at one control step
+    faulty_plans: int = 0  # plans that met a non-finite prediction or reward among their candidates
+    states: int = 0  # candidates rejected because a predicted state went NaN or Inf
+    rewards: int = 0  # candidates rejected because their reward went NaN or Inf on finite states
+    fallbacks: int = 0  # plans whose every candidate was rejected: the previous plan's action was taken
+
+    def __add__(self, other: FaultCounts) -> FaultCounts:
+        return FaultCounts(*(getattr(self, f.name) + getattr(other, f.name) for f in fields(self)))
+
+
+class PlannerFaults:
+    """The non-finite numbers a planner meets, counted in a tensor on its device: adding to it never
+    waits for the device, `counts()` reads it once. The scorer counts rejected candidates, the
+    planner the plans that met one and those that had to fall back."""
+
+    _FAULTY, _STATES, _REWARDS, _FALLBACKS = range(4)
+
+    def __init__(self):
+        self.plans = 0
+        self._tally: torch.Tensor | None = None
+
+    def _add(self, index: int | slice, amount: torch.Tensor) -> None:
+        if self._tally is None:
+            self._tally = torch.zeros(4, dtype=torch.int64, device=amount.device)
+        self._tally[index] += amount.to(self._tally.device)
+
+    def candidates(self, finite: torch.Tensor, states_finite: torch.Tensor) -> None:
+        """Count the rejected candidates of one scoring: `finite` (N,) whether a candidate's return is
+        finite, `states_finite` (N,) whether its predicted states all are."""
+        rejected = ~finite
+        self._add(slice(self._STATES, self._REWARDS + 1),
+                  torch.stack([(rejected & ~states_finite).sum(), (rejected & states_finite).sum()]))
+
+    def plan(self, n: int, met: torch.Tensor | None = None, found: torch.Tensor | None = None) -> None:
+        """Count a plan for n envs: `met` (n,) which met a rejected candidate, `found` (n,) which had a
+        usable one in some iteration (None: all of them)."""
+        self.plans += n
+        if met is not None:
+            self._add(self._FAULTY, met.sum())
+        if found is not None:
+            self._add(self._FALLBACKS, (~found).sum())
+
+    def counts(self) -> FaultCounts:
+        tally = [0] * 4 if self._tally is None else self._tally.tolist()
+        return FaultCounts(self.plans, *tally)
+
+
+def all_finite(values: torch.Tensor) -> bool:
+    """Whether every value is finite, known for sure on the CPU (False on a GPU: knowing would wait for it).
+
+    Their sum is finite only if every value is (or, in float overflow, says "not known": the careful
+    path then runs): one reduction and one read, ~4x cheaper than isfinite().all() on a
+    planner's few hundred returns, which matters on a path run every iteration of every plan.
+    """
+    return values.device.type == "cpu" and math.isfinite(float(values.sum()))
+
+
+def _reject_non_finite(returns: torch.Tensor, path: torch.Tensor, particles: int,
+                       faults: PlannerFaults | None) -> torch.Tensor:
+    """`returns` with every non-finite one set to -inf (rejected), counted in `faults` as a fault of
+    the model (a non-finite predicted state) or of the reward."""
+    if all_finite(returns):  # the usual case
+        return returns
+    finite = torch.isfinite(returns)
+    if faults is not None:
+        states_finite = torch.isfinite(path).flatten(1).all(1)
+        if particles > 1:
+            states_finite = states_finite.reshape(-1, particles).all(1)
+        faults.candidates(finite, states_finite)
+    return returns.masked_fill(~finite, float("-inf"))
+
+
 def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", particles: int | None = None,
-                 generator: torch.Generator | None = None) -> Scorer:
+                 generator: torch.Generator | None = None, faults: PlannerFaults | None = None) -> Scorer:
     """Return of each action sequence under the forward model and a task (reward, termination;
     see motorlab.dynamics.rewards.Task; a None reward or a "learned" termination use the model's heads)
     or a bare torch reward (state, action, next_state, goal) -> (...,).
@@ -40,6 +124,8 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
     (`fast_rollout`); then the reward scores all H steps in one call on (N, H, ...) tensors: a reward
     is elementwise over its leading dimensions, and one call instead of H saves ~10 torch calls per
     step ahead. Other models step with `step_fn`, collecting their heads' outputs on the way.
+
+    A candidate whose return is NaN or Inf scores -inf (rejected), and is counted in `faults`.
     """
     if particles is None:  # one rollout per candidate, or under TS one particle per member
         particles = model.members if propagation == "ts" else 1
@@ -78,13 +164,15 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
                    else reward_fn(path[:, :-1], actions, path[:, 1:], goals_h))
         ends = (torch.stack(head_ends, 1) if learned_end
                 else end_fn(path[:, :-1], actions, path[:, 1:], goals_h) if end_fn else None)
-        if ends is not None:  # the ending step is paid, the steps after it are not (the episode is over)
-            alive = torch.cumprod((~ends.bool()).to(rewards.dtype), 1)
-            rewards = rewards * torch.cat([torch.ones_like(alive[:, :1]), alive[:, :-1]], 1)
+        if ends is not None:  # the ending step is paid, the steps after it are not (the episode is over):
+            ends = ends.bool()  # left out, not multiplied by 0, so that what a model predicts past it cannot be NaN
+            rewards = rewards.masked_fill(ends.cumsum(1) > ends.to(torch.int64), 0.0)
         if discount != 1.0:
             rewards = rewards * discount ** torch.arange(h, dtype=rewards.dtype, device=rewards.device)
-        returns = rewards.sum(1).nan_to_num(nan=-1e30, posinf=1e30, neginf=-1e30)  # a diverged rollout loses
-        return returns.reshape(-1, particles).mean(1) if particles > 1 else returns
+        returns = rewards.sum(1)
+        if particles > 1:  # a particle's NaN makes its candidate's mean NaN: rejected whole
+            returns = returns.reshape(-1, particles).mean(1)
+        return _reject_non_finite(returns, path, particles, faults)
 
     return score
 
@@ -103,8 +191,10 @@ class GaussianPlanner:
     sampled with a seeded generator on the planner's device, its mean warm-started from the last plan."""
 
     def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int, population: int,
-                 iterations: int, init_std: float, seed: int, device: torch.device | str):
+                 iterations: int, init_std: float, seed: int, device: torch.device | str,
+                 faults: PlannerFaults | None = None):
         self.score = score
+        self.faults = faults or PlannerFaults()
         self.device = torch.device(device)
         self.low = torch.as_tensor(low, dtype=torch.float32, device=self.device)
         self.high = torch.as_tensor(high, dtype=torch.float32, device=self.device)
@@ -133,6 +223,31 @@ class GaussianPlanner:
         samples[:, 0] = mean  # the current mean always competes
         return samples
 
+    def screen(self, returns: torch.Tensor) -> tuple[bool, torch.Tensor | None]:
+        """(whether every candidate's return is finite, known without waiting for the device, and
+        which are finite, (n, p), or None when all are). On a GPU the answer is always "not known":
+        the guarded update costs a few small kernels, a check would cost a sync per iteration."""
+        return (True, None) if all_finite(returns) else (False, torch.isfinite(returns))
+
+
+class _PlanRecord:
+    """One plan's record, per env, of rejected candidates: whether it met one, whether some
+    iteration had a usable candidate (else the plan falls back to the previous one)."""
+
+    def __init__(self):
+        self.met: torch.Tensor | None = None
+        self.found: torch.Tensor | None = None
+        self.clean = False  # some iteration had only finite candidates, for every env
+
+    def guarded(self, finite: torch.Tensor, usable: torch.Tensor) -> None:
+        """An iteration with rejected candidates: `finite` (n, p), `usable` (n,) an env had one not rejected."""
+        met = ~finite.all(1)
+        self.met = met if self.met is None else self.met | met
+        self.found = usable if self.found is None else self.found | usable
+
+    def count(self, faults: PlannerFaults, n: int) -> None:
+        faults.plan(n, self.met, None if self.clean or self.found is None else self.found)
+
 
 class CEMPlanner(GaussianPlanner):
     """Batched CEM over action sequences; `plan(states, goals)` gives one action per env."""
@@ -140,9 +255,9 @@ class CEMPlanner(GaussianPlanner):
     def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int = 15,
                  population: int = 100, iterations: int = 5, elites: int = 10, init_std: float = 0.5,
                  min_std: float = 0.05, momentum: float = 0.1, keep: float = 0.3, execute: str = "mean",
-                 seed: int = 0, device: torch.device | str = "cpu"):
+                 seed: int = 0, device: torch.device | str = "cpu", faults: PlannerFaults | None = None):
         check_plan_settings(horizon, population, iterations, elites)
-        super().__init__(score, low, high, horizon, population, iterations, init_std, seed, device)
+        super().__init__(score, low, high, horizon, population, iterations, init_std, seed, device, faults)
         self.elites = elites
         self.min_std = min_std * (self.high - self.low) / 2
         self.momentum = momentum
@@ -161,19 +276,38 @@ class CEMPlanner(GaussianPlanner):
         std = self.init_std.expand_as(mean).clone()
         rows = torch.arange(n, device=self.device)[:, None]
         kept = self.kept
+        record = _PlanRecord()
+        usable = None
         for _ in range(self.iterations):
             samples = self.sample(mean, std)
             if kept is not None:  # iCEM (Pinneri et al. 2020): the best few of the last round compete again
                 samples[:, 1:1 + kept.shape[1]] = kept
             returns = self.score(flat_states, samples.reshape(n * p, h, -1), flat_goals).reshape(n, p)
-            elite = samples[rows, returns.topk(self.elites, dim=1).indices]  # (n, elites, h, A), best first
+            clean, finite = self.screen(returns)
+            if clean:
+                record.clean = True
+                elite = samples[rows, returns.topk(self.elites, dim=1).indices]  # (n, elites, h, A), best first
+            else:  # a rejected elite gives way to the best one; an env without a usable candidate keeps its Gaussian
+                top = returns.masked_fill(~finite, float("-inf")).topk(self.elites, dim=1)  # rejected ones last
+                ok = torch.isfinite(top.values)
+                elite = samples[rows, torch.where(ok, top.indices, top.indices[:, :1])]
+                usable = ok[:, 0]
+                record.guarded(finite, usable)
             kept = elite[:, :self.keep]
-            mean = self.momentum * mean + (1 - self.momentum) * elite.mean(1)
-            std = torch.maximum(self.momentum * std + (1 - self.momentum) * elite.std(1), self.min_std)
+            new_mean = self.momentum * mean + (1 - self.momentum) * elite.mean(1)
+            new_std = torch.maximum(self.momentum * std + (1 - self.momentum) * elite.std(1), self.min_std)
+            if clean:
+                mean, std = new_mean, new_std
+            else:
+                mean = torch.where(usable[:, None, None], new_mean, mean)
+                std = torch.where(usable[:, None, None], new_std, std)
+        record.count(self.faults, n)
         # warm start: shift the mean and the kept elites by one step for the next control step
         self.mean = torch.cat([mean[:, 1:], mean[:, -1:]], dim=1)
         self.kept = torch.cat([kept[:, :, 1:], kept[:, :, -1:]], dim=2) if self.keep else None
-        return elite[:, 0, 0] if self.execute == "best" else mean[:, 0]
+        if self.execute != "best":
+            return mean[:, 0]
+        return elite[:, 0, 0] if clean else torch.where(usable[:, None], elite[:, 0, 0], mean[:, 0])
 
 
 class MPPIPlanner(GaussianPlanner):
@@ -186,11 +320,11 @@ class MPPIPlanner(GaussianPlanner):
 
     def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int = 15,
                  population: int = 100, iterations: int = 1, init_std: float = 0.5, temperature: float = 0.5,
-                 seed: int = 0, device: torch.device | str = "cpu", **_):
+                 seed: int = 0, device: torch.device | str = "cpu", faults: PlannerFaults | None = None, **_):
         check_plan_settings(horizon, population, iterations, 1)
         if temperature <= 0:
             raise MotorlabError(f"--temperature must be positive, got {temperature}.")
-        super().__init__(score, low, high, horizon, population, iterations, init_std, seed, device)
+        super().__init__(score, low, high, horizon, population, iterations, init_std, seed, device, faults)
         self.temperature = temperature
 
     @torch.no_grad()
@@ -198,14 +332,34 @@ class MPPIPlanner(GaussianPlanner):
         n, p, h = states.shape[0], self.population, self.horizon
         mean, flat_states, flat_goals = self.start(states, goals)
         std = self.init_std.expand_as(mean)
+        record = _PlanRecord()
         for _ in range(self.iterations):
             samples = self.sample(mean, std)
             returns = self.score(flat_states, samples.reshape(n * p, h, -1), flat_goals).reshape(n, p)
-            z = (returns - returns.mean(1, keepdim=True)) / (returns.std(1, keepdim=True) + 1e-8)
-            weights = torch.softmax(z / self.temperature, dim=1)
-            mean = (weights[:, :, None, None] * samples).sum(1)
+            clean, finite = self.screen(returns)
+            if clean:
+                record.clean = True
+                z = (returns - returns.mean(1, keepdim=True)) / (returns.std(1, keepdim=True) + 1e-8)
+                mean = (torch.softmax(z / self.temperature, dim=1)[:, :, None, None] * samples).sum(1)
+            else:  # standardized over the usable candidates only; the rejected ones weigh nothing
+                usable = finite.any(1)
+                record.guarded(finite, usable)
+                z = _standardized(returns, finite)
+                moved = (torch.softmax(z / self.temperature, dim=1)[:, :, None, None] * samples).sum(1)
+                mean = torch.where(usable[:, None, None], moved, mean)  # none usable: NaN weights, not taken
+        record.count(self.faults, n)
         self.mean = torch.cat([mean[:, 1:], mean[:, -1:]], dim=1)
         return mean[:, 0]
+
+
+def _standardized(returns: torch.Tensor, finite: torch.Tensor) -> torch.Tensor:
+    """Returns (n, p) standardized per row over its finite entries (as Tensor.std: unbiased); -inf
+    for the others."""
+    count = finite.sum(1, keepdim=True)
+    kept = torch.where(finite, returns, 0.0)
+    mu = kept.sum(1, keepdim=True) / count.clamp(min=1)
+    var = torch.where(finite, (kept - mu) ** 2, 0.0).sum(1, keepdim=True) / (count - 1).clamp(min=1)
+    return torch.where(finite, (kept - mu) / (var.sqrt() + 1e-8), float("-inf"))
 
 
 class EvoTorchCEM:
@@ -213,10 +367,11 @@ class EvoTorchCEM:
 
     def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int = 10,
                  population: int = 200, iterations: int = 5, elites: int = 20, init_std: float = 0.5,
-                 seed: int = 0, device: torch.device | str = "cpu", **_):
+                 seed: int = 0, device: torch.device | str = "cpu", faults: PlannerFaults | None = None, **_):
         check_plan_settings(horizon, population, iterations, elites)
         require("evotorch", "evotorch", "--optimizer evotorch needs EvoTorch")  # fail here, not at the first plan
         self.score = score
+        self.faults = faults or PlannerFaults()
         self.low, self.high = np.asarray(low, dtype=np.float32), np.asarray(high, dtype=np.float32)
         self.horizon, self.population, self.iterations, self.elites = horizon, population, iterations, elites
         self.init_std = float(init_std * np.max((self.high - self.low) / 2))
@@ -239,13 +394,19 @@ class EvoTorchCEM:
         a_dim = len(self.low)
         low, high = torch.as_tensor(self.low, device=self.device), torch.as_tensor(self.high, device=self.device)
         actions = []
+        met, found = [], []
         for i in range(states.shape[0]):
             s, g = states[i:i + 1], goals[i:i + 1]
+            seen = {"rejected": False, "usable": False}
 
-            def objective(x: torch.Tensor, s=s, g=g) -> torch.Tensor:
+            def objective(x: torch.Tensor, s=s, g=g, seen=seen) -> torch.Tensor:
                 # EvoTorch's CEM searches an unbounded space: the env would clip, so the model sees clipped actions
                 seqs = torch.maximum(torch.minimum(x.reshape(len(x), self.horizon, a_dim), high), low)
-                return self.score(s.expand(len(x), -1), seqs, g.expand(len(x), -1))
+                returns = self.score(s.expand(len(x), -1), seqs, g.expand(len(x), -1))
+                finite = torch.isfinite(returns)
+                seen["rejected"] |= not bool(finite.all())
+                seen["usable"] |= bool(finite.any())
+                return returns.clamp(min=-1e30)  # a rejected candidate ranks last; EvoTorch takes no -inf
 
             problem = Problem("max", objective, solution_length=self.horizon * a_dim, vectorized=True,
                               dtype=torch.float32, seed=self.seed, device=self.device)
@@ -255,9 +416,14 @@ class EvoTorchCEM:
                 searcher.step()
             center = np.clip(searcher.status["center"].cpu().numpy(), np.tile(self.low, self.horizon),
                              np.tile(self.high, self.horizon))
+            if not seen["usable"]:  # every candidate rejected: the last plan's next action, its centre kept
+                center = self.centers[i]
             plan = center.reshape(self.horizon, a_dim)
             self.centers[i] = np.concatenate([plan[1:], plan[-1:]]).ravel()
             actions.append(plan[0])
+            met.append(seen["rejected"])
+            found.append(seen["usable"])
+        self.faults.plan(len(met), torch.tensor(met), torch.tensor(found))
         return torch.as_tensor(np.array(actions))
 
 
@@ -282,6 +448,11 @@ class MPCPolicy:
         self.device = torch.device(device)
         self.disagreements: list[np.ndarray] = []
         self.task = None  # the reward and termination it plans with (build_policy sets it)
+
+    @property
+    def faults(self) -> PlannerFaults:
+        """The non-finite predictions and rewards its planner met (rejected candidates, fallbacks)."""
+        return self.planner.faults
 
     def disagreement_mean(self) -> float | None:
         """The ensemble's mean disagreement over the steps taken so far (None for one member)."""

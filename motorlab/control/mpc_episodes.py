@@ -17,11 +17,12 @@ import numpy as np
 import torch
 from rich.progress import Progress
 
-from motorlab.control.mpc import MPCPolicy, make_planner, model_scorer
+from motorlab.control.mpc import FaultCounts, MPCPolicy, PlannerFaults, make_planner, model_scorer
 from motorlab.dynamics.model import ForwardModel, device_for, load_model
 from motorlab.dynamics.rewards import resolve_task
-from motorlab.dynamics.state import layout_for, xy_columns
+from motorlab.dynamics.state import env_layout, xy_columns
 from motorlab.envs import EnvConfig, make_env
+from motorlab.envs.spaces import require_actions
 from motorlab.errors import MotorlabError
 from motorlab.faults import fault_line, fault_of
 from motorlab.report.video import filming, record_episode, write_mp4
@@ -33,35 +34,63 @@ def build_policy(env, env_id: str, model: Path | ForwardModel, optimizer: str = 
     """An MPC policy for `env` on a forward model (or the model folder holding one), checked against the
     env and its layout. `reward` and `termination` say what it scores (motorlab.dynamics.rewards.resolve_task);
     `settings` are the optimizer's (horizon, population, iterations, elites or temperature)."""
+    require_plannable(env, env_id)
     where = model if isinstance(model, ForwardModel) else Path(model)
     if not isinstance(model, ForwardModel):
         model = load_model(model, env_id=env_id)
-    layout = layout_for(env_id, env.observation_space.shape[0], model.meta.get("state_layout", "observation"))
+    layout = env_layout(env, env_id, model.meta.get("state_layout", "observation"))
     if model.state_size != layout.size or model.action_size != env.action_space.shape[0]:
         raise MotorlabError(f"{where} predicts {model.state_size} state entries from {model.action_size} "
                             f"actions; {env_id} has {layout.size} and {env.action_space.shape[0]}. Refit the model.")
+    if model.meta.get("obs_layout") != layout.keys_json():
+        raise MotorlabError(f"{where} was fit on observations whose Dict keys lie at {_keys(model.meta.get('obs_layout'))}, "
+                            f"{env_id}'s at {_keys(layout.keys_json())}; refit the model on {env_id}'s transitions.")
     task = resolve_task(env_id, layout.name, layout.size, model.action_size, len(layout.goal_labels), reward,
-                        termination, frozenset(model.heads))
+                        termination, frozenset(model.heads), achieved=layout.achieved)
     dev = device_for(device)
     if threads and dev.type == "cpu":
         torch.set_num_threads(threads)  # small batches: more threads cost more than they give
     model = model.to(dev)
     # the particles' own noise (probabilistic members), apart from the optimizer's samples
+    faults = PlannerFaults()
     score = model_scorer(model, task, propagation=propagation, particles=particles,
-                         generator=torch.Generator(dev).manual_seed(seed + 7919))
+                         generator=torch.Generator(dev).manual_seed(seed + 7919), faults=faults)
     planner = make_planner(optimizer, score, env.action_space.low, env.action_space.high, seed=seed, device=dev,
-                           **settings)
+                           faults=faults, **settings)
     policy = MPCPolicy(planner, layout, model, dev)
     policy.task = task
     return policy
 
 
+def require_plannable(env, env_id: str, user: str = "MPC") -> None:
+    """Refuse, in one line, an env the planner cannot act on: actions that are not a Box, or a Box
+    without finite bounds (the planner samples action sequences within them). `user`: who refuses."""
+    require_actions(env.action_space, user, env_id=env_id,
+                    instead=f"learn it model-free instead, e.g. `motorlab train {env_id} --algo ppo`")
+    space = env.action_space
+    if not (np.isfinite(space.low).all() and np.isfinite(space.high).all()):
+        raise MotorlabError(f"{user} samples actions within the action bounds, and {env_id}'s are unbounded "
+                            f"({space}); give your env finite action bounds (its action_space's low and high).")
+
+
+def _keys(layout: list[dict] | None) -> str:
+    """A recorded obs_layout in a few words: "achieved_goal 0:2, desired_goal 2:4, ..." or that there is none."""
+    if not layout:
+        return "(none: not a Dict observation)"
+    return ", ".join(f"{k.get('key')} {k.get('start')}:{k.get('stop')}" for k in layout)
+
+
 def _distance(layout, obs: np.ndarray) -> float:
-    """Fingertip-to-target distance for layouts that know both (reacher), else NaN."""
+    """Distance to the goal for layouts that know both ends: the fingertip's to the target (reacher),
+    the achieved_goal's to the desired_goal (a Dict observation with both); else NaN."""
     xy = xy_columns(layout.labels)
-    if xy is None or len(layout.goal_labels) != 2:
+    if xy is not None and len(layout.goal_labels) == 2:
+        reached = layout.state(obs)[xy]
+    elif layout.achieved is not None:
+        reached = layout.state(obs)[layout.achieved]
+    else:
         return float("nan")
-    return float(np.linalg.norm(layout.state(obs)[xy] - layout.goal(obs)))
+    return float(np.linalg.norm(reached - layout.goal(obs)))
 
 
 class EpisodePath(NamedTuple):
@@ -81,6 +110,18 @@ class MPCEpisodes(NamedTuple):
     per_env_ms: np.ndarray  # the same per env
     fault_log: list[str]  # one line per episode ended by a numerical fault
     paths: list[EpisodePath] | None = None  # each episode's transitions, when recorded
+    planner: FaultCounts = FaultCounts()  # the non-finite predictions and rewards the planner met
+    first_planner_fault: str | None = None  # where the planner first met one: "seed=S step=T"
+
+
+def planner_fault_line(counts: FaultCounts, reward: str, model: str, first: str | None = None) -> str:
+    """One line for faults.log and the warning: what the planner met of non-finite numbers."""
+    fallbacks = (f"; {counts.fallbacks} plan{'s' * (counts.fallbacks != 1)} had no usable candidate and fell back "
+                 "to the previous plan (the middle of the action range at an episode's start)") if counts.fallbacks else ""
+    where = f"; first at {first}" if first else ""
+    return (f"planner: {counts.faulty_plans} of {counts.plans} plans met NaN/Inf numbers: {counts.rewards} "
+            f"candidate{'s' * (counts.rewards != 1)} with a NaN/Inf reward (reward {reward}), {counts.states} with "
+            f"NaN/Inf predicted states (model {model}), all rejected{fallbacks}{where}")
 
 
 def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, parallel: int,
@@ -90,6 +131,7 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
     seeds = list(seeds) if seeds is not None else [seed + i for i in range(episodes)]
     envs = [make_env(EnvConfig(id=env_id), shaped=False) for _ in range(parallel)]
     returns, distances, call_ms, per_env_ms, fault_log, paths = [], [], [], [], [], []
+    before, first_fault = policy.faults.counts(), None
     with Progress(disable=not progress) as bar:
         task = bar.add_task(f"MPC on {env_id}", total=episodes)
         for first in range(0, episodes, parallel):
@@ -107,6 +149,9 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
                 ms = (time.perf_counter() - start) * 1000
                 call_ms.append(ms)
                 per_env_ms.append(ms / len(group))
+                if first_fault is None and policy.faults.counts().faulty_plans > before.faulty_plans:
+                    live_seeds = ",".join(str(seeds[first + i]) for i in np.flatnonzero(live))
+                    first_fault = f"step {len(dist[int(np.flatnonzero(live)[0])]) - 1} of seed={live_seeds}"
                 for i in np.flatnonzero(live):
                     o, r, terminated, truncated, info = group[i].step(actions[i])
                     if record:
@@ -130,8 +175,10 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
         e.close()
     length = max(len(d) for d in distances)
     padded = np.array([d + [d[-1]] * (length - len(d)) for d in distances])
+    planner = policy.faults.counts()
+    planner = FaultCounts(*(getattr(planner, k) - getattr(before, k) for k in FaultCounts.__dataclass_fields__))
     return MPCEpisodes(np.array(returns), padded, np.array(call_ms), np.array(per_env_ms), fault_log,
-                       paths if record else None)
+                       paths if record else None, planner, first_fault)
 
 
 def record_video(env_id: str, policy: MPCPolicy, path: Path, seed: int) -> Path:

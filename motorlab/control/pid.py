@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from motorlab.envs import env_dt
+from motorlab.envs.spaces import require_actions
 from motorlab.errors import MotorlabError
 
 # Gains that balance InvertedPendulum (obs: cart x, pole angle, cart velocity, pole velocity).
@@ -110,6 +112,23 @@ def parse_gains(text: str) -> dict[str, list[float]]:
     if leftover:
         raise MotorlabError(f"cannot read PID gains {text!r}; write them as pid:kp=[1,20,0,0],ki=0,kd=[1,3,0,0].")
     return gains
+
+
+def pid_for_env(spec: str, env, env_id: str) -> PIDController:
+    """`make_pid` for a built env: its flat observation size, its dt and action bounds.
+
+    Raises:
+        MotorlabError: an env whose actions are not a Box (a PID's output is a continuous command),
+            or bad gains.
+    """
+    require_actions(env.action_space, "the PID controller", env_id=env_id,
+                    instead=f"evaluate a policy trained with `motorlab train {env_id} --algo ppo` instead")
+    dt = env_dt(env)
+    if dt is None:
+        raise MotorlabError(f"the PID controller needs {env_id}'s step duration, and the env has no dt (nor a "
+                            "MuJoCo timestep and frame skip); evaluate a trained policy instead.")
+    return make_pid(spec, env_id, int(np.prod(env.observation_space.shape)), dt, env.action_space.low,
+                    env.action_space.high)
 
 
 def make_pid(spec: str, env_id: str, obs_dim: int, dt: float, low, high) -> PIDController:

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from pydantic import Field
 from rich.console import Console
+from rich.markup import escape
 
 from motorlab import trackers
 from motorlab.dynamics.steps import ModelSettings
@@ -19,6 +20,9 @@ from motorlab.runs import MetricsWriter, atomic_write_npz
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind
 
+if TYPE_CHECKING:  # the planner's domain code (torch) is imported where a run needs it
+    from motorlab.control.mpc import FaultCounts
+
 
 class PlannerSettings(Settings):
     """What MPC plans with: the reward and termination it scores, the optimizer and its budget, how
@@ -28,8 +32,10 @@ class PlannerSettings(Settings):
     # The horizon matters most (10 steps: ~-4.6); population x iterations buys precision at ~0.6 us per row.
     reward: str = Field("auto", description="What the planner maximizes: builtin (motorlab's torch reward for "
                         "Reacher, Pusher, InvertedPendulum, ...), MODULE:FUNCTION (your torch function (obs, action, "
-                        "next_obs) -> reward), learned (the model's reward head: fit with --learn-reward), auto "
-                        "(builtin where there is one, else learned where the model has the head)")
+                        "next_obs) -> reward), learned (the model's reward head: fit with --learn-reward), goal "
+                        "(minus the distance from achieved_goal to desired_goal, for an env with a Dict observation "
+                        "holding both), auto (builtin where there is one, else learned where the model has the head, "
+                        "else goal where the env has one)")
     termination: str = Field("auto", description="When a planned episode ends (rewards after it count nothing): "
                              "builtin, MODULE:FUNCTION (obs, action, next_obs) -> bool, learned (--learn-termination), "
                              "none, auto (the builtin reward's termination, else the learned head, else none)")
@@ -63,6 +69,33 @@ class PlannerSettings(Settings):
                     particles=self.particles, device=self.device)
 
 
+class PlannerFaultsSummary(Summary):
+    """The numerical faults of a run that plans: episodes that ended on one, and the non-finite
+    predictions and rewards its planner rejected (motorlab.control.mpc.PlannerFaults)."""
+
+    numerical_faults: int = 0  # episode_faults + planner_faults
+    episode_faults: int = 0  # episodes ended on a numerical fault (NaN/Inf or a diverging simulation)
+    planner_faults: int = 0  # plans (one env, one control step) that met a NaN/Inf prediction or reward
+    planner_nonfinite_states: int = 0  # candidate action sequences rejected for NaN/Inf predicted states
+    planner_nonfinite_rewards: int = 0  # candidates rejected for a NaN/Inf reward on finite states
+    planner_fallbacks: int = 0  # plans whose every candidate was rejected: the previous plan's action was taken
+
+
+def fault_keys(episodes: int, planner: FaultCounts) -> dict[str, int]:
+    """PlannerFaultsSummary's keys from the episodes' fault count and the planner's FaultCounts."""
+    return dict(numerical_faults=episodes + planner.faulty_plans, episode_faults=episodes,
+                planner_faults=planner.faulty_plans, planner_nonfinite_states=planner.states,
+                planner_nonfinite_rewards=planner.rewards, planner_fallbacks=planner.fallbacks)
+
+
+def warn_planner_faults(console: Console | None, line: str | None, run_dir: Path) -> None:
+    """One warning line on stderr (or the console the run was given) when the planner met non-finite
+    numbers: they are rejected and counted, not fatal, and must not go unseen."""
+    if line:
+        (console or Console(stderr=True)).print(f"[yellow]warning[/yellow]: {escape(line)}; listed in "
+                                                f"{escape(str(run_dir))}/faults.log", soft_wrap=True)
+
+
 class MpcSettings(PlannerSettings):
     env: str = Field(description="Env id the model was fit on, e.g. Reacher-v5, or MODULE:EnvId")
     model: str = Field(description="A model folder from `motorlab dynamics fit`")
@@ -72,7 +105,7 @@ class MpcSettings(PlannerSettings):
     seed: int = Field(0, ge=0, description="Random seed (env resets and the planner)")
 
 
-class MpcSummary(Summary):
+class MpcSummary(PlannerFaultsSummary):
     env_id: str
     episodes: int
     return_mean: float
@@ -95,17 +128,18 @@ class MpcSummary(Summary):
     iterations: int
     elites: int | None = None
     temperature: float | None = None
-    wall_seconds: float
-    numerical_faults: int  # and "video", the first episode's MP4, when one was asked for
+    wall_seconds: float  # and "video", the first episode's MP4, when one was asked for
 
 
 class MpcKind(StepKind[MpcSettings, MpcSummary]):
     """Model-predictive control on a learned forward model (CEM, MPPI or EvoTorch's CEM), maximizing a
     builtin, user or learned reward.
 
-    summary.json: return_mean, return_std, final_distance_mean (metres, Reacher), plan_ms_median (per env per
-    control step), disagreement_mean (ensembles); episodes.npz (returns, distances, plan_ms, disagreement: one
-    per env per control step), metrics.csv (one row per episode), plots/distance.png."""
+    summary.json: return_mean, return_std, final_distance_mean (metres, Reacher's fingertip to its target, a
+    goal-conditioned env's achieved_goal to its desired_goal), plan_ms_median (per env per control step),
+    disagreement_mean (ensembles), numerical_faults (episode_faults + planner_faults); episodes.npz (returns,
+    distances, plan_ms, disagreement: one per env per control step), metrics.csv (one row per episode),
+    plots/distance.png."""
 
     name = "mpc"
     what = "MPC ({optimizer}) on {model} · {env}"
@@ -126,7 +160,7 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
 
     def run(self, settings: MpcSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> MpcSummary:
-        from motorlab.control.mpc_episodes import build_policy, record_video, run_episodes
+        from motorlab.control.mpc_episodes import build_policy, planner_fault_line, record_video, run_episodes
         from motorlab.report.dynamics_plots import distance_over_time
 
         s = settings
@@ -137,9 +171,11 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
         parallel = min(s.parallel, s.episodes)
         run_dir = self.start(out)
         start = time.perf_counter()
-        returns, distances, call_ms, per_env_ms, fault_log, _ = run_episodes(s.env, policy, s.episodes, s.seed,
-                                                                              parallel, progress)
+        result = run_episodes(s.env, policy, s.episodes, s.seed, parallel, progress)
+        returns, distances, call_ms, per_env_ms = result.returns, result.distances, result.call_ms, result.per_env_ms
         wall = time.perf_counter() - start
+        planner_line = planner_fault_line(result.planner, policy.task.reward_source, s.model,
+                                          result.first_planner_fault) if result.planner.faulty_plans else None
         final = distances[:, -1]
         metrics = MetricsWriter(run_dir / "metrics.csv", ["episode", "return", "final_distance"])
         for i, (r, d) in enumerate(zip(returns, final, strict=True)):
@@ -166,8 +202,10 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
                              disagreement_mean=policy.disagreement_mean(), parallel=parallel, optimizer=s.optimizer,
                              reward_source=policy.task.reward_source, termination_source=policy.task.termination_source,
                              propagation=s.propagation, particles=s.particles, device=str(policy.device), **s.plan(),
-                             wall_seconds=wall, numerical_faults=len(fault_log), **video)
-        return self.finish(run_dir, settings, summary, fault_log)
+                             wall_seconds=wall, **fault_keys(len(result.fault_log), result.planner), **video)
+        summary = self.finish(run_dir, settings, summary, result.fault_log + ([planner_line] if planner_line else []))
+        warn_planner_faults(console, planner_line, run_dir)
+        return summary
 
 
 MPC = MpcKind()
@@ -221,7 +259,7 @@ class MbrlSettings(PlannerSettings, ModelSettings):
                         optimizer=self.optimizer, plan=self.plan(), scoring=self.scoring())
 
 
-class MbrlSummary(Summary):
+class MbrlSummary(PlannerFaultsSummary):
     env_id: str
     rounds: int
     env_steps: int  # collected in all rounds
@@ -271,6 +309,7 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
         import shutil
 
         from motorlab.control.mbrl import ROUND_JSON, check_resumable, run_loop
+        from motorlab.control.mpc_episodes import planner_fault_line
         from motorlab.report.dynamics_plots import mbrl_curve
 
         s = settings
@@ -296,7 +335,9 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
         evals = [r.eval_return_mean for r in records if r.eval_return_mean is not None]
         plan_ms = [r.plan_ms_median for r in records if r.plan_ms_median is not None]
         last = records[-1]
+        faults = result.faults
         summary = MbrlSummary(
+            **fault_keys(faults.episodes, faults.planner),
             env_id=s.env, rounds=len(records), env_steps=last.env_steps, episodes=last.episodes,
             final_return_mean=last.eval_return_mean, final_return_std=last.eval_return_std,
             best_return_mean=max(evals) if evals else None, valid_mse=last.valid_mse,
@@ -306,7 +347,11 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
             propagation=s.propagation, optimizer=s.optimizer, resumed_rounds=done_before,
             reached_return=None if s.until_return is None else bool(evals) and max(evals) >= s.until_return,
             wall_seconds=time.perf_counter() - start)
-        return self.finish(run_dir, settings, summary)
+        summary = self.finish(run_dir, settings, summary, faults.log)
+        if faults.planner.faulty_plans:
+            warn_planner_faults(console, planner_fault_line(faults.planner, task.reward_source, "rounds/NN/model"),
+                                run_dir)
+        return summary
 
 
 MBRL = MbrlKind()

@@ -25,9 +25,10 @@ import torch
 from rich.progress import Progress
 
 from motorlab.dynamics.reacher_sim import arm_models, closed_form_arm, rollout_reacher, sample_initial_states
-from motorlab.dynamics.state import StateLayout, layout_for
+from motorlab.dynamics.state import StateLayout, env_layout
 from motorlab.dynamics.transitions import Transitions
 from motorlab.envs import EnvConfig, make_env
+from motorlab.envs.spaces import encode_space, flat_space, require_actions
 from motorlab.errors import MotorlabError
 from motorlab.faults import fault_line, fault_of
 from motorlab.policies import load_policy_files, load_run_policy
@@ -159,6 +160,22 @@ def _collect_pool(env_cfg: EnvConfig, policy_dir: str | None, episodes: int, see
     return episode_arrays(*zip(*(r[:-1] for r in results)), layout=layout, episode_ids=range(episodes)), faults
 
 
+def require_continuous(env: gym.Env, env_id: str, user: str, random: bool = False) -> None:
+    """Refuse, in one line, an env whose actions a forward model cannot take: not a Box (a discrete
+    choice), or, for uniformly random actions (`random`), a Box without finite bounds to draw them in.
+
+    Raises:
+        MotorlabError: naming the env, its action space and what fits it.
+    """
+    require_actions(env.action_space, user, env_id=env_id,
+                    instead=f"learn it model-free instead, e.g. `motorlab train {env_id} --algo ppo`")
+    space = env.action_space
+    if random and not (np.isfinite(space.low).all() and np.isfinite(space.high).all()):
+        raise MotorlabError(f"{user} draws random actions within the action bounds, and {env_id}'s are unbounded "
+                            f"({space}); give your env finite action bounds (its action_space's low "
+                            "and high) or collect with --policy RUN_DIR.")
+
+
 def collect_transitions(env_id: str, episodes: int, policy: str = "random", workers: int | None = None,
                         seed: int = 0, state: str = "auto", simulator: str = "auto",
                         progress: bool = True) -> Transitions:
@@ -185,13 +202,20 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
         raise MotorlabError(f"--simulator {simulator!r}: choose {', '.join(SIMULATORS[:-1])} or {SIMULATORS[-1]}.")
     env_cfg = EnvConfig(id=env_id)
     env = make_env(env_cfg, shaped=False)
-    layout = layout_for(env_id, env.observation_space.shape[0], state)
+    try:  # before any work: one line for an env a forward model cannot act on
+        require_continuous(env, env_id, "dynamics collect", random=policy == "random")
+        layout = env_layout(env, env_id, state)
+    except MotorlabError:
+        env.close()
+        raise
     policy_dir = None
     if policy != "random":
         policy_dir = str(Path(policy).resolve())
         if not Path(policy).exists():
             raise MotorlabError(f"--policy {policy!r} is neither 'random' nor a run folder from `motorlab train`.")
         expected = getattr(getattr(load_run_policy(Path(policy)), "policy", None), "observation_space", None)
+        if expected is not None:  # a policy trained on a Dict observation acts on its flat vector here
+            expected = flat_space(expected)
         if expected is not None and expected.shape != env.observation_space.shape:
             raise MotorlabError(f"the policy in {policy} expects observations of shape {expected.shape}, "
                                 f"{env_id} gives {env.observation_space.shape}; pick the env it was trained on.")
@@ -220,6 +244,7 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
     seconds = time.perf_counter() - start
     meta = {"env_id": env_id, "state_layout": layout.name, "state_labels": list(layout.labels),
             "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),
+            "obs_layout": layout.keys_json(), "action_space": encode_space(env.action_space),
             "action_low": env.action_space.low.tolist(), "action_high": env.action_space.high.tolist(),
             "policy": policy_dir or "random", "seed": seed, "episodes": episodes,
             "simulator": used, "workers": workers, "seconds": seconds,

@@ -12,6 +12,11 @@ planner scores predicted paths with them; `resolve_task` picks them from one of 
   in the default "observation" layout). `load_function` imports it, `resolve_task` checks it on
   probe tensors.
 - `learned`: a head of the forward model fitted with the dynamics (`Task.reward` is then None).
+- `goal`: for a goal-conditioned env (a Dict observation with achieved_goal and desired_goal, e.g.
+  Gymnasium-Robotics' mazes and Fetch tasks, which bundle no torch reward): minus the distance from
+  the achieved_goal after the step to the desired_goal (`GoalDistance`). It is not the env's own
+  reward (often sparse: 1 within a radius), but one a short horizon can climb; `auto` takes it
+  where there is no builtin reward and no learned head.
 
 See docs/model-based-rewards.md for which Gymnasium MuJoCo envs cannot be bundled and why.
 """
@@ -33,7 +38,7 @@ from motorlab.user_modules import import_modules
 StateFn = Callable[[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
 TorchReward = StateFn  # the name this module had before terminations
 
-SOURCES = ("builtin", "learned")  # besides "auto", "none" (terminations) and MODULE:FUNCTION
+SOURCES = ("builtin", "learned", "goal")  # besides "auto", "none" (terminations) and MODULE:FUNCTION
 PROBE_SHAPES = ((2, 3), (5,))  # leading shapes a user function is checked on
 
 
@@ -169,6 +174,20 @@ register("HumanoidStandup-v4", "observation", humanoid_standup_v4, state_size=37
 # Not InvertedDoublePendulum: the env scores the tip MuJoCo placed during the last RK4 substep
 # (not the observed angles', ~1e-5 m apart) and unclipped velocities (the observation clips them
 # at 10), so a reward or termination from the observation is close but not the env's own.
+
+
+class GoalDistance:
+    """The goal reward: minus the distance from the achieved_goal entries of the state after the step
+    to the goal (the desired_goal), for goal-conditioned envs with a Dict observation."""
+
+    def __init__(self, achieved: slice):
+        self.achieved = achieved
+
+    def __call__(self, state, action, next_state, goal):
+        return -_norm(next_state[..., self.achieved] - goal)
+
+    def __repr__(self) -> str:
+        return f"GoalDistance(achieved={self.achieved.start}:{self.achieved.stop})"
 
 
 # ---- one-line messages ------------------------------------------------------------------
@@ -366,24 +385,37 @@ def _builtin(env_id: str, layout: str, state_size: int) -> _Builtin | None:
 
 
 def _unknown(what: str, value: str, choices: tuple[str, ...]) -> MotorlabError:
-    return MotorlabError(f"--{what} {value!r}{did_you_mean(value, choices)}: choose {', '.join(choices)} or "
-                         "MODULE:FUNCTION (your torch function (obs, action, next_obs) -> "
-                         f"{_returns(what)}).")
+    known, goal = choices, ""
+    if what == "reward":  # named apart: it applies to goal-conditioned envs only
+        known, goal = (*choices, "goal"), ", or goal on a goal-conditioned env (achieved_goal and desired_goal in " \
+            "its Dict observation)"
+    return MotorlabError(f"--{what} {value!r}{did_you_mean(value, known)}: choose {', '.join(choices)} or "
+                         f"MODULE:FUNCTION (your torch function (obs, action, next_obs) -> {_returns(what)}){goal}.")
+
+
+def _no_goal(env_id: str) -> MotorlabError:
+    return MotorlabError(f"--reward goal: minus the distance from achieved_goal to desired_goal needs an env whose "
+                         f"Dict observation holds both keys, of one size; {env_id}'s does not. Use --reward "
+                         "MODULE:FUNCTION (your torch function (obs, action, next_obs) -> reward) or --reward learned "
+                         "(fit the model with --learn-reward).")
 
 
 def resolve_task(env_id: str, layout: str, state_size: int, action_size: int, goal_size: int = 0,
                  reward: str = "auto", termination: str = "auto",
-                 learned: frozenset[str] = frozenset()) -> Task:
+                 learned: frozenset[str] = frozenset(), achieved: slice | None = None) -> Task:
     """The reward and termination to plan with on env_id.
 
     Args:
         layout: the model's state layout ("observation", "reacher").
         state_size, action_size, goal_size: the model's; a user function is checked on tensors of these sizes.
         reward: "auto" (builtin if bundled for env_id and layout, else learned if the model has a reward
-            head), "builtin", "learned" or "module:function".
+            head, else goal where the env is goal-conditioned), "builtin", "learned", "goal" or
+            "module:function".
         termination: "auto" (the bundled one with a bundled reward, else learned if the model has a
             termination head, else none), "builtin", "learned", "none" or "module:function".
         learned: the heads the model has ({"reward"}, {"reward", "termination"} or none).
+        achieved: the state's achieved_goal entries, for a goal-conditioned env whose goal is the
+            desired_goal (StateLayout.achieved): what makes the goal reward available.
 
     Raises:
         MotorlabError: one line naming what is missing and the ways to give it.
@@ -396,6 +428,8 @@ def resolve_task(env_id: str, layout: str, state_size: int, action_size: int, go
             reward = "builtin"
         elif "reward" in learned:
             reward = "learned"
+        elif achieved is not None:
+            reward = "goal"
         else:
             raise MotorlabError(missing_reward_message(env_id, layout, state_size))
     if reward == "builtin":
@@ -411,6 +445,10 @@ def resolve_task(env_id: str, layout: str, state_size: int, action_size: int, go
             raise MotorlabError(f"--reward learned: this model of {env_id} has no reward head; refit it with "
                                 "--learn-reward, or use --reward builtin or --reward MODULE:FUNCTION.")
         reward_fn = None
+    elif reward == "goal":
+        if achieved is None:
+            raise _no_goal(env_id)
+        reward_fn = GoalDistance(achieved)
     elif ":" in reward:
         reward_fn = _user_function(reward, "reward", state_size, action_size)
     else:

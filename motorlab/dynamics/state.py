@@ -3,16 +3,25 @@
 A `StateLayout` names the state's entries and, where the task has one, a goal the
 planner's cost needs but the dynamics do not predict (Reacher's target). The default
 layout is the observation itself; `reacher` is the reference notebook's 8-number state.
+
+An env with a Dict observation (a goal-conditioned task: observation, achieved_goal,
+desired_goal) is seen flattened, as `gymnasium.spaces.flatten` lays it out
+(motorlab.envs.spaces): the layout keeps each key's slice (`keys`), names the entries after
+their keys ("achieved_goal[0]", ...), and takes the desired_goal as the planner's goal.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import gymnasium as gym
 import numpy as np
 
+from motorlab.envs.spaces import KeySlice, is_dict, obs_layout
 from motorlab.errors import MotorlabError
+
+ACHIEVED, DESIRED = "achieved_goal", "desired_goal"
 
 
 @dataclass(frozen=True)
@@ -22,6 +31,8 @@ class StateLayout:
     goal_labels: tuple[str, ...] = ()
     _state: Callable[[np.ndarray], np.ndarray] | None = field(default=None, repr=False, compare=False)
     _goal: Callable[[np.ndarray], np.ndarray] | None = field(default=None, repr=False, compare=False)
+    # a Dict observation's keys and where each lies in the state (empty for a Box observation)
+    keys: tuple[KeySlice, ...] = ()
 
     @property
     def size(self) -> int:
@@ -36,6 +47,22 @@ class StateLayout:
         if self._goal is None:
             return np.zeros(obs.shape[:-1] + (0,), dtype=obs.dtype)
         return self._goal(obs)
+
+    def key(self, name: str) -> KeySlice | None:
+        return next((k for k in self.keys if k.key == name), None)
+
+    @property
+    def achieved(self) -> slice | None:
+        """The state's achieved_goal entries where the goal is the desired_goal of the same size
+        (a goal-conditioned task): what the goal reward and the distance to the goal compare."""
+        achieved, desired = self.key(ACHIEVED), self.key(DESIRED)
+        if achieved is None or desired is None or achieved.stop - achieved.start != len(self.goal_labels):
+            return None
+        return slice(achieved.start, achieved.stop)
+
+    def keys_json(self) -> list[dict] | None:
+        """The keys' slices as transitions.npz and model.json record them (None for a Box observation)."""
+        return [k.to_dict() for k in self.keys] or None
 
 
 REACHER_LABELS = ("cos q1", "cos q2", "sin q1", "sin q2", "dq1", "dq2", "tip x", "tip y")
@@ -57,15 +84,53 @@ def xy_columns(labels) -> list[int] | None:
     return [labels.index("tip x"), labels.index("tip y")] if {"tip x", "tip y"} <= set(labels) else None
 
 
-def layout_for(env_id: str, obs_dim: int, name: str = "auto") -> StateLayout:
-    """The state layout NAME ("auto": reacher for Reacher ids, else the observation)."""
+def observation_keys(env: gym.Env) -> tuple[KeySlice, ...]:
+    """The slices of the keys of the Dict observation `env` flattens (make_env flattens one as
+    `gymnasium.spaces.flatten` does), outermost Dict first; empty for a Box observation."""
+    layer = env
+    while True:
+        if is_dict(layer.observation_space):
+            return tuple(obs_layout(layer.observation_space))
+        if not isinstance(layer, gym.Wrapper):
+            return ()
+        layer = layer.env
+
+
+def _entry_labels(keys: Sequence[KeySlice]) -> tuple[str, ...]:
+    return tuple(f"{k.key}[{i}]" for k in keys for i in range(k.stop - k.start))
+
+
+def _observation_layout(obs_dim: int, keys: Sequence[KeySlice]) -> StateLayout:
+    """The observation as the state; a Dict observation's entries named after their keys, and its
+    desired_goal (if any) the planner's goal."""
+    if not keys:
+        return StateLayout("observation", tuple(f"obs[{i}]" for i in range(obs_dim)))
+    if keys[-1].stop != obs_dim:
+        raise MotorlabError(f"the observation has {obs_dim} entries and its Dict keys cover {keys[-1].stop}: a "
+                            "wrapper changed the flat observation; collect and plan on the env without it.")
+    desired = next((k for k in keys if k.key == DESIRED), None)
+    if desired is None:
+        return StateLayout("observation", _entry_labels(keys), keys=tuple(keys))
+    cut = slice(desired.start, desired.stop)
+    return StateLayout("observation", _entry_labels(keys), _entry_labels([desired]),
+                       _goal=lambda obs: obs[..., cut], keys=tuple(keys))
+
+
+def layout_for(env_id: str, obs_dim: int, name: str = "auto", keys: Sequence[KeySlice] = ()) -> StateLayout:
+    """The state layout NAME ("auto": reacher for Reacher ids, else the observation), for an env
+    with `obs_dim` observations (`keys`: their Dict keys' slices, see `observation_keys`)."""
     if name == "auto":
-        name = "reacher" if env_id.startswith("Reacher-") else "observation"
+        name = "reacher" if env_id.startswith("Reacher-") and not keys else "observation"
     if name == "reacher":
-        if obs_dim not in (10, 11):
+        if obs_dim not in (10, 11) or keys:
             raise MotorlabError(f"the reacher state layout needs Reacher's 10 (v5) or 11 (v4) observations, "
                                 f"not {obs_dim}; use --state observation for {env_id}.")
         return REACHER
     if name == "observation":
-        return StateLayout("observation", tuple(f"obs[{i}]" for i in range(obs_dim)))
+        return _observation_layout(obs_dim, keys)
     raise MotorlabError(f"unknown state layout {name!r}; choose auto, reacher or observation.")
+
+
+def env_layout(env: gym.Env, env_id: str, name: str = "auto") -> StateLayout:
+    """`layout_for` the env `make_env` built (its flattened observation, and its Dict keys if any)."""
+    return layout_for(env_id, int(np.prod(env.observation_space.shape)), name, observation_keys(env))

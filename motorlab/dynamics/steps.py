@@ -14,6 +14,8 @@ from rich.console import Console
 from motorlab.dynamics.state import xy_columns
 from motorlab.dynamics.transitions import TRANSITIONS, load_transitions
 from motorlab.envs import check_env_id
+from motorlab.envs.spaces import decode_space, require_actions
+from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric, Number
 from motorlab.runs import atomic_write_npz
 from motorlab.settings import Settings, Summary
@@ -179,6 +181,7 @@ class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
         s = settings
         start = time.perf_counter()
         data = load_transitions(Path(s.transitions))
+        require_box_actions(data.meta, str(s.transitions))
         run_dir = self.start(out)
         model, result = fit_model(data, seed=s.seed, run_dir=run_dir, progress=progress, **s.fit_args())
         history = result.pop("history")
@@ -193,6 +196,26 @@ class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
 
 
 DYNAMICS_FIT = DynamicsFitKind()
+
+
+def require_box_actions(meta: dict[str, Any], source: str) -> None:
+    """Refuse transitions of an env whose actions are not a Box (the model regresses on continuous
+    actions); files that do not record their action space pass (motorlab's collect refuses the others).
+
+    Raises:
+        MotorlabError: one line naming the space.
+    """
+    space = meta.get("action_space")
+    if space is None:
+        return
+    try:
+        decoded = decode_space(space)
+    except (KeyError, TypeError, ValueError) as e:
+        raise MotorlabError(f"{source}: its action_space is damaged ({type(e).__name__}: {e}); re-run "
+                            "`motorlab dynamics collect`.") from None
+    env_id = meta.get("env_id", "ENV_ID")
+    require_actions(decoded, f"dynamics fit ({source})", env_id=env_id,
+                    instead=f"learn it model-free instead, e.g. `motorlab train {env_id} --algo ppo`")
 
 
 # ---- dynamics-check ---------------------------------------------------------------------------

@@ -144,7 +144,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
     if len(train_rows) == 0:
         raise MotorlabError("no training rows left after the validation split; collect more episodes.")
     meta = {k: data.meta.get(k) for k in ("env_id", "state_layout", "state_labels", "goal_labels", "obs_dim",
-                                          "action_low", "action_high")}
+                                          "obs_layout", "action_space", "action_low", "action_high")}
     model = ForwardModel(data.states.shape[1], data.actions.shape[1], hidden, ensemble, meta=meta,
                          probabilistic=probabilistic, heads=heads)
     if init is not None:

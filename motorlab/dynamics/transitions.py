@@ -5,12 +5,20 @@ Plain arrays (no pickle), one row per env step:
     (episode ended: terminated or truncated), terminated (N,), episode (N,) (index of
     the episode the row belongs to), goals (N, G) (the planner's goal, e.g. Reacher's
     target; G = 0 for goal-free layouts)
-and `meta`, a JSON string: env id, state layout and labels, policy, seed, collector.
+and `meta`, a JSON string: env id, state layout and labels, policy, seed, collector, the action
+space (`action_space`, as motorlab.envs.spaces.encode_space writes it) and, for an env with a Dict
+observation, where each of its keys lies in the flat observation (`obs_layout`: a list of
+{key, start, stop, shape}, e.g. observation, achieved_goal, desired_goal; null otherwise).
+
+Reading one never unpickles: a file that is not a plain .npz archive is refused in one line
+(`read_npz`), whatever numpy would suggest.
 """
 
 from __future__ import annotations
 
 import json
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -103,6 +111,69 @@ def check_meta(meta: dict, state_size: int, source: str, fix: str) -> None:
     obs_dim = meta.get("obs_dim")
     if obs_dim is not None and (not isinstance(obs_dim, int) or isinstance(obs_dim, bool) or obs_dim < 1):
         raise bad("obs_dim", "a positive integer")
+    if not _is_obs_layout(meta.get("obs_layout"), obs_dim):
+        raise bad("obs_layout", "null or a list of {key, start, stop, shape}, one after another, covering "
+                  "the observation")
+    space = meta.get("action_space")
+    if space is not None and not (isinstance(space, dict) and isinstance(space.get("type"), str)):
+        raise bad("action_space", "an action space as motorlab writes it ({\"type\": \"Box\", ...})")
+
+
+def _is_count(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= 0
+
+
+def _is_obs_layout(value, obs_dim: int | None) -> bool:
+    """None, or key slices that tile the flat observation from 0 (to obs_dim, where it is known)."""
+    if value is None:
+        return True
+    if not isinstance(value, list) or not value:
+        return False
+    stop = 0
+    for item in value:
+        if not (isinstance(item, dict) and isinstance(item.get("key"), str) and _is_count(item.get("start"))
+                and _is_count(item.get("stop")) and item["start"] == stop and item["stop"] > stop
+                and isinstance(item.get("shape"), list) and all(_is_count(d) for d in item["shape"])):
+            return False
+        stop = item["stop"]
+    return obs_dim is None or stop == obs_dim
+
+
+ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip's first entry, or an empty zip's end record
+
+
+class NpzUnreadable(Exception):
+    """Why a file is not a plain .npz archive, in words for a one-line message."""
+
+
+def read_npz(path: Path) -> dict[str, np.ndarray]:
+    """Every array of a plain .npz archive at `path`, never unpickling.
+
+    Raises:
+        NpzUnreadable: not an .npz archive (random bytes, an .npy file, a pickle), a damaged or
+            cut-short one, or arrays of Python objects; its text says which, never numpy's
+            advice to load the file unsafely. The caller names the file and the fix.
+    """
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as e:
+        raise NpzUnreadable(f"cannot read it: {e.strerror or e}") from None
+    if head not in ZIP_MAGIC:
+        raise NpzUnreadable("it is not an .npz archive")
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            return {k: f[k] for k in f.files}
+    except ValueError as e:
+        if "pickle" in str(e):  # numpy's own text suggests unpickling: never shown
+            raise NpzUnreadable("it holds arrays of Python objects, which motorlab never unpickles") from None
+        raise NpzUnreadable(f"an array in it is damaged: {_first_line(e)}") from None
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, KeyError) as e:
+        raise NpzUnreadable(f"the archive is damaged or cut short: {_first_line(e) or type(e).__name__}") from None
+
+
+def _first_line(e: Exception) -> str:
+    return (str(e).strip().splitlines() or [""])[0]
 
 
 def load_transitions(path: Path) -> Transitions:
@@ -112,19 +183,22 @@ def load_transitions(path: Path) -> Transitions:
         path = path / TRANSITIONS
     if not path.is_file():
         raise MotorlabError(f"{path} is missing; write it with `motorlab dynamics collect ENV_ID --out DIR`.")
+
+    def not_transitions(reason: str) -> MotorlabError:
+        return MotorlabError(f"{path} is not a transitions file written by `motorlab dynamics collect` ({reason}); "
+                             "re-run `motorlab dynamics collect`.")
+
     try:
-        with np.load(path, allow_pickle=False) as f:
-            missing = [k for k in (*_ARRAYS, "meta") if k not in f.files]
-            if missing:
-                raise MotorlabError(f"{path} lacks {', '.join(missing)}: not a transitions file from "
-                                    "`motorlab dynamics collect`.")
-            arrays = {k: f[k] for k in _ARRAYS}
-            meta = json.loads(str(f["meta"]))
-    except MotorlabError:
-        raise
-    except Exception as e:  # zip, npy-header or JSON damage all mean the same to the user
-        raise MotorlabError(f"{path} is not a readable transitions.npz ({type(e).__name__}: {e}); "
-                            "re-run `motorlab dynamics collect`.") from None
+        found = read_npz(path)
+    except NpzUnreadable as e:
+        raise not_transitions(str(e)) from None
+    missing = [k for k in (*_ARRAYS, "meta") if k not in found]
+    if missing:
+        raise not_transitions(f"it lacks {', '.join(missing)}")
+    try:
+        meta = json.loads(str(found["meta"]))
+    except ValueError as e:
+        raise not_transitions(f"its meta is not JSON: {_first_line(e)}") from None
     if not isinstance(meta, dict):
-        raise MotorlabError(f"{path}: its meta is not a JSON object; re-run `motorlab dynamics collect`.")
-    return Transitions(**arrays, meta=meta).check(str(path))
+        raise not_transitions("its meta is not a JSON object")
+    return Transitions(**{k: found[k] for k in _ARRAYS}, meta=meta).check(str(path))

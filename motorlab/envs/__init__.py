@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import gymnasium as gym
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from motorlab.envs.disturbances import (
     GaussianNoise,
@@ -27,12 +27,12 @@ from motorlab.envs.disturbances import (
     span_text,
 )
 from motorlab.envs.rewards import resolve_reward
-from motorlab.envs.spaces import is_dict, obs_layout
+from motorlab.envs.spaces import is_dict, obs_layout, require_actions
 from motorlab.envs.upkie import is_upkie, make_upkie, register_upkie
 from motorlab.envs.wrappers import DelayOn, LowPassDelay, NumericalGuard, RewardShaping, delay_alpha, env_dt_of
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.extras import missing
-from motorlab.settings import Settings
+from motorlab.settings import Settings, StrictModel
 from motorlab.user_modules import (
     import_inherited,
     import_modules,
@@ -42,7 +42,7 @@ from motorlab.user_modules import (
 )
 
 __all__ = ["EnvConfig", "EnvSettings", "ENV_KEYS", "DISTURBANCES", "describe_env", "make_env", "check_env_id", "max_return", "env_dt", "LowPassDelay", "RewardShaping",
-           "delay_alpha", "register_myosuite"]
+           "delay_alpha", "register_myosuite", "register_robotics", "reads_observations"]
 
 def _route_mujoco_warnings() -> None:
     """Send MuJoCo's C-level warnings to Python logging instead of stderr and a
@@ -60,7 +60,7 @@ _route_mujoco_warnings()
 _ALIVE_REWARD_PREFIXES = ("InvertedPendulum-",)
 
 
-class EnvConfig(BaseModel):
+class EnvConfig(StrictModel):
     """Which env, and how it is wrapped."""
 
     model_config = ConfigDict(extra="forbid")
@@ -202,6 +202,37 @@ def register_myosuite() -> bool:
     return True
 
 
+# Gymnasium-Robotics' families (the `robotics` extra), for the install hint when it is missing
+ROBOTICS_PREFIXES = ("PointMaze_", "AntMaze_", "Fetch", "HandReach", "HandManipulate", "AdroitHand", "FrankaKitchen")
+# Its Fetch and Shadow-hand models fail while they are built, inside Gymnasium-Robotics 1.4.2 under
+# MuJoCo 4 (its set_joint_qpos asserts on their free joints: an upstream incompatibility)
+ROBOTICS_BROKEN = ("Fetch", "HandReach", "HandManipulate", "FrankaKitchen")
+
+
+def register_robotics() -> bool:
+    """Import Gymnasium-Robotics, which registers its env ids (PointMaze_UMaze-v3, AntMaze_*,
+    AdroitHand*, ...), without the notice it prints to stderr on import.
+
+    Returns:
+        False when Gymnasium-Robotics is not installed (the `robotics` extra).
+    """
+    import contextlib
+    import io
+
+    try:
+        with warnings.catch_warnings(), contextlib.redirect_stderr(io.StringIO()):
+            warnings.simplefilter("ignore")
+            import gymnasium_robotics  # noqa: F401  (import registers the envs)
+    except ImportError:
+        return False
+    return True
+
+
+def is_robotics(env_id: str) -> bool:
+    """An id of Gymnasium-Robotics' families (registered or not)."""
+    return split_env_id(env_id)[1].startswith(ROBOTICS_PREFIXES)
+
+
 def check_env_id(env_id: str) -> None:
     """Raise a clear error for an env id Gymnasium does not know, with close matches.
 
@@ -221,12 +252,17 @@ def check_env_id(env_id: str) -> None:
         return
     if is_upkie(env_id):
         register_upkie()  # clear message when upkie or pybullet is missing
+    if env_id not in gym.registry and is_robotics(env_id):  # registered on first use, like MyoSuite's
+        if not register_robotics():
+            raise missing(f"{env_id} needs Gymnasium-Robotics", "robotics")
     if env_id not in gym.registry:
         installed = register_myosuite()
         if env_id in gym.registry:
             return
         if env_id.startswith("myo") and not installed:
             raise missing(f"{env_id} needs MyoSuite", "myosuite")
+        if not is_robotics(env_id) and register_robotics() and env_id in gym.registry:
+            return  # one of its families this list does not name
         raise MotorlabError(
             f"unknown env id {env_id!r}{did_you_mean(env_id, gym.registry.keys())}; "
             "`python -c \"import gymnasium; gymnasium.pprint_registry()\"` lists the ids; an env of your own: "
@@ -269,27 +305,27 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
         render_mode: passed to `gymnasium.make` (e.g. "rgb_array" for videos).
         dict_obs: keep a Dict observation space as it is (SB3 training: MultiInputPolicy, HER),
             unless a wrapper that reads observations as one array is asked for (a delay or latency
-            on observations, observation noise, history). Otherwise a Dict observation is flattened
+            on observations, observation noise, history, a reward shaping that reads the
+            observation). Otherwise a Dict observation is flattened
             as `gymnasium.spaces.flatten` does (motorlab.envs.spaces: the layout of its keys).
 
     Raises:
-        MotorlabError: unknown id, bad delay, unknown reward.
+        MotorlabError: unknown id, bad delay, unknown reward, an env that cannot render (with
+            render_mode), a setting that acts on Box actions on an env whose actions are not.
     """
     check_env_id(cfg.id)
     name = split_env_id(cfg.id)[1]
     if is_upkie(cfg.id):
         env = make_upkie(cfg.id, render_mode, **{**cfg.kwargs, **kwargs})
     else:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # -v4 deprecation notices are noise here
-            try:
-                # render_mode only when asked: a user's env need not take the argument
-                rendering = {"render_mode": render_mode} if render_mode is not None else {}
-                env = gym.make(name, **rendering, **cfg.kwargs, **kwargs)
-            except TypeError as e:  # an env argument it does not take
-                raise MotorlabError(f"{cfg.id} does not take these settings: {e}.") from None
+        env = _gym_make(cfg, name, render_mode, kwargs)
         if name in user_env_ids():
             check_user_env(env, cfg.id)
+    try:
+        _require_box_wrappers(env, cfg)
+    except MotorlabError:
+        env.close()
+        raise
     if cfg.motor_noise is not None:
         env = MotorNoise(env, cfg.motor_noise)  # MyoSuite's own wrappers, on the muscle excitations
     if cfg.fatigue != "off":
@@ -318,12 +354,54 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
     return env
 
 
+def _gym_make(cfg: EnvConfig, name: str, render_mode: str | None, kwargs: dict[str, Any]) -> gym.Env:
+    """`gymnasium.make`, its mistakes in one line: an argument the env does not take, an env that
+    cannot render, a Gymnasium-Robotics model that fails to build under this MuJoCo."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # -v4 deprecation notices are noise here
+        try:
+            # render_mode only when asked: a user's env need not take the argument
+            rendering = {"render_mode": render_mode} if render_mode is not None else {}
+            return gym.make(name, **rendering, **cfg.kwargs, **kwargs)
+        except TypeError as e:  # an env argument it does not take
+            if render_mode is not None and "render_mode" in str(e):
+                raise MotorlabError(f"{cfg.id} cannot render: it takes no render_mode argument. A video needs a "
+                                    "MuJoCo env, or an env that takes render_mode='rgb_array' and returns frames "
+                                    "from render().") from None
+            raise MotorlabError(f"{cfg.id} does not take these settings: {e}.") from None
+        except AssertionError:
+            if not name.startswith(ROBOTICS_BROKEN):
+                raise
+            import mujoco
+
+            raise MotorlabError(f"{cfg.id} fails to build inside Gymnasium-Robotics with MuJoCo {mujoco.__version__} "
+                                "(an upstream incompatibility of its Fetch, Shadow-hand and Kitchen models); "
+                                "its mazes (PointMaze_*, AntMaze_*) and the Adroit hand (AdroitHand*) work.") from None
+
+
+def _require_box_wrappers(env: gym.Env, cfg: EnvConfig) -> None:
+    """Refuse, in one line, the settings that act on Box actions when the env's actions are not."""
+    on_actions = ("action", "both")
+    uses = [("--delay on actions", bool(cfg.delay) and cfg.delay_on in on_actions, "give --delay-on observation"),
+            ("--latency on actions", bool(cfg.latency) and cfg.latency_on in on_actions,
+             "give --latency-on observation"),
+            ("--action-noise", cfg.action_noise is not None, "drop it"),
+            ("--sar (synergy actions)", bool(cfg.sar), "drop it")]
+    for user, used, instead in uses:
+        if used:
+            require_actions(env.action_space, user, instead=instead, env_id=cfg.id)
+
+
+# Reward shapings that never look at the observation (the others are given one array)
+OBS_FREE_REWARDS = (None, "task", "alive", "action-penalty")
+
+
 def reads_observations(cfg: EnvConfig) -> bool:
     """Whether a wrapper `cfg` asks for works on the observation as one array (a Dict one is then
     flattened first, even for training)."""
     on_obs = ("observation", "both")
     return bool((cfg.delay and cfg.delay_on in on_obs) or (cfg.latency and cfg.latency_on in on_obs)
-                or cfg.obs_noise is not None or cfg.history > 1)
+                or cfg.obs_noise is not None or cfg.history > 1 or cfg.reward not in OBS_FREE_REWARDS)
 
 
 def describe_env(env: EnvConfig) -> str:

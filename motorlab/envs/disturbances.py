@@ -169,7 +169,7 @@ class GaussianNoise(EpisodeRandom, gym.utils.RecordConstructorArgs):
 
     def step(self, action):
         if self.action_std is not None:
-            space = self.env.action_space
+            space = self.env.action_space  # a Box: make_env refuses action noise on other actions
             action = np.asarray(action, dtype=space.dtype)
             std = np.reshape(self._act_now, action.shape) if np.ndim(self._act_now) else self._act_now
             noise = std * self.rng.standard_normal(action.shape)
@@ -198,7 +198,12 @@ class Latency(EpisodeRandom, gym.utils.RecordConstructorArgs):
         self.steps = parse_span(steps, "latency (steps)", integer=True)
         self.on = on
         space = env.action_space
-        self._rest = np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
+        if on in ("action", "both") and not isinstance(space, gym.spaces.Box):
+            raise MotorlabError("a latency on actions needs a continuous (Box) action space; give --latency-on "
+                                "observation.")
+        # the command held until the first one arrives: zero, clipped into the box (Box actions only)
+        self._rest = (np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
+                      if isinstance(space, gym.spaces.Box) else np.zeros(0))
         self.k = 0
         self._actions: deque = deque()
         self._observations: deque = deque()

@@ -98,18 +98,38 @@ def describe_space(space: gym.Space) -> str:
 
 
 def require_actions(space: gym.Space, user: str, fits: str = "continuous (Box) actions",
-                    instead: str = "") -> None:
+                    instead: str = "", env_id: str | None = None) -> None:
     """Refuse, in one line, a component that needs Box actions on an env whose actions are not.
 
     Args:
         user: what refuses, e.g. "SAC", "MPC", "the PID controller".
         fits: what it needs.
         instead: what does fit this env, e.g. "use --algo ppo".
+        env_id: the env, named in the message ("CartPole-v1's actions are Discrete(2)").
+
+    Raises:
+        MotorlabError: e.g. "SAC needs continuous (Box) actions, and CartPole-v1's actions are
+            Discrete(2); use --algo ppo."
     """
     if isinstance(space, gym.spaces.Box):
         return
-    raise MotorlabError(f"{user} needs {fits}, and this env's actions are {describe_space(space)}"
+    whose = f"{env_id}'s" if env_id else "this env's"
+    raise MotorlabError(f"{user} needs {fits}, and {whose} actions are {describe_space(space)}"
                         + (f"; {instead}" if instead else "") + ".")
+
+
+def flat_space(space: gym.Space) -> gym.Space:
+    """The space of the observations motorlab's evaluation envs give: a Dict flattened as
+    `gymnasium.spaces.flatten_space` does (a Box in `obs_layout` order); any other space as it is."""
+    return gym.spaces.flatten_space(space) if is_dict(space) else space
+
+
+def env_actions(actions: np.ndarray, space: gym.Space) -> np.ndarray:
+    """A batch of policy actions in the dtype the env's action space takes: float32 for a Box,
+    int64 for Discrete (an env rejects an action index given as a float)."""
+    if isinstance(space, (gym.spaces.Discrete, gym.spaces.MultiDiscrete, gym.spaces.MultiBinary)):
+        return np.asarray(actions).astype(np.int64)
+    return np.asarray(actions, dtype=np.float32)
 
 
 # ---- spaces as JSON ------------------------------------------------------------------------

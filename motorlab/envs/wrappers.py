@@ -65,8 +65,8 @@ class LowPassDelay(EpisodeRandom, gym.utils.RecordConstructorArgs):
         dt = env_dt_of(env.unwrapped)
         if dt is None:
             raise MotorlabError(f"{env.spec.id if env.spec else env} has no step dt; delay needs one.")
-        if not isinstance(env.action_space, gym.spaces.Box):
-            raise MotorlabError("delay needs a continuous (Box) action space.")
+        if on in ("action", "both") and not isinstance(env.action_space, gym.spaces.Box):
+            raise MotorlabError("a delay on actions needs a continuous (Box) action space; give --delay-on observation.")
         self.dt = float(dt)
         self.span = parse_span(time_constant, "delay time constant (s)")
         if self.span[0] == self.span[1]:
@@ -75,7 +75,8 @@ class LowPassDelay(EpisodeRandom, gym.utils.RecordConstructorArgs):
         self.alpha = self._alpha(self.time_constant)
         self.on = on
         space = env.action_space
-        self._action_rest = np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
+        self._action_rest = (np.clip(np.zeros(space.shape), space.low, space.high).astype(space.dtype)
+                             if self.filters_action else np.zeros(0))  # the lag's rest command (Box actions only)
         self._action = self._action_rest.copy()
         self._obs: np.ndarray | None = None
 
@@ -102,8 +103,8 @@ class LowPassDelay(EpisodeRandom, gym.utils.RecordConstructorArgs):
         return self._obs.copy(), info
 
     def step(self, action):
-        action = np.asarray(action, dtype=self._action.dtype)
         if self.filters_action:
+            action = np.asarray(action, dtype=self._action.dtype)
             self._action = (self._action + self.alpha * (action - self._action)).astype(self._action.dtype)
             action = self._action
         obs, reward, terminated, truncated, info = self.env.step(action)

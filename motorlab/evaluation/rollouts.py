@@ -17,6 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 from motorlab.envs import EnvConfig, max_return
+from motorlab.envs.spaces import env_actions
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.pool import SUCCESS_KEYS, EnvPool, auto_workers, make_pool, step_success
 from motorlab.faults import fault_line
@@ -211,7 +212,7 @@ class Evaluator:
             for r in range(rows):
                 traces_o[r].append(obs[r].copy())  # copies: obs rows are overwritten step by step
         while active.any():
-            actions = np.asarray(policy.act(obs), dtype=np.float32)
+            actions = env_actions(policy.act(obs), self.action_space)  # float32, or int64 action indices
             following = episode + rows  # each row's next episode, started by the env worker if this one ends
             restarts = np.where(following < n, first + following, -1)
             steps = self.pool.step(actions, active, restarts)

@@ -49,9 +49,15 @@ class VideoKind(StepKind[VideoSettings, VideoSummary]):
         from motorlab.report.video import render_video
 
         s = settings
-        run_dir = self.start(out if out is not None else require_run_dir(Path(s.run)) / "videos")
-        rendered = render_video(Path(s.run), s.episodes, s.seed, s.camera, s.width, s.height, out=run_dir)
-        return self.finish(run_dir, settings, VideoSummary.model_validate(rendered))
+        folder = out if out is not None else require_run_dir(Path(s.run)) / "videos"
+        made: list[Path] = []  # the folder, once the env rendered a frame and the policy loaded
+
+        def start() -> Path:
+            made.append(self.start(folder))
+            return made[0]
+
+        rendered = render_video(Path(s.run), s.episodes, s.seed, s.camera, s.width, s.height, start=start)
+        return self.finish(made[0], settings, VideoSummary.model_validate(rendered))
 
     def describe(self, settings: VideoSettings, copies: int = 1) -> str:
         return f"video of {settings.run}, {settings.episodes} episode{'s' * (settings.episodes > 1)}"

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -68,7 +69,16 @@ class EnvCamera:
         self.env = env
 
     def grab(self) -> np.ndarray:
-        return np.asarray(self.env.render())
+        import gymnasium as gym
+
+        name = self.env.spec.id if self.env.spec else "the env"
+        try:
+            frame = self.env.render()
+        except gym.error.DependencyNotInstalled as e:  # e.g. classic control's pygame
+            raise MotorlabError(f"{name} cannot render here: {' '.join(str(e).split())}") from None
+        if frame is None or np.ndim(frame) != 3:
+            raise MotorlabError(f"{name} cannot render: its render() gives no rgb_array frame, which a video needs.")
+        return np.asarray(frame)
 
     def close(self) -> None:
         pass
@@ -85,22 +95,33 @@ def make_video_env(env_cfg: EnvConfig):
 
 
 def render_video(run_dir: Path, episodes: int = 5, seed: int = 0, camera: str | None = None,
-                 width: int = 640, height: int = 480, out: Path | None = None) -> dict[str, Any]:
+                 width: int = 640, height: int = 480, out: Path | None = None,
+                 start: Callable[[], Path] | None = None) -> dict[str, Any]:
     """Render `episodes` deterministic episodes of the run's policy to `<out>/episode_<k>.mp4`
     (default out: RUN_DIR/videos), with an index videos.json beside them.
 
+    Args:
+        start: called once the env has rendered a first frame and the policy is loaded, before
+            anything is written; returns the folder to write (a step kind's `start`). A mistake
+            (an env that cannot render, a policy that does not fit it) so leaves no folder behind.
+
     Returns:
         The files, frame counts, fps, episode returns, camera and size.
+
+    Raises:
+        MotorlabError: not a finished run, an env that cannot render, a policy that does not fit it.
     """
     if episodes <= 0:
         raise MotorlabError(f"--episodes must be positive, got {episodes}.")
     run_dir = require_run_dir(Path(run_dir))
     config = read_config(run_dir)
     env_cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
-    folder = Path(out) if out else run_dir / "videos"
     files, returns, frames_per = [], [], []
     with filming(make_video_env(env_cfg), width, height, camera) as (env, cam, every, fps):
         policy = load_policy(config.get("policy", str(run_dir)), env, env_cfg.id, seed)
+        env.reset(seed=seed)
+        cam.grab()  # the env renders: checked before the folder is touched
+        folder = start() if start is not None else Path(out) if out else run_dir / "videos"
         for k in range(episodes):
             frames, ret = record_episode(env, policy, cam, seed + k, every)
             path = folder / f"episode_{k}.mp4"

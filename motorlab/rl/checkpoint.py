@@ -4,13 +4,16 @@ that was killed (even with SIGKILL) to the same total budget.
     RUN_DIR/checkpoint/latest.json         step counter, tracker state, the files below (written last)
     RUN_DIR/checkpoint/model-<steps>.safetensors   networks' and optimizers' tensors
     RUN_DIR/checkpoint/model-<steps>.json  the rest of their state dicts (optimizer settings, step counts)
-    RUN_DIR/checkpoint/buffer-<steps>.npz  the replay buffer (SAC, TD3): plain arrays
+    RUN_DIR/checkpoint/buffer-<steps>.npz  the replay buffer (SAC, TD3): plain arrays; a Dict
+                                           observation's per key ("observations.<key>"); with --her,
+                                           HerReplayBuffer's episode bounds (ep_start, ep_length)
     RUN_DIR/checkpoint/normalize-<steps>.npz   VecNormalize's running mean, variance and count
 
 Nothing here is a pickle: SB3's own model.zip and torch.save files unpickle when loaded, so
 state dicts are split into tensors (safetensors) and plain values (JSON). Each file is written atomically
 and latest.json names a complete set, so a kill at any moment leaves the previous checkpoint
-usable. Episodes in progress at the checkpoint are not restored: resumed training starts new ones.
+usable. Episodes in progress at the checkpoint are not restored: resumed training starts new ones
+(HER's buffer closes the episodes it was recording, as SB3's truncate_last_trajectory does).
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ if TYPE_CHECKING:  # torch, safetensors and SB3 are imported where a checkpoint 
 FOLDER = "checkpoint"
 LATEST = "latest.json"
 BUFFER_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+HER_ARRAYS = ("ep_start", "ep_length")  # HerReplayBuffer's episode bounds, row by row
+HER_CURRENT = "_current_ep_start"  # where each env's episode in progress started
 
 
 def save_checkpoint(run_dir: Path, model: BaseAlgorithm, tracker_state: dict[str, Any]) -> int:
@@ -51,14 +56,11 @@ def save_checkpoint(run_dir: Path, model: BaseAlgorithm, tracker_state: dict[str
     rb = getattr(model, "replay_buffer", None)
     if rb is not None:
         files["buffer"] = f"buffer-{tag}.npz"
-        filled = rb.buffer_size if rb.full else rb.pos  # only what holds data: SB3 preallocates 1M rows
-        arrays = {k: getattr(rb, k)[:filled] for k in BUFFER_ARRAYS if getattr(rb, k, None) is not None}
-        atomic_write_npz(folder / files["buffer"], pos=np.array(rb.pos), full=np.array(rb.full), **arrays)
+        atomic_write_npz(folder / files["buffer"], pos=np.array(rb.pos), full=np.array(rb.full), **_buffer_arrays(rb))
     venv = model.get_env()
     if isinstance(venv, VecNormalize):
         files["normalize"] = f"normalize-{tag}.npz"
-        atomic_write_npz(folder / files["normalize"], mean=venv.obs_rms.mean, var=venv.obs_rms.var,
-                         count=np.array(venv.obs_rms.count))
+        atomic_write_npz(folder / files["normalize"], **_statistics(venv.obs_rms))
     write_json(folder / LATEST, {"steps": steps, "n_updates": int(getattr(model, "_n_updates", 0)),
                                  "episode_num": int(getattr(model, "_episode_num", 0)), "files": files,
                                  "tracker": tracker_state})
@@ -91,17 +93,12 @@ def load_checkpoint(run_dir: Path, model: BaseAlgorithm) -> dict[str, Any]:
         for name, node in structure["variables"].items():
             _attr(model, name).data.copy_(_join(node, tensors))
         if "buffer" in record["files"]:
-            rb = model.replay_buffer
             with np.load(folder / record["files"]["buffer"], allow_pickle=False) as z:
-                for key in BUFFER_ARRAYS:
-                    if key in z.files:
-                        saved = z[key]
-                        getattr(rb, key)[: len(saved)] = saved
-                rb.pos, rb.full = int(z["pos"]), bool(z["full"])
+                _restore_buffer(model.replay_buffer, z)
         if "normalize" in record["files"]:
             venv = model.get_env()
             with np.load(folder / record["files"]["normalize"], allow_pickle=False) as z:
-                venv.obs_rms.mean, venv.obs_rms.var, venv.obs_rms.count = z["mean"], z["var"], float(z["count"])
+                _restore_statistics(venv.obs_rms, z)
     except (OSError, KeyError, TypeError, ValueError, RuntimeError, MotorlabError, SafetensorError) as e:
         raise MotorlabError(f"the checkpoint in {folder} is damaged or from other settings ({type(e).__name__}: "
                             f"{str(e).splitlines()[0] if str(e) else ''}); delete {folder} to start the run over.") from None
@@ -109,6 +106,58 @@ def load_checkpoint(run_dir: Path, model: BaseAlgorithm) -> dict[str, Any]:
     model._n_updates = record["n_updates"]
     model._episode_num = record["episode_num"]
     return record
+
+
+def _statistics(obs_rms: Any) -> dict[str, np.ndarray]:
+    """VecNormalize's running statistics as named arrays: mean, var, count, or per key of a Dict
+    observation ("mean.<key>", ...; VecNormalize keeps one RunningMeanStd per key)."""
+    if isinstance(obs_rms, dict):
+        return {f"{name}.{key}": np.asarray(getattr(rms, name)) for key, rms in obs_rms.items()
+                for name in ("mean", "var", "count")}
+    return {"mean": obs_rms.mean, "var": obs_rms.var, "count": np.array(obs_rms.count)}
+
+
+def _restore_statistics(obs_rms: Any, z: Any) -> None:
+    """The inverse of _statistics."""
+    for key, rms in (obs_rms.items() if isinstance(obs_rms, dict) else [("", obs_rms)]):
+        suffix = f".{key}" if key else ""
+        rms.mean, rms.var, rms.count = z["mean" + suffix], z["var" + suffix], float(z["count" + suffix])
+
+
+def _buffer_arrays(rb: Any) -> dict[str, np.ndarray]:
+    """A replay buffer's rows that hold data (SB3 preallocates a million) as named arrays: a Dict
+    observation's keys as "observations.<key>", HER's episode bounds beside them."""
+    filled = rb.buffer_size if rb.full else rb.pos
+    arrays: dict[str, np.ndarray] = {}
+    for name in (*BUFFER_ARRAYS, *HER_ARRAYS):
+        value = getattr(rb, name, None)
+        if isinstance(value, dict):
+            arrays.update({f"{name}.{key}": a[:filled] for key, a in value.items()})
+        elif value is not None:
+            arrays[name] = value[:filled]
+    if hasattr(rb, HER_CURRENT):
+        arrays[HER_CURRENT] = getattr(rb, HER_CURRENT)
+    return arrays
+
+
+def _restore_buffer(rb: Any, z: Any) -> None:
+    """The inverse of _buffer_arrays, into a buffer built from the same settings."""
+    import warnings
+
+    for name in z.files:
+        if name in ("pos", "full"):
+            continue
+        saved = z[name]
+        base, _, key = name.partition(".")
+        if base not in (*BUFFER_ARRAYS, *HER_ARRAYS, HER_CURRENT):
+            raise KeyError(f"unknown buffer array {name}")
+        target = getattr(rb, base)[key] if key else getattr(rb, base)
+        target[: len(saved)] = saved
+    rb.pos, rb.full = int(z["pos"]), bool(z["full"])
+    if hasattr(rb, "truncate_last_trajectory"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # its notice says what is meant here: the episodes being recorded end
+            rb.truncate_last_trajectory()
 
 
 def _split(obj: Any, key: str, tensors: dict[str, torch.Tensor]) -> Any:

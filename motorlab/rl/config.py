@@ -70,6 +70,11 @@ class TrainConfig(EnvSettings):
     checkpoint_every: int | None = Field(None, ge=0, description="Env steps between checkpoints for --resume "
                                          "(default: a tenth of the budget; 0: none)")
     hyperparams: dict[str, Any] = Field(default_factory=dict, description="extra keyword arguments for the SB3 algorithm")
+    her: bool = Field(False, description="Hindsight experience replay (SAC, TD3) on a goal-conditioned env (a Dict "
+                      "observation with achieved_goal and desired_goal, e.g. PointMaze_UMaze-v3): SB3's "
+                      "HerReplayBuffer relabels each transition with 4 goals reached later in its episode (future; "
+                      "--set replay_buffer_kwargs={...} changes them); learning starts after the first full episode "
+                      "unless learning_starts is set")
     lqr: LQRSettings = Field(default_factory=LQRSettings)
 
     @field_validator("lr", "clip_range")
@@ -84,6 +89,15 @@ class TrainConfig(EnvSettings):
     def _clip_range_is_ppo_only(self):
         if self.clip_range is not None and self.algo != "ppo":
             raise MotorlabError(f"--clip-range applies to PPO only, not {self.algo}; drop it or use --algo ppo.")
+        return self
+
+    @model_validator(mode="after")
+    def _her_is_off_policy_only(self):
+        if self.her and self.algo not in ("sac", "td3"):
+            raise MotorlabError(f"--her relabels the goals of a replay buffer, which {self.algo.upper()} has none of; "
+                                "use --algo sac or --algo td3, or drop --her.")
+        if self.her and "replay_buffer_class" in self.hyperparams:
+            raise MotorlabError("--her sets replay_buffer_class (SB3's HerReplayBuffer); drop one of them.")
         return self
 
 

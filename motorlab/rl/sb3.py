@@ -1,4 +1,9 @@
-"""Stable-Baselines3 training (PPO, SAC, TD3) with motorlab's tracking."""
+"""Stable-Baselines3 training (PPO, SAC, TD3) with motorlab's tracking.
+
+Training envs keep a Dict observation (goal-conditioned tasks) as a Dict: the networks are SB3's
+MultiInputPolicy, and --her relabels goals with SB3's HerReplayBuffer. Everything after training
+(evaluation, videos, export) gives the policy flat observations; `SB3Policy` turns them back.
+"""
 
 from __future__ import annotations
 
@@ -15,14 +20,16 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import TensorBoardOutputFormat
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
+from stable_baselines3.her.her_replay_buffer import HerReplayBuffer
 
 from motorlab import trackers
 from motorlab.envs import make_env
+from motorlab.envs.spaces import is_dict
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.evaluation import EpisodeSuccess, success_mode
 from motorlab.faults import fault_of
-from motorlab.policies import SB3Policy, save_sb3_policy
+from motorlab.policies import SB3Policy, flat_statistics, normalization, save_sb3_policy
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.schedules import parse_schedule
 from motorlab.rl.tracking import Tracker
@@ -59,8 +66,9 @@ class TrackingCallback(BaseCallback):
     def policy_now(self) -> SB3Policy:
         # SB3Policy switches the network to eval mode; SB3 switches it back in train().
         venv = self.model.get_env()
-        if isinstance(venv, VecNormalize):
-            return SB3Policy(self.model.policy, venv.obs_rms.mean, venv.obs_rms.var, venv.clip_obs, venv.epsilon)
+        stats = normalization(venv, self.model.observation_space) if isinstance(venv, VecNormalize) else None
+        if stats is not None:
+            return SB3Policy(self.model.policy, *flat_statistics(stats), venv.clip_obs, venv.epsilon)
         return SB3Policy(self.model.policy)
 
     def _maybe_evaluate(self) -> None:
@@ -94,25 +102,69 @@ class TrackingCallback(BaseCallback):
 
 
 def build_model(cfg: TrainConfig, run_dir: Path) -> BaseAlgorithm:
-    """The SB3 algorithm on a vectorized (optionally normalized) env."""
+    """The SB3 algorithm on a vectorized (optionally normalized) env: MlpPolicy on a Box observation,
+    MultiInputPolicy on a Dict one; with --her, SB3's HerReplayBuffer.
+
+    Raises:
+        MotorlabError: settings SB3 refuses (one line naming them).
+    """
     env_cfg = cfg.env
     vec_cls = SubprocVecEnv if cfg.n_envs > 1 else DummyVecEnv
-    venv = make_vec_env(lambda: make_env(env_cfg), n_envs=cfg.n_envs, seed=cfg.seed, vec_env_cls=vec_cls)
-    if cfg.normalize:
+    venv = make_vec_env(lambda: make_env(env_cfg, dict_obs=True), n_envs=cfg.n_envs, seed=cfg.seed,
+                        vec_env_cls=vec_cls)
+    if cfg.normalize:  # a Dict observation: running statistics per key
         venv = VecNormalize(venv, norm_obs=True, norm_reward=False, clip_obs=10.0)
-    kwargs = check_hyperparams(cfg.algo, cfg.hyperparams)
+    name = cfg.algo.upper()
+    try:
+        kwargs = check_hyperparams(cfg.algo, cfg.hyperparams)
+        if cfg.her:
+            kwargs.update(her_settings(kwargs, episode_steps(venv)))
+    except MotorlabError:
+        venv.close()
+        raise
     if cfg.lr is not None:
         kwargs["learning_rate"] = parse_schedule(cfg.lr, "learning-rate")
     if cfg.clip_range is not None:
         kwargs["clip_range"] = parse_schedule(cfg.clip_range, "clip-range")
-    name = cfg.algo.upper()
+    policy = "MultiInputPolicy" if is_dict(venv.observation_space) else "MlpPolicy"
     try:
-        return ALGORITHMS[cfg.algo]("MlpPolicy", venv, seed=cfg.seed, device=cfg.device, verbose=0,
+        return ALGORITHMS[cfg.algo](policy, venv, seed=cfg.seed, device=cfg.device, verbose=0,
                                     tensorboard_log=str(run_dir / "tensorboard"), **kwargs)
     except (TypeError, ValueError, AssertionError) as e:  # SB3 checks its arguments with asserts
         venv.close()
         raise MotorlabError(f"bad hyperparameters for {name} ({e or type(e).__name__}); "
                             f"see the Stable-Baselines3 documentation of {name}.") from None
+
+
+# HER's defaults (Andrychowicz et al. 2017, and SB3's): 4 relabelled goals per transition, each
+# a goal achieved later in the same episode
+HER_DEFAULTS = {"goal_selection_strategy": "future", "n_sampled_goal": 4}
+
+
+def her_settings(kwargs: dict, episode: int | None) -> dict:
+    """The keyword arguments --her adds to SAC's or TD3's: HerReplayBuffer with HER_DEFAULTS under the
+    user's replay_buffer_kwargs, and learning_starts of at least one episode (HER samples goals from
+    finished episodes only; SB3 raises mid-training when asked to sample before one ended).
+
+    Raises:
+        MotorlabError: a learning_starts given below the episode length.
+    """
+    out = {"replay_buffer_class": HerReplayBuffer,
+           "replay_buffer_kwargs": {**HER_DEFAULTS, **(kwargs.get("replay_buffer_kwargs") or {})}}
+    if episode is not None:
+        starts = kwargs.get("learning_starts")
+        if starts is None:
+            out["learning_starts"] = max(episode, 100)  # SB3's default, or a whole episode
+        elif starts < episode:
+            raise MotorlabError(f"--her samples goals from finished episodes, so learning_starts ({starts}) must be "
+                                f"at least the episode length ({episode} steps); raise it or leave it out.")
+    return out
+
+
+def episode_steps(venv: VecEnv) -> int | None:
+    """The time limit of the vectorized envs' episodes (None: none)."""
+    spec = venv.get_attr("spec", [0])[0]
+    return spec.max_episode_steps if spec is not None else None
 
 
 def check_hyperparams(algo: str, params: dict) -> dict:
@@ -158,12 +210,16 @@ def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, tracker: Tr
         model.learn(total_timesteps=cfg.timesteps - start, callback=callback, progress_bar=cfg.progress,
                     tb_log_name=cfg.algo.upper(), reset_num_timesteps=start == 0)
     steps = int(model.num_timesteps)
-    callback.solved = callback.solved or (cfg.until_solved and tracker.steps_to_success is not None)
-    if tracker.last_eval_steps < steps and not callback.solved:
+    # stopped once solved: the saved policy is the one the solving evaluation judged
+    stopped = cfg.until_solved and tracker.steps_to_success is not None
+    if tracker.last_eval_steps < steps and not stopped:
         # The last update used every step so far and has not been evaluated yet.
         tracker.evaluate(steps, callback.policy_now())
-    if callback.solved and on_policy and tracker.steps_to_success is not None:
-        steps = tracker.steps_to_success  # the next rollout was cut after its first step
+    if stopped and on_policy:
+        # the next rollout was cut after its first step, which no update used: the policy saved
+        # learned from steps_to_success steps. Without --until-solved training goes on to the
+        # budget whatever an evaluation solved, and the steps trained are all of them.
+        steps = tracker.steps_to_success
     _save_model(model, run_dir)
     venv = model.get_env()
     save_sb3_policy(run_dir, model, cfg.algo, venv if isinstance(venv, VecNormalize) else None)

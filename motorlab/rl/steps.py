@@ -8,7 +8,7 @@ from typing import Any
 
 from rich.console import Console
 
-from motorlab.envs import describe_env, make_env
+from motorlab.envs import describe_env
 from motorlab.report.results import Metric, Number, write_run_results
 from motorlab.rl.config import TrainConfig, resolve
 from motorlab.runs import last_timesteps
@@ -81,11 +81,18 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
         return summary
 
     def check(self, settings: TrainConfig) -> None:
-        make_env(settings.env).close()  # a bad id, delay or reward fails before any step runs
+        from motorlab.rl.envcheck import check_train_env
+
+        # a bad id, delay or reward, an algorithm that does not fit the env, --her misused: before any step runs
+        check_train_env(settings)
+        if settings.algo != "lqr":
+            from motorlab.rl.sb3 import check_hyperparams
+
+            check_hyperparams(settings.algo, settings.hyperparams)  # unknown names, wrong types
 
     def describe(self, settings: TrainConfig, copies: int = 1) -> str:
-        what = (settings.preset or settings.algo) + (" until solved" if settings.until_solved
-                                                     else f" {settings.timesteps:,} steps")
+        what = (settings.preset or settings.algo) + (" + HER" if settings.her else "") + (
+            " until solved" if settings.until_solved else f" {settings.timesteps:,} steps")
         if copies > 1:
             what += f" × {copies} seeds"
         return f"{what} · {describe_env(settings.env)}"

@@ -21,12 +21,13 @@ from rich.progress import Progress
 
 from motorlab import trackers
 from motorlab.control.lqr import learn_lqr
-from motorlab.envs import make_env, max_return
+from motorlab.envs import max_return
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import success_by, success_mode
 from motorlab.policies import load_policy_files, save_controller
 from motorlab.report.run import plot_learning_curve
 from motorlab.rl.config import TrainConfig
+from motorlab.rl.envcheck import check_train_env
 from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker
 from motorlab.runs import prepare_run_dir, run_path, write_config, write_summary
 
@@ -67,9 +68,11 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
         when the budget ran out first), `wall_seconds`, `timesteps`, final evaluation.
 
     Raises:
-        MotorlabError: bad env id, delay, reward, or no solve target for --until-solved.
+        MotorlabError: bad env id, delay, reward, an algorithm that does not fit the env's spaces,
+            --her where it cannot relabel, or no solve target for --until-solved.
     """
-    make_env(cfg.env).close()  # validate env id, delay and reward before anything is written
+    # env id, delay, reward, the algorithm against the env's spaces, --her: before anything is written
+    check_train_env(cfg)
     solve_return = cfg.solve_return if cfg.solve_return is not None else max_return(cfg.env.id)
     if cfg.until_solved and solve_return is None:
         raise MotorlabError(f"{cfg.env.id} has no known maximum return; give --solve-return for --until-solved.")

@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import multiprocessing as mp
 import os
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,7 +21,9 @@ import gymnasium as gym
 import numpy as np
 from rich.progress import Progress
 
+from motorlab.dynamics.transitions import NpzUnreadable, read_npz
 from motorlab.envs import EnvConfig, make_env, max_return
+from motorlab.envs.spaces import require_actions
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import EpisodeSuccess, success_mode, trained_env_settings
 from motorlab.faults import fault_line, fault_of
@@ -230,6 +231,10 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
     cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
     probe = make_env(cfg)
     try:
+        # synergies are a continuous map onto the actions (a SAR replaces a Box of them): refused before any episode
+        require_actions(probe.action_space, "synergies collect", env_id=cfg.id,
+                        instead="there are no continuous commands to find synergies in; collect from a policy of "
+                        "an env with Box actions")
         signal = resolve_signal(probe, signal)  # fail early for a signal the env does not have
         low, high = signal_bounds(probe, signal)
     finally:
@@ -304,22 +309,23 @@ def load_activations(path: Path) -> tuple[np.ndarray, dict]:
     if not path.is_file():
         raise MotorlabError(f"{path} does not exist; write it with `motorlab synergies collect RUN_DIR`.")
     try:
-        loaded = np.load(path, allow_pickle=False)
-        if not isinstance(loaded, np.lib.npyio.NpzFile):  # a plain .npy array
-            raise MotorlabError(f"{path} is a single array, not an .npz archive; write it with "
-                                "`motorlab synergies collect` (activations.npz).")
-        with loaded as data:
-            if "activations" not in data.files:
-                raise MotorlabError(f"{path} has no 'activations' array; it holds {', '.join(data.files) or 'nothing'}.")
-            acts = np.asarray(data["activations"], dtype=np.float64)
-            meta = json.loads(str(data["metadata"])) if "metadata" in data.files else {}
-            bounds = {k: np.asarray(data[k], dtype=np.float64).ravel() for k in ("low", "high") if k in data.files}
-            if "signal" in data.files:
-                meta["signal"] = str(data["signal"])
-    except MotorlabError:
-        raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, json.JSONDecodeError) as e:
-        raise MotorlabError(f"{path} is not a readable .npz file ({e}); collect it again.") from None
+        data = read_npz(path)
+    except NpzUnreadable as e:
+        raise MotorlabError(f"{path} is not a readable .npz file ({e}); collect it again with "
+                            "`motorlab synergies collect`.") from None
+    if "activations" not in data:
+        raise MotorlabError(f"{path} has no 'activations' array; it holds {', '.join(data) or 'nothing'}.")
+    try:
+        acts = np.asarray(data["activations"], dtype=np.float64)
+        meta = json.loads(str(data["metadata"])) if "metadata" in data else {}
+        bounds = {k: np.asarray(data[k], dtype=np.float64).ravel() for k in ("low", "high") if k in data}
+    except (ValueError, TypeError) as e:  # strings where numbers belong, metadata that is not JSON
+        raise MotorlabError(f"{path} is not an activations file written by `motorlab synergies collect` "
+                            f"({str(e).splitlines()[0] if str(e) else type(e).__name__}); collect it again.") from None
+    if not isinstance(meta, dict):
+        raise MotorlabError(f"{path}: its metadata is not a JSON object; collect it again.")
+    if "signal" in data:
+        meta["signal"] = str(data["signal"])
     if acts.ndim != 2 or acts.shape[0] < 2 or acts.shape[1] < 1:
         raise MotorlabError(f"{path}: activations must be (samples, muscles) with at least 2 samples; got {acts.shape}.")
     if not np.all(np.isfinite(acts)):

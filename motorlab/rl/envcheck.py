@@ -1,0 +1,74 @@
+"""What a training run needs of its env, checked before anything is written: the algorithm fits
+the env's action space, and hindsight relabelling (--her) has goals to relabel.
+
+    SAC, TD3, LQR   continuous (Box) actions
+    PPO             Box, Discrete, MultiDiscrete or MultiBinary actions
+    --her           SAC or TD3 (rl.config), a goal-conditioned env (motorlab.envs.spaces.is_goal_conditioned)
+                    whose Dict observation reaches the replay buffer as it is, and the env's own reward
+                    (HER recomputes rewards with the env's compute_reward)
+
+Each refusal is one line naming the space and what fits it.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+from motorlab.envs import EnvConfig, make_env, reads_observations
+from motorlab.envs.spaces import describe_space, is_goal_conditioned, require_actions
+from motorlab.errors import MotorlabError
+from motorlab.rl.config import TrainConfig
+
+ALGO_NAMES = {"ppo": "PPO", "sac": "SAC", "td3": "TD3", "lqr": "LQR (--algo lqr)"}
+PPO_ACTIONS = (gym.spaces.Box, gym.spaces.Discrete, gym.spaces.MultiDiscrete, gym.spaces.MultiBinary)
+
+
+def check_train_env(cfg: TrainConfig) -> None:
+    """Build the training env once and check it against the settings.
+
+    Raises:
+        MotorlabError: a bad env setting (from make_env), an algorithm that cannot act in the env's
+            action space, --her where it cannot relabel.
+    """
+    env = make_env(cfg.env, dict_obs=cfg.algo != "lqr")  # the observation training sees
+    try:
+        check_actions(cfg, env.action_space)
+        if cfg.her:
+            check_her(cfg.env, env)
+    finally:
+        env.close()
+
+
+def check_actions(cfg: TrainConfig, space: gym.Space) -> None:
+    """One line naming the space and the algorithms that fit it, when `cfg.algo` does not."""
+    if cfg.algo == "ppo":
+        if not isinstance(space, PPO_ACTIONS):
+            raise MotorlabError(f"PPO needs Box, Discrete, MultiDiscrete or MultiBinary actions, and {cfg.env.id}'s "
+                                f"actions are {describe_space(space)}.")
+        return
+    require_actions(space, ALGO_NAMES[cfg.algo], instead="use --algo ppo", env_id=cfg.env.id)
+
+
+def check_her(env_cfg: EnvConfig, env: gym.Env) -> None:
+    """--her needs the goals: a goal-conditioned env, its Dict observation kept whole, its own reward."""
+    base = env.unwrapped
+    if not is_goal_conditioned(base):
+        raise MotorlabError(f"--her needs a goal-conditioned env (a Dict observation with achieved_goal and "
+                            f"desired_goal, and compute_reward), and {env_cfg.id}'s observations are "
+                            f"{describe_space(base.observation_space)}; drop --her.")
+    if env_cfg.reward not in (None, "task"):
+        raise MotorlabError(f"--her recomputes the rewards of relabelled goals with the env's compute_reward, so "
+                            f"--reward {env_cfg.reward} would apply to some transitions only; drop --reward or --her.")
+    if reads_observations(env_cfg):
+        raise MotorlabError(f"--her relabels the goals inside the Dict observation, and {flattening(env_cfg)} "
+                            "turns it into one array; drop it or --her.")
+
+
+def flattening(env_cfg: EnvConfig) -> str:
+    """The settings that make training flatten a Dict observation, as the user gave them."""
+    on_obs = ("observation", "both")
+    given = [(f"--history {env_cfg.history}", env_cfg.history > 1),
+             ("--obs-noise", env_cfg.obs_noise is not None),
+             ("--delay on observations", bool(env_cfg.delay) and env_cfg.delay_on in on_obs),
+             ("--latency on observations", bool(env_cfg.latency) and env_cfg.latency_on in on_obs)]
+    return ", ".join(name for name, used in given if used) or "an env setting"
