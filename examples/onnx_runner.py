@@ -21,7 +21,16 @@ args = parser.parse_args()
 session = ort.InferenceSession(args.policy, providers=["CPUExecutionProvider"])
 meta = session.get_modelmeta().custom_metadata_map  # what motorlab wrote: env_id, history, interface ...
 history = int(meta["history"])
+try:  # Gymnasium-Robotics' ids (PointMaze_*, AdroitHand*) register when it is imported
+    import gymnasium_robotics
+
+    gym.register_envs(gymnasium_robotics)
+except ImportError:
+    pass
 env = gym.make(args.env or meta["env_id"])
+# a Dict observation (goal-conditioned tasks) goes in as the flat vector, keys in the order of
+# policy.onnx.json's obs_layout: Gymnasium's own flattening
+env = gym.wrappers.FlattenObservation(env) if isinstance(env.observation_space, gym.spaces.Dict) else env
 obs, _ = env.reset(seed=args.seed)
 stack = np.tile(np.asarray(obs, np.float32), history)[None]  # at the start: the first observation, K times
 total, steps, done = 0.0, 0, False

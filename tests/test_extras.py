@@ -27,7 +27,7 @@ from motorlab.errors import MotorlabError
 from motorlab.extras import EXTRAS, install_hint, require
 
 ROOT = Path(__file__).resolve().parents[1]
-STACKS = ("myosuite", "upkie", "pybullet", "ray", "evotorch")  # the top-level modules of the extras
+STACKS = ("myosuite", "upkie", "pybullet", "ray", "evotorch", "gymnasium_robotics")  # the top-level modules of the extras
 BLOCK = f"import sys\nfor _m in {STACKS!r}:\n    sys.modules[_m] = None\n"
 
 MYOSUITE_HINT = "pip install 'motorlab[myosuite]' (or: pip install myosuite==3.0.0)"
