@@ -110,6 +110,17 @@ def test_a_killed_overwrite_is_undone_by_the_next_command(tmp_path):
     assert snapshot(out) == {k: v for k, v in before.items() if k.startswith(str(out))}
 
 
+def test_a_run_with_a_damaged_summary_is_not_taken_as_finished(finished, tmp_path):
+    run = tmp_path / "run"
+    assert_ok(run_here("train", ENV_ID, *LQR, "--out", run))
+    (run / "summary.json").write_text('{"return_mean": 10')  # cut short, e.g. by a full disk
+    before = snapshot(run)
+    assert_one_line_error(run_here("evaluate", run, "--episodes", "1", "--out", tmp_path / "eval"),
+                          "damaged summary.json", "did not finish")
+    assert snapshot(run) == before
+    assert not (tmp_path / "eval").exists()
+
+
 # ---- a step never writes into its input's folder -----------------------------------------
 
 @pytest.mark.parametrize("input_", ["{data}", "{data}/transitions.npz"])
