@@ -14,6 +14,7 @@ from rich.console import Console
 
 from helpers import HAND_MUSCLES, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli, run_here
 from motorlab.recipes import bundled, load_recipe, parse_recipe
+from motorlab.runs import run_folders
 from motorlab.studies import run_study
 from motorlab.synergy import load_sar
 
@@ -91,7 +92,7 @@ def test_rerun_keeps_every_step(study):
     recipe, out, _ = study
     before = {d: (out / d / "summary.json").stat().st_mtime_ns for d in STEP_DIRS}
     sar_bytes = (out / "fit" / "sar.npz").read_bytes()
-    proc = run_cli("run", recipe, "--out", out, timeout=600)
+    proc = run_cli("run", recipe, "--out", out, "--resume", timeout=600)
     assert_ok(proc)
     assert proc.stdout.count("already done") == len(STEP_DIRS)
     assert {d: (out / d / "summary.json").stat().st_mtime_ns for d in STEP_DIRS} == before
@@ -248,7 +249,8 @@ def test_rerun_retrains_on_a_refitted_sar(tmp_path):
     quiet = Console(file=io.StringIO())
     run_study(parse_recipe(tiny_sar_study(3), "tiny.toml"), out, console=quiet)
     assert load_sar(out / "fit" / "sar.npz").n_synergies == 3
-    run_study(parse_recipe(tiny_sar_study(2), "tiny.toml"), out, console=quiet)
+    with run_folders("resume"):  # a finished study is redone only when asked: --resume
+        run_study(parse_recipe(tiny_sar_study(2), "tiny.toml"), out, console=quiet)
     assert load_sar(out / "fit" / "sar.npz").n_synergies == 2
     policy = json.loads((out / "sar-rl" / "policy.json").read_text())
     assert policy["action_space"]["shape"] == [2]
