@@ -53,19 +53,6 @@ def reward(obs, action, next_obs):
 '''
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _imports_stay_in_this_file():
-    """The modules this file's runs import (gymnasium_robotics, a user's reward) are passed on to the
-    processes motorlab starts through MOTORLAB_IMPORTS: it is put back after the file, so that later
-    files' processes do not import them (gymnasium_robotics' notice would be a line on their stderr)."""
-    saved = os.environ.get("MOTORLAB_IMPORTS")
-    yield
-    if saved is None:
-        os.environ.pop("MOTORLAB_IMPORTS", None)
-    else:
-        os.environ["MOTORLAB_IMPORTS"] = saved
-
-
 @pytest.fixture(scope="module")
 def maze(tmp_path_factory):
     """10 random episodes of the point maze (3000 transitions) and a model fit on them."""

@@ -26,18 +26,6 @@ MAZE = "gymnasium_robotics:PointMaze_UMaze-v3"
 NUMPY_PICKLE_ADVICE = ("allow_pickle", "pickle.load", "unsafely")
 
 
-@pytest.fixture(scope="module", autouse=True)
-def _imports_stay_in_this_file():
-    """MOTORLAB_IMPORTS put back after the file: the modules its runs import (gymnasium_robotics, a
-    user's reward) must not be imported by later files' processes."""
-    saved = os.environ.get("MOTORLAB_IMPORTS")
-    yield
-    if saved is None:
-        os.environ.pop("MOTORLAB_IMPORTS", None)
-    else:
-        os.environ["MOTORLAB_IMPORTS"] = saved
-
-
 @pytest.fixture(scope="module")
 def maze(tmp_path_factory):
     """Finished runs on the point maze, a Dict observation env: 4 random episodes, a model fit on them."""
