@@ -180,7 +180,7 @@ def test_parallel_study_equals_the_sequential_one(tmp_path):
     table = (par / "table.txt").read_text()
     assert "ran beside" in table and "ran beside" not in (seq / "table.txt").read_text()
     assert "(in the background)" in proc.stdout
-    again = run_cli("run", _recipe(tmp_path), "--out", par)  # a finished study is kept, step by step
+    again = run_cli("run", _recipe(tmp_path), "--out", par, "--resume")  # a finished study is kept, step by step
     assert_ok(again)
     assert again.stdout.count("already done with these settings; kept") == 5  # a, a-eval, b, c/seed0, c/seed1
 

@@ -68,7 +68,7 @@ def test_study_runs_every_step(study):
 def test_rerun_keeps_finished_steps(study):
     root, _ = study
     before = {p: (root / "out" / p / "summary.json").stat().st_mtime_ns for p in ("collect", "model", "mpc")}
-    proc = run_cli("run", root / "tiny.toml", "--out", root / "out")
+    proc = run_cli("run", root / "tiny.toml", "--out", root / "out", "--resume")
     assert_ok(proc)
     assert proc.stdout.count("already done with these settings") == 4
     assert before == {p: (root / "out" / p / "summary.json").stat().st_mtime_ns for p in before}
