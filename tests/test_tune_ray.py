@@ -52,8 +52,7 @@ def test_ray_backend_searches_on_a_cluster_and_asha_stops_a_hopeless_trial(ray_a
     proc = run_cli(*argv)
     assert_ok(proc)
     kept = (out / "trials" / "0" / "seed0" / "summary.json").stat().st_mtime_ns
-    again = run_cli(*argv, "--resume")
-    print("DEBUG again stdout:", again.stdout[-3000:])  # the same command again: every trial is finished, nothing runs
+    again = run_cli(*argv, "--resume")  # the same command again: every trial is finished, nothing runs
     assert "ASHA" in proc.stdout and "trial 1 stopped by ASHA at step 300" in proc.stdout
     assert not _live_processes(out / "trials")  # every seed process ended, the stopped ones too
 
