@@ -24,6 +24,8 @@ import shutil
 import tempfile
 import time
 import tomllib
+import zipfile
+import zlib
 from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, Literal
@@ -89,6 +91,44 @@ def atomic_write_npz(path: Path, **arrays: Any) -> None:
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     atomic_write_bytes(path, buf.getvalue())
+
+
+ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip's first entry, or an empty zip's end record
+
+
+class NpzUnreadable(Exception):
+    """Why a file is not a plain .npz archive, in words for a one-line message."""
+
+
+def read_npz(path: Path) -> dict[str, np.ndarray]:
+    """Every array of a plain .npz archive at `path`, never unpickling (transitions, activations: the
+    files motorlab writes with `atomic_write_npz`).
+
+    Raises:
+        NpzUnreadable: not an .npz archive (random bytes, an .npy file, a pickle), a damaged or
+            cut-short one, or arrays of Python objects; its text says which, never numpy's
+            advice to load the file unsafely. The caller names the file and the fix.
+    """
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as e:
+        raise NpzUnreadable(f"cannot read it: {e.strerror or e}") from None
+    if head not in ZIP_MAGIC:
+        raise NpzUnreadable("it is not an .npz archive")
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            return {k: f[k] for k in f.files}
+    except ValueError as e:
+        if "pickle" in str(e):  # numpy's own text suggests unpickling: never shown
+            raise NpzUnreadable("it holds arrays of Python objects, which motorlab never unpickles") from None
+        raise NpzUnreadable(f"an array in it is damaged: {first_line(e)}") from None
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, KeyError) as e:
+        raise NpzUnreadable(f"the archive is damaged or cut short: {first_line(e) or type(e).__name__}") from None
+
+
+def first_line(e: Exception) -> str:
+    return (str(e).strip().splitlines() or [""])[0]
 
 
 def _plain(value: Any) -> Any:
@@ -222,10 +262,7 @@ def run_folders(mode: FolderMode = "new"):
         raise
     else:
         for run_dir, aside in replaced:
-            if is_complete(run_dir):
-                shutil.rmtree(aside, ignore_errors=True)
-            else:
-                _restore(run_dir, aside)
+            _settle(run_dir, aside)
     finally:
         _MODE.reset(tokens[0])
         _REPLACED.reset(tokens[1])
@@ -272,7 +309,7 @@ def _alive(pid: str) -> bool:
     except (ValueError, ProcessLookupError):
         return False
     except PermissionError:
-        return True  # another user's process
+        pass  # another user's process
     return True
 
 
@@ -280,10 +317,15 @@ def recover(run_dir: Path) -> None:
     """Settle an --overwrite of `run_dir` that was killed: the old run comes back where the new one
     did not finish; where it did, the old one is deleted."""
     for aside in _asides(Path(run_dir)):
-        if is_complete(run_dir):
-            shutil.rmtree(aside, ignore_errors=True)
-        else:
-            _restore(Path(run_dir), aside)
+        _settle(Path(run_dir), aside)
+
+
+def _settle(run_dir: Path, aside: Path) -> None:
+    """The replaced run `aside` goes for good where its replacement finished, else back in place."""
+    if is_complete(run_dir):
+        shutil.rmtree(aside, ignore_errors=True)
+    else:
+        _restore(run_dir, aside)
 
 
 def finished_run_message(run_dir: Path, resumable: bool = False) -> str:
@@ -302,7 +344,7 @@ def refuse_finished(run_dir: Path, resumable: bool = False) -> None:
         raise MotorlabError(finished_run_message(run_dir, resumable))
 
 
-def prepare_run_dir(out: Path | None, step: str) -> Path:
+def prepare_run_dir(out: Path | None, step: str, resumable: bool = False) -> Path:
     """Create the run folder; a stale summary.json is removed so the folder
     does not look complete until this run finishes. Call it only once the
     settings are known to be valid, so a mistake never spoils a finished run.
@@ -312,7 +354,7 @@ def prepare_run_dir(out: Path | None, step: str) -> Path:
             it cannot be written.
     """
     run_dir = run_path(out, step)
-    refuse_finished(run_dir)
+    refuse_finished(run_dir, resumable)  # resumable: the refusal names --resume too
     replaced = _REPLACED.get()
     if folder_mode() == "overwrite" and run_dir.is_dir() and any(run_dir.iterdir()) and replaced is not None:
         move_aside(run_dir, replaced)

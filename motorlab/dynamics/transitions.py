@@ -17,8 +17,6 @@ Reading one never unpickles: a file that is not a plain .npz archive is refused 
 from __future__ import annotations
 
 import json
-import zipfile
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from motorlab.errors import MotorlabError
-from motorlab.runs import atomic_write_npz
+from motorlab.runs import NpzUnreadable, atomic_write_npz, first_line, read_npz
 
 TRANSITIONS = "transitions.npz"
 _ARRAYS = ("states", "actions", "next_states", "rewards", "dones", "terminated", "episode", "goals")
@@ -139,43 +137,6 @@ def _is_obs_layout(value, obs_dim: int | None) -> bool:
     return obs_dim is None or stop == obs_dim
 
 
-ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # a zip's first entry, or an empty zip's end record
-
-
-class NpzUnreadable(Exception):
-    """Why a file is not a plain .npz archive, in words for a one-line message."""
-
-
-def read_npz(path: Path) -> dict[str, np.ndarray]:
-    """Every array of a plain .npz archive at `path`, never unpickling.
-
-    Raises:
-        NpzUnreadable: not an .npz archive (random bytes, an .npy file, a pickle), a damaged or
-            cut-short one, or arrays of Python objects; its text says which, never numpy's
-            advice to load the file unsafely. The caller names the file and the fix.
-    """
-    try:
-        with open(path, "rb") as f:
-            head = f.read(4)
-    except OSError as e:
-        raise NpzUnreadable(f"cannot read it: {e.strerror or e}") from None
-    if head not in ZIP_MAGIC:
-        raise NpzUnreadable("it is not an .npz archive")
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            return {k: f[k] for k in f.files}
-    except ValueError as e:
-        if "pickle" in str(e):  # numpy's own text suggests unpickling: never shown
-            raise NpzUnreadable("it holds arrays of Python objects, which motorlab never unpickles") from None
-        raise NpzUnreadable(f"an array in it is damaged: {_first_line(e)}") from None
-    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, KeyError) as e:
-        raise NpzUnreadable(f"the archive is damaged or cut short: {_first_line(e) or type(e).__name__}") from None
-
-
-def _first_line(e: Exception) -> str:
-    return (str(e).strip().splitlines() or [""])[0]
-
-
 def load_transitions(path: Path) -> Transitions:
     """Read and check a transitions.npz (or the run folder holding one), without unpickling."""
     path = Path(path)
@@ -198,7 +159,7 @@ def load_transitions(path: Path) -> Transitions:
     try:
         meta = json.loads(str(found["meta"]))
     except ValueError as e:
-        raise not_transitions(f"its meta is not JSON: {_first_line(e)}") from None
+        raise not_transitions(f"its meta is not JSON: {first_line(e)}") from None
     if not isinstance(meta, dict):
         raise not_transitions("its meta is not a JSON object")
     return Transitions(**{k: found[k] for k in _ARRAYS}, meta=meta).check(str(path))

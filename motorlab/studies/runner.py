@@ -55,7 +55,6 @@ from motorlab.runs import (
     move_aside,
     prepare_run_dir,
     read_json,
-    refuse_finished,
     replacements,
     toml_holds,
     write_config,
@@ -294,11 +293,9 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
         console.print(f"      the recipe's parallel_steps = {parallel_steps} applies on this machine only; with "
                       f"--backend {execution.backend} its steps run one after another")
         parallel_steps = 1
-    if out is not None:
-        refuse_finished(Path(out), resumable=True)  # before anything runs: a finished study needs --resume
     finished = {f: (Path(out) / f).read_bytes() for f in ("summary.json", "config.toml")} \
         if out is not None and is_complete(Path(out)) else {}
-    study_dir = prepare_run_dir(out, recipe.name)
+    study_dir = prepare_run_dir(out, recipe.name, resumable=True)  # a finished study needs --resume
     config = {"recipe": recipe.name, "source": recipe.source, "steps": [s.name for s in recipe.steps]}
     write_config(study_dir, config)
     outputs = _Outputs(recipe.steps)

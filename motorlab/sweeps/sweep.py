@@ -100,7 +100,7 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
     labels = list(dict.fromkeys(t["setting"] for t in trials))
     config = {"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [], "settings": labels,
               "backend": backend, "address": mask_url(address) if address else None, "max_parallel": max_parallel}
-    prepare_run_dir(sweep_dir, "sweep")  # unfinished until the aggregate is written (--overwrite: a fresh folder)
+    prepare_run_dir(sweep_dir, "sweep", resumable=True)  # unfinished until the aggregate is written (--overwrite: a fresh folder)
     write_config(sweep_dir, config)
     todo = [t for t in trials if not is_finished(t)]
     kept = len(trials) - len(todo)

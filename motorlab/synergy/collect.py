@@ -21,14 +21,13 @@ import gymnasium as gym
 import numpy as np
 from rich.progress import Progress
 
-from motorlab.dynamics.transitions import NpzUnreadable, read_npz
 from motorlab.envs import EnvConfig, make_env, max_return
 from motorlab.envs.spaces import require_actions
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import EpisodeSuccess, success_mode, trained_env_settings
 from motorlab.faults import fault_line, fault_of
 from motorlab.policies import load_policy_files
-from motorlab.runs import atomic_write_npz, require_run_dir
+from motorlab.runs import NpzUnreadable, atomic_write_npz, read_npz, require_run_dir
 
 ACTIVATIONS = "activations.npz"
 

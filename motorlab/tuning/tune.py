@@ -100,7 +100,7 @@ def run_tune(spec: TuneSpec, console: Console | None = None, commands: TyperGrou
     planner.check()
     refuse_finished(spec.out, resumable=True)  # a finished search goes on with --resume, or is replaced
     if folder_mode() == "overwrite":
-        prepare_run_dir(spec.out, "tune")  # the old folder (and its study.db) aside until this search ends
+        prepare_run_dir(spec.out, "tune", resumable=True)  # the old folder (and its study.db) aside until this search ends
     if spec.storage.startswith("sqlite:///") and spec.storage == f"sqlite:///{spec.out / 'study.db'}":
         make_folder(spec.out)
     config = {"tune": spec.target, "space": {k: d.describe() for k, d in spec.space.items()},
