@@ -51,7 +51,7 @@ test: lint docs $(VENV)/.browser  ## the whole test suite, as CI runs it (under 
 docs: $(STAMP)  ## the documentation site in site/ (open site/index.html, offline); any warning fails it
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
-test-fast: lint $(VENV)/.browser  ## the edit loop: unit tests and one end-to-end test per workflow (under 3 min)
+test-fast: lint  ## the edit loop: unit tests and one end-to-end test per workflow (under 3 min; no browser needed)
 	$(VENV)/bin/python -m pytest -q -m fast
 
 bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object

@@ -24,7 +24,8 @@ __version__ = "0.1.0"
 # The API's names, loaded from motorlab.api when first used. `motorlab.dynamics` is the domain
 # package (forward models); its collect / fit / check are the API's (motorlab/dynamics/__init__.py).
 __all__ = ["train", "evaluate", "video", "zeroshot", "robustness", "compare", "mpc", "mbrl", "run_recipe", "sweep",
-           "tune", "load", "synergies", "Result", "Run", "Study", "Sweep", "Tune", "MotorlabError", "dynamics"]
+           "tune", "load", "synergies", "Result", "Run", "Study", "Sweep", "Tune", "MotorlabError", "dynamics",
+           "tracking", "register_env"]
 
 
 def __getattr__(name: str):

@@ -3,7 +3,8 @@
 The graph holds everything between the robot's raw observation and the command it sends:
 
     obs ─► history stack (K > 1) ─► normalization (obs_rms, clip) ─► the policy's deterministic
-        action (PPO: the mean, clipped to the action box; SAC/TD3: tanh, unscaled to the box)
+        action (PPO: the mean, clipped to the action box; SAC/TD3/TQC/CrossQ: tanh, unscaled to the
+        box; each algorithm's file in motorlab/rl/algos/ says how its actor computes it)
         ─► SAR decode (runs acting in synergy space) ─► action
 
 so that onnxruntime and numpy are all a robot needs (docs/deployment.md; examples/onnx_runner.py).
@@ -15,6 +16,11 @@ Inputs and outputs (float32 unless said, dynamic batch dimension "batch"):
     action          [batch, A]     what the env (robot) takes; int64 [batch] for Discrete actions:
                                    the index of the deterministic policy's action (the most likely)
     next_obs_stack  [batch, K*D]   K > 1 only: feed it back as obs_stack at the next step
+
+A recurrent policy (RecurrentPPO) carries its state explicitly, an input/output pair per state
+(`lstm_h` / `next_lstm_h`, `lstm_c` / `next_lstm_c`, [layers, batch, hidden]): zeros at an
+episode's start, else the previous step's outputs. The sidecar lists them with the rest, and
+the check runs the graph over several steps, feeding the states back, against the policy's own.
 
 A policy trained on a Dict observation (goal-conditioned tasks) takes it flattened, one input:
 `obs` is the keys' values one after another in `obs_layout` order (the Dict's key order,
@@ -53,6 +59,7 @@ from motorlab.envs.spaces import KeySlice, describe_space, layout_json
 from motorlab.errors import MotorlabError
 from motorlab.extras import missing
 from motorlab.policies import BUILTIN_POLICIES, POLICY_JSON, SB3Policy, load_policy_files
+from motorlab.rl.algos.base import StateSpec
 from motorlab.runs import CONFIG, atomic_write_bytes, read_json, require_run_dir, write_json
 from motorlab.synergy.wrapper import SynergyActionWrapper
 
@@ -64,6 +71,7 @@ TOLERANCE = 1e-5  # largest |onnxruntime - torch| allowed on any action element 
 RANDOM_OBSERVATIONS = 256
 ENV_STEPS = 200  # observations from env steps for the check: a few episodes, a second or so
 DYNAMIC = "batch"
+RECURRENT_ROWS = 8  # a recurrent policy is checked on this many rows at a time, step after step
 # EnvConfig fields the graph implements, or that say nothing about the policy's inputs and outputs
 IN_GRAPH = {"id", "history", "sar", "phi", "kwargs", "success"}
 
@@ -72,7 +80,7 @@ def export_onnx(run_dir: Path, out: Path, seed: int = 0) -> dict[str, Any]:
     """Write a run's policy as `out/policy.onnx` and its interface as `out/policy.onnx.json`.
 
     Args:
-        run_dir: a finished run folder holding an SB3 policy (PPO, A2C, SAC, TD3), from
+        run_dir: a finished run folder holding an SB3 policy (any in motorlab/rl/algos/, and A2C), from
             `motorlab train` or `motorlab export`.
         out: the folder to write (created if needed; may be the run folder itself).
         seed: seeds the env episodes and random observations of the check.
@@ -107,15 +115,16 @@ def export_onnx(run_dir: Path, out: Path, seed: int = 0) -> dict[str, Any]:
     finally:
         if env is not None:
             env.close()
+    states = policy.algorithm.onnx_states(policy.policy)  # a recurrent policy's state pairs (else none)
     module = _deployed_module(policy, meta, history, obs_size, decode)
-    model = onnx.load_from_string(_to_onnx(module, history, obs_size))
+    model = onnx.load_from_string(_to_onnx(module, history, obs_size, states))
     stacks = np.concatenate([stacks, _random_stacks(policy, stacks, RANDOM_OBSERVATIONS, seed)])
-    error = _check(ort, model.SerializeToString(), policy, decode, stacks, history, obs_size)
+    error = _check(ort, model.SerializeToString(), policy, decode, stacks, history, obs_size, states)
 
     space = policy.policy.action_space
     discrete = isinstance(space, gym.spaces.Discrete)
     action_size = int(decode.size if decode else 1 if discrete else space.shape[0])
-    inputs, outputs = _interface(obs_size, history, action_size, policy.layout, space)
+    inputs, outputs = _interface(obs_size, history, action_size, policy.layout, space, states)
     not_in_graph = _not_in_graph(env_cfg)
     info = {
         "format": FORMAT, "onnx": ONNX_FILE, "inputs": inputs, "outputs": outputs, "opset": OPSET,
@@ -143,7 +152,7 @@ def _require_run(run_dir: Path) -> Path:
     run_dir = Path(run_dir)
     if str(run_dir).split(":", 1)[0] in BUILTIN_POLICIES and not run_dir.exists():
         raise MotorlabError(f"{run_dir} is a built-in controller, not a run folder; --onnx exports the neural "
-                            "policy of a run folder from `motorlab train` (PPO, SAC, TD3).")
+                            f"policy of a run folder from `motorlab train` ({_sb3_titles()}).")
     return require_run_dir(run_dir)
 
 
@@ -163,12 +172,18 @@ def _sb3_meta(run_dir: Path) -> dict[str, Any]:
     kind = meta.get("type")
     if kind in ("pid", "lqr"):
         raise MotorlabError(f"{run_dir} holds {'an LQR' if kind == 'lqr' else 'a PID'} controller, not a neural policy; --onnx exports "
-                            "PPO, SAC and TD3 policies (a linear controller is a few lines on the robot: its "
+                            f"{_sb3_titles()} policies (a linear controller is a few lines on the robot: its "
                             f"gains are in {run_dir / POLICY_JSON}).")
     if kind != "sb3":
-        raise MotorlabError(f"{run_dir / POLICY_JSON} has policy type {kind!r}; --onnx exports PPO, SAC and TD3 "
-                            "policies.")
+        raise MotorlabError(f"{run_dir / POLICY_JSON} has policy type {kind!r}; --onnx exports "
+                            f"{_sb3_titles()} policies.")
     return meta
+
+
+def _sb3_titles() -> str:
+    from motorlab.rl import algos
+
+    return ", ".join(a.title for a in algos.registry().values() if a.sb3)
 
 
 def _require_onnx() -> tuple[ModuleType, ModuleType]:
@@ -255,15 +270,14 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
         SquashedDiagGaussianDistribution,
         StateDependentNoiseDistribution,
     )
-    from stable_baselines3.common.policies import ActorCriticPolicy
     from stable_baselines3.common.preprocessing import preprocess_obs
-    from stable_baselines3.sac.policies import SACPolicy
-    from stable_baselines3.td3.policies import TD3Policy
 
     sb3 = policy.policy
+    algo = policy.algorithm  # how its actor computes the deterministic action (motorlab/rl/algos/)
+    n_states = len(algo.onnx_states(sb3))
     dist = getattr(sb3, "action_dist", None) or getattr(getattr(sb3, "actor", None), "action_dist", None)
     discrete = isinstance(dist, CategoricalDistribution)  # its deterministic action: the most likely index
-    if isinstance(sb3, TD3Policy) or discrete:
+    if algo.tanh_in_actor or discrete:
         squash = False  # TD3's actor ends in tanh itself
     elif isinstance(dist, SquashedDiagGaussianDistribution):
         squash = True
@@ -273,8 +287,7 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
         squash = False
     else:
         raise MotorlabError(f"the policy's action distribution is {type(dist).__name__}; --onnx exports Gaussian "
-                            "policies (PPO, A2C, SAC, TD3 on Box actions) and categorical ones (PPO, A2C on Discrete "
-                            "actions).")
+                            "policies (on Box actions) and categorical ones (on Discrete actions).")
     space = sb3.action_space
     layout = policy.layout  # a Dict observation: each key's slice of the flat input
 
@@ -299,21 +312,15 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
                 self.register_buffer("decode_low", f64(decode.low))
                 self.register_buffer("decode_high", f64(decode.high))
 
-        def act(self, x: torch.Tensor) -> torch.Tensor:
+        def act(self, x: torch.Tensor, states: tuple = ()) -> tuple[torch.Tensor, tuple]:
             if self.normalized:
                 x = torch.clamp((x.double() - self.mean) / self.std, -policy.clip_obs, policy.clip_obs).float()
             if layout:  # the flat vector as the Dict the network was trained on (SB3Policy.act's unflatten_batch)
                 x = {s.key: x[:, s.start:s.stop].reshape(-1, *s.shape) for s in layout}
             x = preprocess_obs(x, sb3.observation_space, normalize_images=sb3.normalize_images)
-            if isinstance(sb3, ActorCriticPolicy):
-                features = sb3.pi_features_extractor(x)
-                a = sb3.action_net(sb3.mlp_extractor.forward_actor(features))
-            elif isinstance(sb3, SACPolicy):
-                a, _, _ = sb3.actor.get_action_dist_params(x)
-            else:
-                a = sb3.actor(x)
+            a, states = algo.actor(sb3, x, states)
             if discrete:
-                return torch.argmax(a, dim=1)  # the logits' largest: CategoricalDistribution.mode()
+                return torch.argmax(a, dim=1), states  # the logits' largest: CategoricalDistribution.mode()
             if squash:
                 a = torch.tanh(a)
             # what SB3's predict does with a Box action, in the same float32 operations
@@ -326,39 +333,51 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
                 if decode.clip:
                     command = torch.minimum(torch.maximum(command, self.decode_low), self.decode_high)
                 a = command.float()
-            return a
+            return a, states
 
-        def forward(self, obs: torch.Tensor, obs_stack: torch.Tensor | None = None):
+        def forward(self, obs: torch.Tensor, *rest: torch.Tensor):
+            # rest: obs_stack (K > 1), then the recurrent states; out: action, next_obs_stack, next states
+            states = tuple(rest[len(rest) - n_states:]) if n_states else ()
             if history == 1:
-                return self.act(obs)
-            stack = torch.cat([obs_stack[:, obs_size:], obs], dim=1)  # drop the oldest, append the newest
-            return self.act(stack), stack
+                a, states = self.act(obs, states)
+                return (a, *states) if n_states else a
+            stack = torch.cat([rest[0][:, obs_size:], obs], dim=1)  # drop the oldest, append the newest
+            a, states = self.act(stack, states)
+            return a, stack, *states
 
     return DeployedPolicy().eval()
 
 
-def _to_onnx(module, history: int, obs_size: int) -> bytes:
+def _to_onnx(module, history: int, obs_size: int, states: tuple[StateSpec, ...] = ()) -> bytes:
     """The module as ONNX bytes, batch dimension dynamic."""
     import io
 
     import torch
 
     inputs, outputs = ["obs"], ["action"]
-    args = (torch.zeros(2, obs_size),)
+    args = [torch.zeros(2, obs_size)]
+    axes = {"obs": {0: DYNAMIC}, "action": {0: DYNAMIC}}
     if history > 1:
         inputs.append("obs_stack")
         outputs.append("next_obs_stack")
-        args = (torch.zeros(2, obs_size), torch.zeros(2, obs_size * history))
+        args.append(torch.zeros(2, obs_size * history))
+        axes.update({"obs_stack": {0: DYNAMIC}, "next_obs_stack": {0: DYNAMIC}})
+    for spec in states:
+        inputs.append(spec.name)
+        outputs.append(f"next_{spec.name}")
+        args.append(torch.zeros(*(2 if d == DYNAMIC else d for d in spec.shape)))
+        batch = {spec.shape.index(DYNAMIC): DYNAMIC}
+        axes.update({spec.name: batch, f"next_{spec.name}": batch})
     buffer = io.BytesIO()
     with warnings.catch_warnings(), torch.no_grad():
         warnings.simplefilter("ignore")  # the TorchScript exporter's deprecation notice, tracer notes
-        torch.onnx.export(module, args, buffer, dynamo=False, opset_version=OPSET, input_names=inputs,
-                          output_names=outputs, dynamic_axes={name: {0: DYNAMIC} for name in inputs + outputs})
+        torch.onnx.export(module, tuple(args), buffer, dynamo=False, opset_version=OPSET, input_names=inputs,
+                          output_names=outputs, dynamic_axes=axes)
     return buffer.getvalue()
 
 
 def _interface(obs_size: int, history: int, action_size: int, layout: list[KeySlice],
-               space: gym.Space) -> tuple[list[dict], list[dict]]:
+               space: gym.Space, states: tuple[StateSpec, ...] = ()) -> tuple[list[dict], list[dict]]:
     """The graph's inputs and outputs as the sidecar and metadata_props describe them."""
     stack = history * obs_size
     what = "the newest observation, as the env gives it (not normalized)"
@@ -381,6 +400,12 @@ def _interface(obs_size: int, history: int, action_size: int, layout: list[KeySl
         outputs.append({"name": "next_obs_stack", "shape": [DYNAMIC, stack], "dtype": "float32",
                         "description": "obs_stack with obs appended and the oldest dropped: feed it back as "
                                        "obs_stack at the next step"})
+    for spec in states:
+        inputs.append({"name": spec.name, "shape": list(spec.shape), "dtype": "float32",
+                       "description": spec.description})
+        outputs.append({"name": f"next_{spec.name}", "shape": list(spec.shape), "dtype": "float32",
+                        "description": f"{spec.name} after this step: feed it back as {spec.name} at the next step "
+                                       "of the same episode"})
     return inputs, outputs
 
 
@@ -411,6 +436,7 @@ def _env_stacks(env: gym.Env, policy: SB3Policy, seed: int) -> np.ndarray:
     seen, episode = [], 0
     while len(seen) < ENV_STEPS:
         obs, _ = env.reset(seed=seed + episode)
+        policy.reset(1)  # a recurrent policy's state starts from zeros each episode
         episode += 1
         for _ in range(ENV_STEPS - len(seen)):
             obs = np.asarray(obs, dtype=np.float32)
@@ -439,21 +465,35 @@ def _random_stacks(policy: SB3Policy, seen: np.ndarray, n: int, seed: int) -> np
 
 
 def _check(ort: ModuleType, model: bytes, policy: SB3Policy, decode: _Decode | None, stacks: np.ndarray,
-           history: int, obs_size: int) -> float:
+           history: int, obs_size: int, states: tuple[StateSpec, ...] = ()) -> float:
     """Largest |onnxruntime - torch| over the actions for `stacks`; raises past TOLERANCE.
 
     Each row is fed as the graph is fed on a robot: its newest observation as obs, and the
-    stack it came from (its oldest observation first, the row shifted by one) as obs_stack."""
+    stack it came from (its oldest observation first, the row shifted by one) as obs_stack.
+    A recurrent policy's rows are fed RECURRENT_ROWS at a time, step after step, the graph's
+    states fed back as the policy carries its own, so that every step's state is checked too."""
     session = ort.InferenceSession(model, providers=["CPUExecutionProvider"])
-    feed = {"obs": stacks[:, -obs_size:]}
-    if history > 1:
-        # the stack before this step: any observation may come first, the rest is the row's oldest K-1
-        feed["obs_stack"] = np.concatenate([stacks[:, -obs_size:], stacks[:, :-obs_size]], axis=1)
-    results = session.run(None, feed)
-    expected = policy.act(stacks)
+    rows = RECURRENT_ROWS if states else len(stacks)
+    stacks = stacks[: len(stacks) // rows * rows] if states else stacks
+    carried = {spec.name: np.zeros([rows if d == DYNAMIC else d for d in spec.shape], np.float32) for spec in states}
+    policy.reset(rows)
+    got, expected_all, next_stacks = [], [], []
+    for start in range(0, len(stacks), rows):
+        step = stacks[start:start + rows]
+        feed = {"obs": step[:, -obs_size:], **carried}
+        if history > 1:
+            # the stack before this step: any observation may come first, the rest is the row's oldest K-1
+            feed["obs_stack"] = np.concatenate([step[:, -obs_size:], step[:, :-obs_size]], axis=1)
+        results = session.run(None, feed)
+        carried = {spec.name: out for spec, out in zip(states, results[len(results) - len(states):], strict=True)}
+        got.append(results[0])
+        expected_all.append(policy.act(step))
+        if history > 1:
+            next_stacks.append(results[1])
+    expected = np.concatenate(expected_all)
     if decode is not None:
         expected = decode(expected)
-    got = results[0]
+    got = np.concatenate(got)
     discrete = isinstance(policy.policy.action_space, gym.spaces.Discrete)
     dtype, tolerance = (np.int64, 0.0) if discrete else (np.float32, TOLERANCE)  # action indices must be equal
     if got.shape != expected.shape or got.dtype != dtype:
@@ -464,7 +504,7 @@ def _check(ort: ModuleType, model: bytes, policy: SB3Policy, decode: _Decode | N
         raise MotorlabError(f"onnxruntime's actions differ from torch's by up to {error:.3g} (tolerance "
                             f"{tolerance:g}) on {len(stacks)} observations; policy.onnx not written (a motorlab "
                             "bug: please report it).")
-    if history > 1 and not np.array_equal(results[1], stacks):
+    if history > 1 and not np.array_equal(np.concatenate(next_stacks), stacks):
         raise MotorlabError("the graph's next_obs_stack is not the training env's observation stack; policy.onnx "
                             "not written (a motorlab bug: please report it).")
     return error

@@ -23,7 +23,7 @@ import gymnasium as gym
 
 from motorlab.envs import EnvConfig, make_env
 from motorlab.envs.spaces import describe_space, flat_space, is_dict, obs_layout
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.policies import (
     decode_classes,
     encode_classes,
@@ -32,16 +32,16 @@ from motorlab.policies import (
     policy_classes,
     save_sb3_policy,
 )
+from motorlab.rl import algos
 from motorlab.runs import CONFIG, SUMMARY, atomic_path, prepare_run_dir, require_run_dir, write_config, write_summary
 
 # Files of a run folder that hold no pickle: what `export` copies and what is safe to send.
 SHAREABLE = ("policy.json", "policy.safetensors", CONFIG, "metrics.csv", "environment.json", "faults.log",
              "sar.npz", "activations.npz", "transitions.npz", "model.json", "model.safetensors", "episodes.npz")
 SHAREABLE_FOLDERS = ("plots", "videos")
-# SB3 policy modules -> motorlab algorithm names (A2C's policy is PPO's ActorCriticPolicy)
-ALGO_OF_MODULE = {"stable_baselines3.common.policies": "ppo", "stable_baselines3.ppo.policies": "ppo",
-                  "stable_baselines3.a2c.policies": "ppo", "stable_baselines3.sac.policies": "sac",
-                  "stable_baselines3.td3.policies": "td3"}
+# SB3 policy modules -> motorlab algorithm names, as each algorithm declares them (rl/algos/; A2C's
+# policy is PPO's ActorCriticPolicy)
+ALGO_OF_MODULE = {module: algo.name for algo in algos.registry().values() if algo.sb3 for module in algo.zip_modules}
 
 
 def export_run(source: Path, out: Path) -> dict[str, Any]:
@@ -77,7 +77,8 @@ def export_sb3_zip(zip_path: Path, out: Path, trust: bool, env_id: str | None = 
             and checked against the policy's observation and action spaces.
         vecnormalize: the pickle `VecNormalize.save` wrote, if the policy was trained on
             normalized observations (its statistics go into policy.safetensors).
-        algo: ppo, sac or td3 (default: read from the zip's JSON, without unpickling).
+        algo: an SB3 algorithm of motorlab.rl.algos, e.g. ppo (also for A2C), sac, tqc (default: read from
+            the zip's JSON, without unpickling).
 
     Raises:
         MotorlabError: missing or non-SB3 file, trust not given, unsupported policy or space,
@@ -129,21 +130,21 @@ def _algo_in_zip(zip_path: Path) -> str:
         raise MotorlabError(f"{zip_path} is not an SB3 model zip ({type(e).__name__}: {e}); "
                             "give a file written by SB3's model.save.") from None
     if module not in ALGO_OF_MODULE:
-        raise MotorlabError(f"{zip_path} holds a policy from {module}; motorlab exports PPO, A2C, SAC and TD3 "
-                            "policies (pass --algo if this is one of them).")
+        titles = ", ".join(a.title for a in algos.registry().values() if a.sb3)
+        raise MotorlabError(f"{zip_path} holds a policy from {module}; motorlab exports {titles} and A2C policies "
+                            "(pass --algo if this is one of them).")
     return ALGO_OF_MODULE[module]
 
 
 def _load_zip(zip_path: Path, algo: str):
-    from stable_baselines3 import PPO, SAC, TD3
-
-    classes = {"ppo": PPO, "sac": SAC, "td3": TD3}
-    if algo not in classes:
-        raise MotorlabError(f"--algo {algo!r}: choose ppo (also for A2C), sac or td3.")
+    known = {name: a for name, a in algos.registry().items() if a.sb3}
+    if algo not in known:
+        raise MotorlabError(f"--algo {algo!r}{did_you_mean(algo, known)}: choose {', '.join(known)} (ppo also for "
+                            "A2C).")
     try:
-        return classes[algo].load(zip_path, device="cpu")
+        return known[algo].sb3_class().load(zip_path, device="cpu")
     except Exception as e:  # noqa: BLE001  (unpickling can fail in any way; the user needs the one line)
-        raise MotorlabError(f"cannot load {zip_path} as {algo.upper()} ({type(e).__name__}: {e}); "
+        raise MotorlabError(f"cannot load {zip_path} as {known[algo].title} ({type(e).__name__}: {e}); "
                             "check --algo, and that it was saved with a compatible stable-baselines3.") from None
 
 

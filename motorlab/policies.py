@@ -110,17 +110,12 @@ class RandomPolicy:
 # ---- SB3 policies, pickle-free -------------------------------------------------
 
 def policy_classes() -> dict[str, type]:
-    """The SB3 policy classes a policy.json may name, by the name it writes (`policy_class_name`).
-    SAC's and TD3's multi-input classes are both called MultiInputPolicy: they are named by algorithm."""
-    from stable_baselines3.common.policies import ActorCriticPolicy, MultiInputActorCriticPolicy
-    from stable_baselines3.sac.policies import MultiInputPolicy as SACMultiInputPolicy
-    from stable_baselines3.sac.policies import SACPolicy
-    from stable_baselines3.td3.policies import MultiInputPolicy as TD3MultiInputPolicy
-    from stable_baselines3.td3.policies import TD3Policy
+    """The SB3 policy classes a policy.json may name, by the name it writes (`policy_class_name`):
+    every SB3 algorithm's in motorlab/rl/algos/ (imports SB3)."""
+    from motorlab.rl import algos
 
-    return {"ActorCriticPolicy": ActorCriticPolicy, "SACPolicy": SACPolicy, "TD3Policy": TD3Policy,
-            "MultiInputActorCriticPolicy": MultiInputActorCriticPolicy, "SACMultiInputPolicy": SACMultiInputPolicy,
-            "TD3MultiInputPolicy": TD3MultiInputPolicy}
+    return {name: cls for algo in algos.registry().values() if algo.sb3
+            for name, cls in algo.network_classes().items()}
 
 
 def policy_class_name(policy: Any) -> str | None:
@@ -154,6 +149,10 @@ def decode_classes(value: Any) -> Any:
 class SB3Policy:
     """An SB3 policy network with optional observation normalization; deterministic actions.
 
+    Its algorithm (motorlab.rl.algos; by default the one whose network class it is) says how it
+    acts: most act on each observation alone; a recurrent one keeps a state per row, which
+    `reset(n)` starts from zeros and `reset_row(i)` zeroes for row i's next episode.
+
     It acts on flat observation batches, as evaluation envs give them: a network trained on a Dict
     observation (MultiInputPolicy) gets them back as that Dict (`obs_layout`). Normalization
     statistics (`obs_mean`, `obs_var`) are flat too, each key's in its slice, so that normalizing
@@ -161,8 +160,15 @@ class SB3Policy:
     """
 
     def __init__(self, policy, obs_mean=None, obs_var=None, clip_obs: float = 10.0, epsilon: float = 1e-8,
-                 deterministic: bool = True):
+                 deterministic: bool = True, algorithm=None):
+        from motorlab.rl import algos
+
         self.policy = policy
+        self.algorithm = algorithm or algos.of_network(policy)
+        if self.algorithm is None:
+            raise MotorlabError(f"the policy is a {type(policy).__name__}, which no algorithm in motorlab/rl/algos/ "
+                                "builds.")
+        self.state = None  # a recurrent policy's, row by row
         self.deterministic = deterministic  # False: sample from the policy (uses torch's RNG)
         self.policy.set_training_mode(False)
         self.obs_mean, self.obs_var = obs_mean, obs_var
@@ -171,10 +177,11 @@ class SB3Policy:
         self.observation_space = flat_space(policy.observation_space)  # what act() takes
 
     def reset(self, n: int) -> None:
-        pass
+        self.state = self.algorithm.initial_state(self.policy, n)
 
     def reset_row(self, i: int) -> None:
-        pass  # stateless: history, when there is one, lives in the env's observation
+        # stateless (most): history, when there is one, lives in the env's observation
+        self.state = self.algorithm.reset_row(self.state, i)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float32)
@@ -187,8 +194,8 @@ class SB3Policy:
         if self.obs_mean is not None:
             obs = np.clip((obs - self.obs_mean) / np.sqrt(self.obs_var + self.epsilon), -self.clip_obs, self.clip_obs)
             obs = obs.astype(np.float32)
-        action, _ = self.policy.predict(unflatten_batch(obs, self.layout) if self.layout else obs,
-                                        deterministic=self.deterministic)
+        action, self.state = self.algorithm.predict(self.policy, unflatten_batch(obs, self.layout) if self.layout
+                                                    else obs, self.state, self.deterministic)
         return action
 
 
@@ -217,12 +224,15 @@ def flat_statistics(stats: dict[str, tuple[np.ndarray, np.ndarray]]) -> tuple[np
 
 
 def save_sb3_policy(run_dir: Path, model, algo: str, vecnorm=None) -> None:
-    """Write policy.safetensors + policy.json for an SB3 model (no pickle).
+    """Write policy.safetensors + policy.json for an SB3 model (no pickle): the network's state dict
+    (weights, and buffers such as CrossQ's batch-renormalization statistics) and what builds it.
 
     Raises:
         MotorlabError: a policy class or space motorlab cannot save.
     """
     from safetensors.numpy import save
+
+    from motorlab.rl import algos
 
     name = policy_class_name(model.policy)
     if name is None:
@@ -234,7 +244,7 @@ def save_sb3_policy(run_dir: Path, model, algo: str, vecnorm=None) -> None:
         "algo": algo,
         "policy_class": name,
         "policy_kwargs": encode_classes(dict(model.policy_kwargs)),
-        "use_sde": bool(getattr(model, "use_sde", False)) if algo == "ppo" else None,
+        "use_sde": algos.get(algo).use_sde(model),  # on-policy classes build it beside policy_kwargs
         "observation_space": encode_space(model.observation_space),
         "action_space": encode_space(model.action_space),
         "obs_layout": layout_json(model.observation_space),  # the flat observation it acts on, key by key
@@ -302,7 +312,7 @@ def _load_sb3(run_dir: Path, meta: dict) -> SB3Policy:
                                 "re-run training.") from None
         mean, var = flat_statistics(stats)
         return SB3Policy(policy, mean, var, norm["clip_obs"], norm["epsilon"])
-    return SB3Policy(policy)
+    return SB3Policy(policy)  # its algorithm: the one whose network class it is
 
 
 # ---- saving / loading -------------------------------------------------------

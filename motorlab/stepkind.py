@@ -31,19 +31,20 @@ from __future__ import annotations
 import dataclasses
 import functools
 import statistics
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Generic, TypeVar, get_args, get_origin
 
-from pydantic import ValidationError
 from rich.console import Console
 
 from motorlab import trackers
-from motorlab.envs import early_end_label
+from motorlab.command import Command, Tracked
+from motorlab.envs import early_end_label, fold_env
 from motorlab.errors import MotorlabError
 from motorlab.faults import write_faults_log
 from motorlab.report.results import Metric, Number, RunResults, write_run_results
-from motorlab.runs import prepare_run_dir, write_config, write_summary
+from motorlab.runs import prepare_run_dir, read_text_file, write_config, write_summary
 from motorlab.settings import Settings, Summary
 from motorlab.stats import iqm_with_ci
 
@@ -81,21 +82,20 @@ S = TypeVar("S", bound=Settings)
 R = TypeVar("R", bound=Summary)
 
 
-class StepKind(Generic[S, R]):
-    """One kind of step. Subclasses name their settings and summary types as the generic's
-    parameters (`class FitKind(StepKind[FitSettings, FitSummary])`), set the class attributes
-    and implement `run`."""
+class StepKind(Command[S], Generic[S, R]):
+    """One kind of step: a command (motorlab.command) that writes one run folder and can be a step
+    of a recipe. Subclasses name their settings and summary types as the generic's parameters
+    (`class FitKind(StepKind[FitSettings, FitSummary])`), set the class attributes and implement
+    `run` (and `report`, what the command line prints of its summary)."""
 
-    name: ClassVar[str]
     # the CLI command that runs it (default: the name, "dynamics-fit" -> "dynamics fit"); None: recipes only
-    command: ClassVar[str | None]
-    settings: ClassVar[type[Settings]]
     summary: ClassVar[type[Summary]]
+    invocation = Tracked
     refs: ClassVar[tuple[Ref, ...]] = ()
     provides: ClassVar[Artifact | None] = None
     # a study draws its returns figure from these kinds
     scored: ClassVar[bool] = False
-    # training: a recipe's `seeds = N` runs it once per seed, as processes (see `process_argv`),
+    # training: a recipe's `seeds = N` runs it once per seed, as processes (as jobs: motorlab.jobs),
     # it may run beside other steps, and a study charts its steps to success
     trains: ClassVar[bool] = False
     # a step of this kind that names a step trained with several seeds runs once per seed
@@ -118,31 +118,21 @@ class StepKind(Generic[S, R]):
         for base in getattr(cls, "__orig_bases__", ()):
             if get_origin(base) is StepKind:
                 cls.settings, cls.summary = get_args(base)
-        if "command" not in cls.__dict__ and "name" in cls.__dict__:
-            cls.command = cls.name.replace("-", " ")
         if "run" in cls.__dict__:
             cls.run = _tracked(cls.__dict__["run"])
 
     def run(self, settings: S, out: Path | None = None, console: Console | None = None, progress: bool = True) -> R:
         """Run the step into the run folder `out` (default: runs/<kind>-<time>); `console` gets its
         tables, `progress` says whether to show progress bars. A kind that can continue an
-        interrupted run (its `resume_argv` names a command for a folder) also takes `resume=True`."""
+        interrupted run (`can_resume`) also takes `resume=True`."""
         raise NotImplementedError
 
-    def validate(self, fields: dict[str, Any]) -> S:
-        """Settings from recipe fields or CLI flags (pydantic.ValidationError when they are wrong)."""
-        return self.settings.model_validate(fields)
+    def execute(self, settings: S, how: Tracked, console: Console | None, progress: bool) -> R:
+        return self.run(settings, how.out, console=console, progress=progress)
 
-    def make(self, **fields: Any) -> S:
-        """Settings from keyword arguments (None: the default), as the CLI and the Python API give them.
-
-        Raises:
-            MotorlabError: one line naming the option and what is wrong with it.
-        """
-        try:
-            return self.validate({k: v for k, v in fields.items() if v is not None})
-        except ValidationError as e:
-            raise MotorlabError(option_error(e)) from None
+    def report(self, result: R, settings: S, console: Console) -> None:
+        console.print(f"written: {result.run_dir}/summary.json")
+        warn_faults(result)
 
     def check(self, settings: S) -> None:
         """Checks a recipe runs before any step does (e.g. that the env exists)."""
@@ -216,13 +206,23 @@ class StepKind(Generic[S, R]):
         """(done, total) of a run going on in another process, for progress bars."""
         return 0, 1
 
-    def process_argv(self, settings_file: Path, run_dir: Path) -> list[str]:
-        """The motorlab command line that runs these settings (a TOML file) in their own process."""
-        raise NotImplementedError(f"{self.name} steps run in the study's process")
+    def with_config(self, config: Path, fields: dict[str, Any]) -> dict[str, Any]:
+        """A run's config.toml (`--config`: repeat a run, or run one a study planned) with `fields` on
+        top; env settings, flat or in [env], merged key by key.
 
-    def resume_argv(self, run_dir: Path) -> list[str] | None:
-        """The command line that continues an interrupted run in `run_dir`, where it can be."""
-        return None
+        Raises:
+            MotorlabError: the file cannot be read as TOML.
+        """
+        base = read_text_file(Path(config), tomllib.loads, "TOML", f"give the config.toml of a motorlab {self.name} run.")
+        given = fold_env(fields) if "env" in self.settings.model_fields else dict(fields)
+        merged = {**base, **{k: v for k, v in given.items() if k != "env"}}
+        if "env" in given or "env" in base:
+            merged["env"] = {**fold_env(base).get("env", {}), **given.get("env", {})}
+        return merged
+
+    def can_resume(self, run_dir: Path) -> bool:
+        """An interrupted run in `run_dir` can be continued (`run(..., resume=True)`), not redone."""
+        return False
 
     def warm_up(self) -> None:
         """Import, in the calling thread, what this kind imports when it runs in the background. A
@@ -247,6 +247,18 @@ class StepKind(Generic[S, R]):
         write_summary(run_dir, summary.keys())
         summary.run_dir = Path(run_dir)
         return summary
+
+
+def warn_faults(summary: Summary) -> None:
+    """One line on stderr when episodes ended on a numerical fault (they are counted and listed, not
+    fatal). The planner's rejected candidates are warned about by the planning kinds themselves."""
+    n = getattr(summary, "episode_faults", None)
+    if n is None:
+        n = getattr(summary, "numerical_faults", 0) or 0
+    if n:
+        Console(stderr=True).print(
+            f"[yellow]warning[/yellow]: {n} episode{'s' if n > 1 else ''} ended on a numerical fault (NaN/Inf or a "
+            f"diverging simulation); reasons in {summary.run_dir}/faults.log", soft_wrap=True)
 
 
 def _tracked(run):
@@ -288,21 +300,6 @@ def _strings(value: Any) -> list[str]:
     if isinstance(value, (list, tuple)):
         return [s for v in value for s in _strings(v)]
     return []
-
-
-def option_error(e: ValidationError) -> str:
-    """One line from a pydantic ValidationError, naming the option as the CLI spells it."""
-    first = e.errors()[0]
-    loc = [str(x) for x in first["loc"]]
-    name = loc[-1] if loc else "?"
-    if name == "id":
-        name = "env"
-    label = f"--{name.replace('_', '-')}"
-    if first["type"] == "extra_forbidden":
-        return f"unknown setting {label}"
-    given = first.get("input")
-    shown = f" {given!r}" if isinstance(given, (int, float, str)) and first["type"] != "missing" else ""
-    return f"{label}{shown}: {first['msg']}"
 
 
 def seeds_headline(all_scores: list[Scores]) -> dict[str, Any]:

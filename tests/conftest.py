@@ -12,29 +12,6 @@ pytest.register_assert_rewrite("helpers")
 
 from helpers import ENV_ID, TINY_PPO, assert_ok, run_cli, scaled_recipe  # noqa: E402
 
-# `make test-fast` (pytest -m fast), the edit loop: every cheap unit-level file, and one end-to-end
-# test per workflow (robust pendulum, SAR on the MyoSuite hand, forward model + MPC on Reacher).
-FAST_FILES = {
-    "test_layers.py", "test_runner.py", "test_recipes.py", "test_schedules.py", "test_wrappers.py", "test_sar.py",
-    "test_lqr.py", "test_pid.py", "test_dynamics_collect.py", "test_sklearn_import.py", "test_faults_success.py",
-    "test_steps_to_success.py", "test_myosuite.py", "test_synergy_wrapper.py", "test_plots.py", "test_dynamics.py",
-    "test_extras.py", "test_runs.py", "test_results.py", "test_disturbances.py",
-}
-FAST_TESTS = {
-    "tests/test_train_evaluate.py::test_evaluate_run_folder",  # pendulum: train (CLI), evaluate, plot
-    "tests/test_sar_cli.py::test_fit_by_vaf_writes_a_loadable_sar",  # SAR: play, collect, fit
-    "tests/test_reacher_study.py::test_study_runs_every_step",  # Reacher: collect, fit, check, MPC
-}
-
-
-def pytest_collection_modifyitems(config, items):
-    for item in items:
-        if item.path.name in FAST_FILES or item.nodeid in FAST_TESTS:
-            item.add_marker(pytest.mark.fast)
-    if hasattr(config, "workerinput"):  # an xdist worker: the units of work in the order they are handed out
-        items.sort(key=lambda item: -seconds(item.nodeid))  # stable: tests keep their order
-
-
 # ---- `make test`: pytest -n 2 --dist loadfile, with two changes (pytest_xdist_make_scheduler) ----
 # Each test file is one unit of work for one worker, its tests sharing their module fixtures and
 # folders. 1. Files that share an expensive session fixture are one unit, so that it is made once.
@@ -56,6 +33,8 @@ EACH_TEST = {"test_notebooks.py"}
 # takes alone on an idle 2-core machine (pytest --durations); a file not listed here starts first
 # (it may be long).
 SECONDS = {
+    "tests/rl/test_tqc.py": 18, "tests/rl/test_crossq.py": 22, "tests/rl/test_recurrent_ppo.py": 17,
+    "tests/rl/test_algos.py": 3, "tests/envs/test_catalog.py": 3, "tests/test_command_objects.py": 3,
     "ray": 240, "tests/test_upkie.py": 125, "sar-hand-quick": 110, "hand": 110, "tests/test_mbrl.py": 90,
     "tests/test_tune.py": 90, "tests/test_user_env.py": 85, "tests/test_parallel_steps.py": 75,
     "tests/test_synergy_signals.py": 60, "tests/test_train_evaluate.py": 50, "tests/test_tracking.py": 48,
@@ -83,6 +62,11 @@ SECONDS = {
 def seconds(nodeid: str) -> float:
     """About how long the unit of this test takes (a unit of one test: else its file's figure); unknown: inf."""
     return SECONDS.get(unit(nodeid), SECONDS.get(nodeid.split("::", 1)[0], float("inf")))
+
+
+def pytest_collection_modifyitems(config, items):
+    if hasattr(config, "workerinput"):  # an xdist worker: the units of work in the order they are handed out
+        items.sort(key=lambda item: -seconds(item.nodeid))  # stable: tests keep their order
 
 
 def unit(nodeid: str) -> str:

@@ -17,6 +17,8 @@ from motorlab.envs.disturbances import GaussianNoise, Latency, RandomPush, mujoc
 from motorlab.envs.wrappers import LowPassDelay
 from motorlab.errors import MotorlabError
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 ENV_ID = "InvertedPendulum-v5"
 DT = 0.04
 

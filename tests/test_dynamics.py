@@ -15,6 +15,8 @@ from motorlab.dynamics.train import fit_model, normalized_mse, split_episodes
 from motorlab.dynamics.transitions import load_transitions
 from motorlab.errors import MotorlabError
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 
 @pytest.fixture(scope="module")
 def reacher_data():

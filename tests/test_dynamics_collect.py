@@ -14,6 +14,8 @@ from motorlab.dynamics.reacher_sim import arm_models, closed_form_arm, rollout_r
 from motorlab.dynamics.state import layout_for
 from motorlab.errors import MotorlabError
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 
 def gym_rollout(env, qpos0, qvel0, actions):
     obs, rewards = [], []

@@ -26,6 +26,8 @@ from helpers import ENV_ID, TINY_PPO, assert_ok, read_summary
 from motorlab.errors import MotorlabError
 from motorlab.extras import EXTRAS, install_hint, require
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 ROOT = Path(__file__).resolve().parents[1]
 STACKS = ("myosuite", "upkie", "pybullet", "ray", "evotorch", "gymnasium_robotics")  # the top-level modules of the extras
 BLOCK = f"import sys\nfor _m in {STACKS!r}:\n    sys.modules[_m] = None\n"
@@ -169,7 +171,7 @@ def test_missing_upkie(blocked, message):
 
 
 def test_missing_ray(monkeypatch, tmp_path):
-    from motorlab.sweeps.backends import run_ray
+    from motorlab.launcher import run_ray
 
     for var in ("RAY_USAGE_STATS_ENABLED", "TUNE_DISABLE_AUTO_CALLBACK_LOGGERS", "RAY_AIR_NEW_OUTPUT"):
         monkeypatch.setenv(var, os.environ.get(var, "0"))  # run_ray sets them; keep them out of later tests
@@ -215,7 +217,7 @@ def test_every_module_but_the_ray_callback_imports_without_the_stacks():
     proc = python(code)
     assert proc.returncode == 0, proc.stderr
     failed = json.loads(proc.stdout.strip().splitlines()[-1])
-    # Ray Tune's classes, imported only after backends.init_ray's check: the sweep's callback
+    # Ray Tune's classes, imported only after launcher.init_ray's check: the sweep's callback
     # (ray_progress), tune's searcher and scheduler (ray_study) and trainable (ray_trial)
     assert set(failed) == {"motorlab.sweeps.ray_progress", "motorlab.tuning.ray_study", "motorlab.tuning.ray_trial"}, failed
 

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import gymnasium as gym
 import numpy as np
 import pytest
-from typer.testing import CliRunner
+from click.testing import CliRunner
 
 from helpers import assert_one_line_error, episode_rows, read_metrics_rows, read_summary, run_cli, run_here, run_kind
 from motorlab.cli import app
@@ -20,6 +20,8 @@ from motorlab.policies import ZeroPolicy
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.tracking import Tracker
 from motorlab.rl.train import train
+
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
 
 FAULTY_ID = "MotorlabTestFaulty-v0"
 SOLVED_ONCE_ID = "MotorlabTestSolvedOnce-v0"

@@ -226,13 +226,13 @@ def test_fuzzed_train_arguments(sandbox, no_learning, env, opts):
 def test_fuzzed_sweep_arguments_fail_before_running(sandbox, grid, seeds, target, monkeypatch):
     """Sweeps check every trial's command line before starting any; trials themselves are not
     started here (the pool is replaced), so only the checks run."""
-    from motorlab.sweeps import backends
+    from motorlab import launcher
 
     def no_trials(*args, **kwargs):
         raise Accepted
 
     for name in ("run_local", "run_ray"):
-        monkeypatch.setattr(backends, name, no_trials)
+        monkeypatch.setattr(launcher, name, no_trials)
     sandbox.reset()
     args = ["sweep", target, "--seeds", seeds] + [x for g in grid for x in ("--grid", g)]
     accepted_or_error(sandbox, *args)

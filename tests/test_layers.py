@@ -13,22 +13,29 @@ import pytest
 import motorlab
 from motorlab.kinds import KINDS
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 PACKAGE = Path(motorlab.__file__).parent
-API, CLI, STUDIES, KIND_REGISTRY, STEP_KINDS, DOMAIN, GROUND = 6, 5, 4, 3, 2, 1, 0
+API, WORKER, CLI, COMMANDS, STUDIES, KIND_REGISTRY, STEP_KINDS, DOMAIN, GROUND = 8, 7, 6, 5, 4, 3, 2, 1, 0
 GROUND_FLOOR = {"motorlab.runs", "motorlab.errors", "motorlab.faults", "motorlab.environment", "motorlab.extras",
-                "motorlab.settings", "motorlab.user_modules", "motorlab"}
+                "motorlab.settings", "motorlab.user_modules", "motorlab", "motorlab.command", "motorlab.jobs"}
 
 
 def layer(module: str) -> int:
     if module.startswith("motorlab.api"):
         return API
+    if module == "motorlab.worker":
+        return WORKER
     if module in ("motorlab.cli", "motorlab.__main__"):
         return CLI
-    if module.startswith(("motorlab.studies", "motorlab.sweeps", "motorlab.tuning")) or module == "motorlab.recipes":
+    if module == "motorlab.commands":
+        return COMMANDS
+    if module.startswith(("motorlab.studies", "motorlab.sweeps", "motorlab.tuning")) or module in (
+            "motorlab.recipes", "motorlab.recipe_list", "motorlab.launcher"):
         return STUDIES
-    if module == "motorlab.kinds":
+    if module in ("motorlab.kinds", "motorlab.commandline"):
         return KIND_REGISTRY
-    if module == "motorlab.stepkind" or module.endswith(".steps"):
+    if module in ("motorlab.stepkind", "motorlab.export_command") or module.endswith((".steps", ".commands")):
         return STEP_KINDS
     if module in GROUND_FLOOR or module.startswith("motorlab.trackers"):  # trackers: motorlab.trackers.*
         return GROUND

@@ -9,6 +9,8 @@ from motorlab.control.lqr import LQRPolicy, LQRSettings, companion_form, fit_lin
 from motorlab.envs import EnvConfig
 from motorlab.evaluation import evaluate
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 
 def spectral_radius(M: np.ndarray) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(M))))

@@ -14,6 +14,8 @@ from motorlab.errors import MotorlabError
 from motorlab.evaluation import step_success
 from motorlab.synergy.collect import muscle_activations
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 
 def test_hand_sizes_and_muscles():
     env = make_env(EnvConfig(id=HAND_ID))

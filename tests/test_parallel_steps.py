@@ -210,12 +210,12 @@ def test_interrupting_a_parallel_study_stops_its_trainings(tmp_path):
     while not (out / "a" / "summary.json").exists() and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.2)
     assert (out / "a" / "summary.json").exists(), proc.communicate()
-    assert _motorlab_processes(str(out / "b"))  # b trains in a process of its own
+    assert _motorlab_processes(str(out / "logs" / "b.job.json"))  # b trains in a process of its own (its job)
     proc.send_signal(signal.SIGINT)
     stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 130, (stdout, stderr)
     assert "Traceback" not in stdout + stderr
-    assert not _motorlab_processes(str(out / "b")), "a background training outlived the study"
+    assert not _motorlab_processes(str(out / "logs" / "b.job.json")), "a background training outlived the study"
     assert not (out / "b" / "summary.json").exists() and not (out / "summary.json").exists()
     stamp = (out / "a" / "summary.json").stat().st_mtime_ns
 

@@ -11,6 +11,8 @@ from motorlab.errors import MotorlabError
 from motorlab.evaluation import evaluate
 from motorlab.policies import load_policy
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 
 @pytest.mark.parametrize(
     "env_id, seed",

@@ -6,12 +6,15 @@ import shutil
 
 import matplotlib.image
 import numpy as np
+import pytest
 
 from helpers import ENV_ID, assert_ok, assert_png, run_cli, run_kind
 from motorlab.envs import EnvConfig
 from motorlab.evaluation.steps import EVALUATE
 from motorlab.report.plots import comparison_bars, obs_labels, observation_trace
 from motorlab.report.run import plot_run
+
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
 
 
 def test_plot_cli_on_training_run(ppo_run, tmp_path):

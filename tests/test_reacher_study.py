@@ -52,6 +52,7 @@ def study(tmp_path_factory):
     return root, proc
 
 
+@pytest.mark.fast  # make test-fast: this workflow's end-to-end test
 def test_study_runs_every_step(study):
     root, _ = study
     out = root / "out"

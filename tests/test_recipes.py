@@ -14,6 +14,8 @@ from helpers import assert_ok, assert_png, read_summary, run_cli
 from motorlab.errors import MotorlabError
 from motorlab.recipes import bundled, load_recipe, parse_recipe, set_fields
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 # ---- the bundled recipe ------------------------------------------------------------
 
 
@@ -435,3 +437,11 @@ def test_run_set_on_the_command_line_is_one_line_on_a_mistake(tmp_path):
     assert_one_line_error(proc, "--set ppo.timestep", "did you mean timesteps")
     proc = run_cli("run", "pendulum", "--set", "ppo.timesteps=5000", "--check")
     assert_ok(proc)
+
+
+def test_motorlab_recipes_lists_every_bundled_recipe():
+    """`motorlab recipes` lists them all, those that need an input (--set sar=...) too, and exits 0."""
+    proc = run_cli("recipes")
+    assert_ok(proc)
+    listed = {line.split(":", 1)[0] for line in proc.stdout.splitlines() if ":" in line}
+    assert set(bundled()) <= listed and "sar-hand-published" in listed

@@ -14,6 +14,8 @@ from motorlab.report.plots import comparison_bars, figure_caption, save_figure
 from motorlab.report.results import Metric, read_run_results, show
 from motorlab.stepkind import SCORED_METRICS, StepKind, scored_numbers
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 
 @pytest.mark.parametrize("value, form, text", [
     (0.2, "percent", "20%"), (1.0, "percent", "100%"), (0.125, "percent", "12.5%"),

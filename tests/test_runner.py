@@ -21,6 +21,8 @@ from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind
 from motorlab.studies import run_study
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 RUNS: list[str] = []  # the run folders the fake kind ran, in order
 
 

@@ -25,6 +25,8 @@ from motorlab.runs import (
     write_summary,
 )
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 
 def test_write_json_is_plain_json(tmp_path):
     path = tmp_path / "s.json"

@@ -13,6 +13,8 @@ from scipy.linalg import subspace_angles
 from motorlab.errors import MotorlabError
 from motorlab.synergy.sar import SAR, fit_sar, load_sar, save_sar, smallest_n, vaf_curve
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 K, M = 4, 12  # true synergies, muscles
 
 

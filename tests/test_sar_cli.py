@@ -53,6 +53,7 @@ def _acts(vaf_out):
     return tomllib.loads((vaf_out / "config.toml").read_text())["activations"]
 
 
+@pytest.mark.fast  # make test-fast: this workflow's end-to-end test
 def test_fit_by_vaf_writes_a_loadable_sar(hand_activations, vaf_dir, tmp_path):
     out = tmp_path / "fit"
     # the folder holding activations.npz works as well as the file

@@ -12,6 +12,8 @@ from motorlab.errors import MotorlabError
 from motorlab.rl.config import resolve
 from motorlab.rl.schedules import parse_schedule
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 
 @pytest.mark.parametrize(
     "spec, start, end",

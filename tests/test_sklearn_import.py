@@ -15,6 +15,8 @@ from motorlab.errors import MotorlabError
 from motorlab.synergy.sar import load_sar
 from motorlab.synergy.sklearn_import import import_sklearn
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 PUBLISHED = Path(__file__).resolve().parents[2] / "shared/data/myosuite_sar_pretrained"
 
 

@@ -16,6 +16,8 @@ from motorlab.policies import load_policy, load_run_policy
 from motorlab.rl.config import resolve
 from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 
 def test_fast_preset_until_solved_stops_early(fast_run):
     s = read_summary(fast_run)

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import typer
 
 from helpers import (
     ENV_ID,
@@ -26,12 +25,9 @@ from helpers import (
     run_cli,
     run_here,
 )
-from motorlab.cli import app
 from motorlab.errors import MotorlabError
 from motorlab.stats import aggregate, trial_scores
 from motorlab.sweeps.grid import label, parse_grid, settings
-
-CLI = typer.main.get_command(app)
 
 TINY = " ".join(["train", ENV_ID, *TINY_PPO])  # ~3 s a trial
 LQR = f"train {ENV_ID} --preset fast --until-solved --timesteps 1500 --solve-episodes 2"  # ~1 s a trial
@@ -168,12 +164,13 @@ def test_grid_settings_are_every_combination():
 
 
 def test_switch_options_take_true_or_false(tmp_path):
-    from motorlab.sweeps.trials import command_trials
+    from motorlab.sweeps.trials import command_trials, parse_target
 
-    trials = command_trials(CLI, f"train {ENV_ID}", settings(parse_grid(["normalize=true,false"])), [0], tmp_path, {})
-    assert "--normalize" in trials[0]["argv"] and "--no-normalize" in trials[1]["argv"]
+    target = parse_target(f"train {ENV_ID}")
+    trials = command_trials(target, settings(parse_grid(["normalize=true,false"])), [0], tmp_path, {})
+    assert trials[0]["job"]["settings"]["normalize"] is True and trials[1]["job"]["settings"]["normalize"] is False
     with pytest.raises(MotorlabError, match="is a switch"):
-        command_trials(CLI, f"train {ENV_ID}", settings(parse_grid(["normalize=maybe"])), [0], tmp_path, {})
+        command_trials(parse_target(f"train {ENV_ID}"), settings(parse_grid(["normalize=maybe"])), [0], tmp_path, {})
 
 
 def test_stats_iqm_improvement_and_direction(monkeypatch):

@@ -13,6 +13,8 @@ from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.synergy import SynergyActionWrapper, fit_sar, load_sar, save_sar
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 M, N = 6, 3  # muscles of the tiny env, synergies of its SAR
 
 

@@ -9,9 +9,12 @@ by the run folder they tagged.
 
 from __future__ import annotations
 
+import contextvars
 import json
+import os
 import struct
 import sys
+import threading
 from collections import Counter
 from pathlib import Path
 
@@ -216,12 +219,15 @@ def test_unreachable_server_or_unknown_tracker_is_one_line_before_anything_is_wr
 
 
 @pytest.fixture
-def tracked_here(monkeypatch):
-    """Track the runs of this process (as a script would, or a sweep's child: MOTORLAB_TRACK, no
-    up-front check); the failures it remembers are this test's own."""
+def fresh_failures(monkeypatch):
+    """The failures and warnings the trackers remember in this process are this test's own."""
     monkeypatch.setattr(trackers, "_broken", set())
     monkeypatch.setattr(trackers, "_warned", set())
-    return lambda value: monkeypatch.setenv(trackers.ENV_VAR, value)
+
+
+def tracked_as_a_child(value: str):
+    """Track the runs of the block as a child process would (a handoff adopted: no up-front check)."""
+    return trackers.adopted({"track": [value]})
 
 
 def train_here(run_dir: Path):
@@ -231,21 +237,20 @@ def train_here(run_dir: Path):
     return TRAIN.run(settings, run_dir, progress=False)
 
 
-def test_unwritable_store_at_run_time_warns_once_and_the_run_completes(tracked_here, tmp_path, capsys):
+def test_unwritable_store_at_run_time_warns_once_and_the_run_completes(fresh_failures, tmp_path, capsys):
     """The store cannot be made (nothing checked it first): MLflow fails as the run starts; one warning
     line, and the run finishes as it would untracked."""
-    tracked_here("mlflow=sqlite:////proc/no-such-folder/mlflow.db")
     run_dir = tmp_path / "ppo"
-    assert train_here(run_dir).timesteps == 256
+    with tracked_as_a_child("mlflow=sqlite:////proc/no-such-folder/mlflow.db"):
+        assert train_here(run_dir).timesteps == 256
     lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("warning: tracking to MLflow failed"), lines
     assert read_summary(run_dir)["timesteps"] == 256 and (run_dir / "plots/learning_curve.png").is_file()
 
 
-def test_python_api_tracks_and_a_failure_mid_run_warns_once(store, tracked_here, tmp_path, monkeypatch, capsys):
-    """kind.run from Python, tracked through MOTORLAB_TRACK; the store fails on the first scalars it
+def test_python_api_tracks_and_a_failure_mid_run_warns_once(store, fresh_failures, tmp_path, monkeypatch, capsys):
+    """kind.run from Python, tracked inside a tracking block; the store fails on the first scalars it
     gets (a mocked log_batch): one warning, the run finishes and its folder is complete."""
-    tracked_here(f"mlflow={store}")
     calls = []
 
     def fail(self, rows):
@@ -254,10 +259,121 @@ def test_python_api_tracks_and_a_failure_mid_run_warns_once(store, tracked_here,
 
     monkeypatch.setattr(mlflow_tracker.Sink, "scalars", fail)
     run_dir = tmp_path / "api"
-    assert train_here(run_dir).timesteps == 256 and read_summary(run_dir)["timesteps"] == 256
+    with trackers.tracking(f"mlflow={store}"):
+        assert train_here(run_dir).timesteps == 256 and read_summary(run_dir)["timesteps"] == 256
     assert len(calls) == 1 and calls[0] > 0  # tried once, then that tracker is off
     warnings = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning")]
     assert len(warnings) == 1, warnings
     assert "tracking to MLflow failed (OSError: attempt to write a readonly" in warnings[0]
     (run,) = runs_of(store, run_dir)  # it started before the failure, with the resolved settings
     assert run.data.params["env.id"] == ENV_ID and run.data.tags["motorlab.kind"] == "train"
+
+
+# ---- tracking is explicit: a block, never process state ---------------------------------------------
+
+LQR = {"preset": "fast", "until_solved": True, "timesteps": 1500, "solve_episodes": 2, "progress": False}
+
+
+def evaluate_zero(out: Path):
+    """The cheapest step there is (a zero policy, one episode, milliseconds): a tracked run of kind evaluate."""
+    import motorlab
+
+    return motorlab.evaluate("zero", ENV_ID, episodes=1, workers=1, progress=False, out=out)
+
+
+def test_track_given_to_one_call_tracks_that_call_only(store, tmp_path):
+    """In a notebook, train(track=...) and then a plain train(...): one run in the store, not two."""
+    import motorlab
+
+    motorlab.train(ENV_ID, out=tmp_path / "tracked", track=f"mlflow={store}", **LQR)
+    motorlab.train(ENV_ID, out=tmp_path / "plain", **LQR)
+    (run,) = runs_of(store, tmp_path)
+    assert Path(run.data.tags["motorlab.run_dir"]) == (tmp_path / "tracked").resolve()
+    assert run.info.status == "FINISHED" and trackers.targets() == [] and trackers.handoff() is None
+
+
+def test_a_tracking_block_tracks_every_call_inside_it_and_none_after(store, tmp_path):
+    import motorlab
+
+    with motorlab.tracking(f"mlflow={store}") as found:
+        assert [t.backend for t in found] == ["mlflow"] and trackers.targets() == found
+        evaluate_zero(tmp_path / "first")
+        evaluate_zero(tmp_path / "second")
+    evaluate_zero(tmp_path / "after")
+    runs = runs_of(store, tmp_path)
+    assert sorted(r.info.run_name for r in runs) == ["first", "second"]
+    assert all(r.data.tags["motorlab.kind"] == "evaluate" and r.info.status == "FINISHED" for r in runs)
+    assert trackers.targets() == []
+
+
+@pytest.mark.fast
+def test_tracking_checks_before_the_block_and_none_changes_nothing(tmp_path):
+    """A tracker that cannot work is one error line before the block runs; tracking(None) or [] inside
+    a block keeps the outer block's trackers, and each block restores what was before it."""
+    with pytest.raises(MotorlabError, match="no MLflow tracking server answers"):
+        with trackers.tracking("mlflow=http://127.0.0.1:1"):
+            pytest.fail("the block ran")
+    (tmp_path / "a-file").write_text("")
+    with pytest.raises(MotorlabError, match="cannot write the MLflow store"):
+        with trackers.tracking(f"mlflow=sqlite:///{tmp_path / 'a-file' / 'mlflow.db'}"):
+            pytest.fail("the block ran")
+    outer = f"mlflow=sqlite:///{tmp_path / 'mlflow.db'}"
+    with trackers.tracking(outer) as found:
+        for nothing in (None, [], ""):
+            with trackers.tracking(nothing) as inner:
+                assert inner == found == trackers.targets()
+        with trackers.tracking([f"mlflow=sqlite:///{tmp_path / 'other.db'}"]) as inner:  # a list, as --track gives them
+            assert trackers.targets() == inner != found
+        assert trackers.targets() == found
+    assert trackers.targets() == [] and trackers.handoff() is None
+    assert not any(k.startswith("MOTORLAB_TRACK") for k in os.environ)  # nothing in the environment
+
+
+@pytest.mark.fast
+def test_steps_in_two_threads_are_each_their_own_tracked_run(monkeypatch, tmp_path):
+    """A study runs train steps in threads, each in a copy of the context: each is a tracked step
+    (with one step per process, the second would have been taken for part of the first)."""
+    monkeypatch.setattr(trackers, "_load", lambda found: found)  # no run is started: nothing to load
+    both = threading.Barrier(2, timeout=30)
+    seen = {}
+
+    def one(kind: str) -> None:
+        with trackers.step(kind, {"seed": 0}) as tracked:
+            both.wait()  # both steps are open now
+            seen[kind] = bool(tracked) and trackers._current.get() is tracked and tracked.kind == kind
+            both.wait()
+        seen[kind] &= trackers._current.get() is None
+
+    with tracked_as_a_child(f"mlflow=sqlite:///{tmp_path / 'mlflow.db'}"):
+        threads = [threading.Thread(target=contextvars.copy_context().run, args=(one, k)) for k in ("a", "b")]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(60)
+    assert seen == {"a": True, "b": True}
+
+
+def test_a_child_that_adopts_the_handoff_nests_under_the_parent(store, fresh_failures, tmp_path):
+    """handoff() is JSON for a child's job settings; a process that adopts it (here: an empty context,
+    as a fresh process has) tracks its runs nested under the open parent, without checking again."""
+    sweep_dir = tmp_path / "sweep"
+    sweep_dir.mkdir()
+    assert trackers.handoff() is None
+    with trackers.tracking(f"mlflow={store}"), trackers.parent("sweep", sweep_dir, {"sweep": "zero"}):
+        job = json.loads(json.dumps(trackers.handoff()))
+        assert job["track"] == [f"mlflow={store}"] and job["parent"]["root"] == str(sweep_dir.resolve())
+
+        def child() -> None:
+            assert trackers.targets() == [] and trackers.handoff() is None  # nothing inherited
+            with trackers.adopted(job):
+                evaluate_zero(sweep_dir / "trials" / "0")
+            with trackers.adopted(None):  # a job without tracking: none
+                evaluate_zero(sweep_dir / "untracked")
+
+        contextvars.Context().run(child)
+    runs = runs_of(store, sweep_dir)
+    (parent,) = [r for r in runs if r.data.tags["motorlab.kind"] == "sweep"]
+    (trial,) = [r for r in runs if r is not parent]
+    assert trial.info.run_name == "trials/0" and trial.data.tags["motorlab.parent"] == "sweep"
+    assert trial.data.tags["mlflow.parentRunId"] == parent.info.run_id and trial.info.status == "FINISHED"
+    assert trial.info.experiment_id == parent.info.experiment_id and parent.info.status == "FINISHED"

@@ -88,6 +88,7 @@ def test_train_writes_summary(ppo_run):
     assert not any(p.name.endswith(".tmp") for p in ppo_run.iterdir())  # atomic writes left no temp files
 
 
+@pytest.mark.fast  # make test-fast: this workflow's end-to-end test
 def test_evaluate_run_folder(ppo_run, tmp_path):
     out = tmp_path / "eval"
     proc = run_cli("evaluate", ppo_run, "--episodes", "3", "--out", out)

@@ -18,6 +18,8 @@ from motorlab.envs.rewards import BUILTIN, resolve_reward
 from motorlab.envs.wrappers import delay_alpha
 from motorlab.errors import MotorlabError
 
+pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
+
 ENV_ID = "InvertedPendulum-v5"
 DT = 0.04  # InvertedPendulum's step dt
 TAU = 0.08  # delay time constant used below: alpha = 0.04 / 0.08 = 0.5

@@ -3,7 +3,7 @@
 MkDocs runs this file as a hook (mkdocs.yml: `hooks:`): in docs/reference/cli.md the line
 `<!-- cli-reference -->` becomes one section per command, each holding the text `motorlab ... --help`
 prints under HELP_ENV, so the page cannot drift from the CLI. The text is made in a child process
-(`python docs/hooks/cli_reference.py`), because Typer reads TYPER_USE_RICH when it is first imported.
+(`python docs/hooks/cli_reference.py`), so that the width and colour settings below hold from the start.
 
 tests/test_docs.py checks the built page against `motorlab ... --help` run for every command.
 """
@@ -17,20 +17,18 @@ from pathlib import Path
 
 PLACEHOLDER = "<!-- cli-reference -->"
 PAGE = "reference/cli.md"
-# Plain text (Click's own formatter instead of Rich's panels), no colour, a fixed width.
-HELP_ENV = {"TYPER_USE_RICH": "0", "NO_COLOR": "1", "TERM": "dumb", "COLUMNS": "80"}
+# Plain text, no colour, a fixed width.
+HELP_ENV = {"NO_COLOR": "1", "TERM": "dumb", "COLUMNS": "80", "MOTORLAB_HELP_PAGE": "1"}
 
 
 def commands() -> list[tuple[str, ...]]:
-    """Every command path of the CLI, from the Typer app itself: () for `motorlab`, then each command
+    """Every command path of the CLI, from the Click app itself: () for `motorlab`, then each command
     in the order `motorlab --help` lists them, a group followed by its subcommands."""
-    import typer
-
     from motorlab.cli import app
 
     found: list[tuple[str, ...]] = []
 
-    def walk(cmd, path: tuple[str, ...], ctx) -> None:  # Typer's own (vendored) Click objects
+    def walk(cmd, path: tuple[str, ...], ctx) -> None:
         found.append(path)
         if hasattr(cmd, "list_commands"):
             sub_ctx = cmd.context_class(cmd, info_name=path[-1] if path else "motorlab", parent=ctx)
@@ -39,22 +37,20 @@ def commands() -> list[tuple[str, ...]]:
                 if sub is not None and not sub.hidden:
                     walk(sub, (*path, name), sub_ctx)
 
-    walk(typer.main.get_command(app), (), None)
+    walk(app, (), None)
     return found
 
 
 def help_text(path: tuple[str, ...]) -> str:
     """What `motorlab *path --help` prints (trailing blank space removed); call it in a process that
-    imported Typer under HELP_ENV."""
-    import typer
-
+    runs under HELP_ENV."""
     from motorlab.cli import app
 
-    cmd = typer.main.get_command(app)
-    ctx = cmd.context_class(cmd, info_name="motorlab")
+    cmd = app
+    ctx = cmd.context_class(cmd, info_name="motorlab", **cmd.context_settings)  # as `motorlab --help` makes it
     for name in path:
         cmd = cmd.get_command(ctx, name)
-        ctx = cmd.context_class(cmd, info_name=name, parent=ctx)
+        ctx = cmd.context_class(cmd, info_name=name, parent=ctx, **cmd.context_settings)
     return normalize(ctx.get_help())
 
 
@@ -79,7 +75,7 @@ def render() -> str:
 
 
 def generate() -> str:
-    """render() in a child process under HELP_ENV (Typer fixes its formatter when first imported)."""
+    """render() in a child process under HELP_ENV (the terminal's width is read when Click formats)."""
     root = Path(__file__).resolve().parents[2]
     proc = subprocess.run([sys.executable, __file__], cwd=root, env={**os.environ, **HELP_ENV},
                           capture_output=True, text=True, timeout=120)
@@ -97,7 +93,7 @@ def on_page_markdown(markdown: str, page, config, files) -> str:  # MkDocs hook
 
 
 if __name__ == "__main__":
-    if os.environ.get("TYPER_USE_RICH") != "0":
+    if os.environ.get("MOTORLAB_HELP_PAGE") != "1":  # run as a script by hand: under HELP_ENV, once
         os.environ.update(HELP_ENV)
         os.execv(sys.executable, [sys.executable, __file__])
     sys.stdout.write(render())

@@ -78,11 +78,9 @@ def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None
     Returns:
         Its numbers: `result["return_mean"]`, `["success_rate"]`, `["episode_lengths"]`, ...
     """
-    from motorlab.evaluation.steps import settings_for
-
     env_fields = {"id": env, **{_env_field(k): steps.path_of(v) for k, v in env_settings.items()}}
-    checked = settings_for(steps.path_of(policy), {k: v for k, v in env_fields.items() if v is not None},
-                           episodes, seed, workers)
+    checked = EVALUATE.make(policy=steps.path_of(policy), env={k: v for k, v in env_fields.items() if v is not None},
+                            episodes=episodes, seed=seed, workers=workers)
     return steps.run(EVALUATE, checked, out, progress, overwrite=overwrite)
 
 

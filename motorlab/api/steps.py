@@ -54,9 +54,9 @@ def settings(kind: StepKind, **fields: Any) -> Settings:
 def run(kind: StepKind, checked: Settings, out: str | Path | None, progress: bool, track: Track = None,
         overwrite: bool = False, **run_args: Any) -> Result:
     """Run a `kind` step with `checked` settings into `out` and open its folder (`overwrite`: replace
-    a finished run there, as --overwrite does; without it, a finished run in `out` is refused)."""
-    trackers.enable(track)
-    with run_folders("overwrite" if overwrite else "new"):
+    a finished run there, as --overwrite does; without it, a finished run in `out` is refused).
+    `track`: this run only (None: as the enclosing `motorlab.tracking` block, if any, says)."""
+    with trackers.tracking(track), run_folders("overwrite" if overwrite else "new"):
         summary = kind.run(checked, Path(out) if out is not None else None, console=console(), progress=progress,
                            **run_args)
     return load(summary.run_dir)

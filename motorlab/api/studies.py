@@ -39,8 +39,7 @@ def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: st
 
     block = folders(resume, overwrite)
     study = load_recipe(str(recipe), fields)
-    trackers.enable(track)
-    with block:
+    with trackers.tracking(track), block:
         summary = run_study(study, Path(out) if out is not None else None, console=console(),
                             execution=Execution(backend, address, max_parallel, parallel_steps))
     return Study(summary["study_dir"])
@@ -64,13 +63,11 @@ def sweep(target: str | Path, seeds: int | list[int] = 5, grid: list[str] | dict
     Returns:
         The sweep: `.aggregate`, `.table`, `.summary`, `.report()`.
     """
-    from motorlab.cli import app_commands
     from motorlab.sweeps.sweep import run_sweep
 
-    trackers.enable(track)
-    with folders(resume, overwrite):
+    with trackers.tracking(track), folders(resume, overwrite):
         summary = run_sweep(str(target), seeds, _pairs(grid), backend, address, max_parallel,
-                            Path(out) if out is not None else None, console=console(), commands=app_commands())
+                            Path(out) if out is not None else None, console=console())
     return Sweep(summary["sweep_dir"])
 
 
@@ -97,18 +94,14 @@ def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int =
     Returns:
         The search: `.best` (best.toml), `.trials`, `.summary` (with the fresh seeds' numbers).
     """
-    from motorlab.cli import app_commands
     from motorlab.tuning.tune import make_spec, run_tune
 
     spec = make_spec(str(target), _pairs(space), trials, seeds, objective, direction,
                      Path(out) if out is not None else None, storage, study_name, sampler, pruner, prune_startup,
                      report_every, max_parallel, fresh_seeds, backend=backend, address=address,
                      sampler_seed=sampler_seed)
-    trackers.enable(track)
-    with folders(resume, overwrite), trackers.parent("tune", spec.out, {"tune": str(target), "space": _pairs(space) or [], "trials": trials,
-                                            "seeds": seeds, "objective": objective, "sampler": sampler,
-                                            "pruner": pruner}):
-        summary = run_tune(spec, console=console(), commands=app_commands())
+    with trackers.tracking(track), folders(resume, overwrite):  # run_tune is the parent run itself
+        summary = run_tune(spec, console=console())
     return Tune(summary["tune_dir"])
 
 

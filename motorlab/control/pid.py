@@ -14,19 +14,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from motorlab.envs import env_dt
+from motorlab.envs import env_dt, facts
 from motorlab.envs.spaces import require_actions
 from motorlab.errors import MotorlabError
 
-# Gains that balance InvertedPendulum (obs: cart x, pole angle, cart velocity, pole velocity).
-DEFAULT_GAINS = {
-    "InvertedPendulum": {"kp": [1.0, 20.0, 0.0, 0.0], "ki": [0.0, 0.0, 0.0, 0.0], "kd": [1.0, 3.0, 0.0, 0.0]},
-    # Upkie (obs: pitch, ground position, pitch rate, ground velocity; action: ground velocity):
-    # drive the wheels under the lean, damp the pitch rate, and pull back to the start
-    # position and to rest. Tuned on the PyBullet sim (balances 10 s from pitch up to 0.1 rad).
-    "Upkie-PyBullet-Pendulum": {"kp": [10.0, 0.3, 0.3, 0.5], "ki": [0.0] * 4, "kd": [0.0] * 4},
-    "Upkie-Spine-Pendulum": {"kp": [10.0, 0.3, 0.3, 0.5], "ki": [0.0] * 4, "kd": [0.0] * 4},
-}
+
+def default_gains(env_id: str) -> dict[str, list[float]] | None:
+    """The env's default gains (its catalogue entry's `pid_gains`: InvertedPendulum's, Upkie's, or
+    what a user's env declares), or None."""
+    gains = facts(env_id).pid_gains
+    return None if gains is None else {k: list(g) for k, g in gains.items()}
 
 
 @dataclass
@@ -134,10 +131,11 @@ def pid_for_env(spec: str, env, env_id: str) -> PIDController:
 def make_pid(spec: str, env_id: str, obs_dim: int, dt: float, low, high) -> PIDController:
     """PID from a spec 'pid' (default gains for the env) or 'pid:kp=...,ki=...,kd=...'."""
     _, _, text = spec.partition(":")
-    defaults = next((g for prefix, g in DEFAULT_GAINS.items() if env_id.startswith(prefix)), None)
+    defaults = default_gains(env_id)
     given = parse_gains(text)
     if defaults is None and not given:
-        raise MotorlabError(f"no default PID gains for {env_id}; give them, e.g. pid:kp=[...],kd=[...].")
+        raise MotorlabError(f"no default PID gains for {env_id}; give them, e.g. pid:kp=[...],kd=[...] (or declare "
+                            "them: motorlab.register_env(ENV_ID, pid_gains={'kp': [...], 'kd': [...]})).")
     base = defaults or {}
     full = {}
     for k in ("kp", "ki", "kd"):

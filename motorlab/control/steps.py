@@ -7,18 +7,18 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 from rich.console import Console
 from rich.markup import escape
 
 from motorlab import trackers
 from motorlab.dynamics.steps import ModelSettings
-from motorlab.envs import EnvConfig, check_env_id, make_env
+from motorlab.envs import EnvConfig, check_env_id, facts, make_env
 from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric
 from motorlab.runs import MetricsWriter, atomic_write_npz
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Artifact, Ref, StepKind
+from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
 
 if TYPE_CHECKING:  # the planner's domain code (torch) is imported where a run needs it
     from motorlab.control.mpc import FaultCounts
@@ -57,6 +57,17 @@ class PlannerSettings(Settings):
     device: str = Field("auto", description="Where the planner runs: auto (a GPU where torch sees one, else the "
                         "CPU), cpu, cuda, cuda:N")
 
+    @model_validator(mode="before")
+    @classmethod
+    def _env_defaults(cls, data: Any) -> Any:
+        """The planner settings the env's catalogue entry gives (EnvFacts.planner: a user's env may
+        declare them), where these are not set; no bundled env gives any, so the defaults hold."""
+        if isinstance(data, dict) and isinstance(data.get("env"), str):
+            given = {k: v for k, v in facts(data["env"]).planner.items() if k in cls.model_fields and k not in data}
+            if given:
+                data = {**data, **given}
+        return data
+
     def plan(self) -> dict[str, Any]:
         """The optimizer's settings."""
         keys = ("horizon", "population", "iterations") + (("temperature",) if self.optimizer == "mppi" else
@@ -89,10 +100,11 @@ def fault_keys(episodes: int, planner: FaultCounts) -> dict[str, int]:
 
 
 def warn_planner_faults(console: Console | None, line: str | None, run_dir: Path) -> None:
-    """One warning line on stderr (or the console the run was given) when the planner met non-finite
-    numbers: they are rejected and counted, not fatal, and must not go unseen."""
+    """One warning line on stderr when the planner met non-finite numbers: they are rejected and
+    counted, not fatal, and must not go unseen (a console the run was given is used where it is stderr:
+    the CLI gives its stdout, for tables)."""
     if line:
-        (console or Console(stderr=True)).print(f"[yellow]warning[/yellow]: {escape(line)}; listed in "
+        (console if console is not None and console.stderr else Console(stderr=True)).print(f"[yellow]warning[/yellow]: {escape(line)}; listed in "
                                                 f"{escape(str(run_dir))}/faults.log", soft_wrap=True)
 
 
@@ -132,16 +144,19 @@ class MpcSummary(PlannerFaultsSummary):
 
 
 class MpcKind(StepKind[MpcSettings, MpcSummary]):
-    """Model-predictive control on a learned forward model (CEM, MPPI or EvoTorch's CEM), maximizing a
-    builtin, user or learned reward.
+    """Model-predictive control on a learned forward model, maximizing a builtin, user or learned reward.
 
-    summary.json: return_mean, return_std, final_distance_mean (metres, Reacher's fingertip to its target, a
+    The optimizer (--optimizer) plans every control step on the model's predictions. summary.json: return_mean, return_std, final_distance_mean (metres, Reacher's fingertip to its target, a
     goal-conditioned env's achieved_goal to its desired_goal), plan_ms_median (per env per control step),
     disagreement_mean (ensembles), numerical_faults (episode_faults + planner_faults); episodes.npz (returns,
     distances, plan_ms, disagreement: one per env per control step), metrics.csv (one row per episode),
     plots/distance.png."""
 
     name = "mpc"
+    arguments = ("env",)
+    examples = ("motorlab mpc Reacher-v5 --model runs/reacher-model --episodes 50",
+                "motorlab mpc Reacher-v5 --model runs/reacher-model --optimizer evotorch --horizon 4 --population 250 "
+                "--iterations 20 --episodes 5")
     what = "MPC ({optimizer}) on {model} · {env}"
     headline_keys = ("return_mean", "return_std", "return_min", "final_distance_mean", "plan_ms_median", "episodes",
                      "wall_seconds")
@@ -206,6 +221,14 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
         summary = self.finish(run_dir, settings, summary, result.fault_log + ([planner_line] if planner_line else []))
         warn_planner_faults(console, planner_line, run_dir)
         return summary
+
+    def report(self, s: MpcSummary, settings: MpcSettings, console: Console) -> None:
+        distance = (f", final distance {s.final_distance_mean * 1000:.1f} mm (mean)"
+                    if s.final_distance_mean is not None else "")
+        spread = f", ensemble disagreement {s.disagreement_mean:.3f}" if s.disagreement_mean is not None else ""
+        console.print(f"return {s.return_mean:.2f} ± {s.return_std:.2f}{distance}, planning {s.plan_ms_median:.2f} "
+                      f"ms/step (median){spread} over {s.episodes} episodes ({s.reward_source} reward) -> {s.run_dir}")
+        warn_faults(s)
 
 
 MPC = MpcKind()
@@ -283,10 +306,21 @@ class MbrlSummary(PlannerFaultsSummary):
 
 
 class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
-    """The model-based loop (PETS): collect with the current planner, refit the ensemble on all data,
-    evaluate; curve.csv, plots/learning_curve.png, rounds/NN/ (transitions, model, round.json), model/."""
+    """The model-based loop (PETS): collect with the planner, refit the ensemble on all data, evaluate; round by round.
+
+    Each round collects with the current planner (the first with random actions), refits the ensemble
+    on all data so far (warm-started) and evaluates it; writes curve.csv, plots/learning_curve.png,
+    rounds/NN/ (transitions, model, round.json) and model/ (the last round's)."""
 
     name = "mbrl"
+    arguments = ("env",)
+    examples = (
+        "motorlab mbrl InvertedPendulum-v5 --rounds 5 --out runs/ip-mbrl",
+        "motorlab mbrl Pusher-v5 --rounds 20 --particles 20 --out runs/pusher-pets",
+        "motorlab mbrl Pusher-v5 --rounds 20 --no-probabilistic --propagation mean   # deterministic members",
+        "motorlab mbrl mypkg.envs:MyArm-v0 --reward mypkg.rewards:reach --rounds 10",
+        "motorlab mbrl Pusher-v5 --rounds 20 --out runs/pusher-pets --resume   # after a kill",
+    )
     what = "model-based loop on {env}: {rounds} rounds x {episodes_per_round} episodes, {ensemble} members"
     headline_keys = ("final_return_mean", "final_return_std", "best_return_mean", "env_steps", "valid_mse",
                      "valid_mse_first", "plan_ms_median", "rounds", "wall_seconds")
@@ -352,6 +386,15 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
             warn_planner_faults(console, planner_fault_line(faults.planner, task.reward_source, "rounds/NN/model"),
                                 run_dir)
         return summary
+
+    def report(self, s: MbrlSummary, settings: MbrlSettings, console: Console) -> None:
+        final = f"return {s.final_return_mean:.2f}" if s.final_return_mean is not None else "no evaluation"
+        resumed = (f" ({s.resumed_rounds} round{'s were' if s.resumed_rounds > 1 else ' was'} done before)"
+                   if s.resumed_rounds else "")
+        console.print(f"{final} after {s.rounds} rounds, {s.env_steps:,} env steps{resumed}; planning "
+                      f"{s.plan_ms_median or float('nan'):.1f} ms/step -> {s.run_dir}/curve.csv, "
+                      "plots/learning_curve.png")
+        warn_faults(s)
 
 
 MBRL = MbrlKind()

@@ -27,7 +27,7 @@ from rich.progress import Progress
 from motorlab.dynamics.reacher_sim import arm_models, closed_form_arm, rollout_reacher, sample_initial_states
 from motorlab.dynamics.state import StateLayout, env_layout
 from motorlab.dynamics.transitions import Transitions
-from motorlab.envs import EnvConfig, make_env
+from motorlab.envs import EnvConfig, facts, make_env
 from motorlab.envs.spaces import encode_space, flat_space, require_actions
 from motorlab.errors import MotorlabError
 from motorlab.faults import fault_line, fault_of
@@ -38,9 +38,10 @@ SIMULATORS = ("auto", "closed-form", "mujoco", "gymnasium")
 
 
 def _is_reacher(env: gym.Env) -> bool:
-    """Reacher-v4/v5 whose model is its XML's layout: what `rollout_reacher` reproduces exactly."""
+    """Reacher-v4/v5 (the catalogue's closed_form "reacher") whose model is its XML's layout: what
+    `rollout_reacher` reproduces exactly."""
     spec = env.spec.id if env.spec else ""
-    if not (spec.startswith("Reacher-") and env.observation_space.shape[0] in (10, 11)):
+    if not (facts(spec).closed_form == "reacher" and env.observation_space.shape[0] in (10, 11)):
         return False
     try:
         arm_models(env)
@@ -186,7 +187,8 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
         episodes: number of episodes, each to its end (termination or time limit).
         policy: "random" (uniform actions) or a run folder from `motorlab train`.
         workers: processes or threads (default: all cores).
-        state: state layout, "auto" (reacher for Reacher ids, else the observation), "reacher", "observation".
+        state: state layout, "auto" (the env's catalogue entry: reacher for Reacher ids, else the observation),
+            "reacher", "observation".
         simulator: "auto" (for Reacher with random actions the arm's closed form where it reproduces
             the model, else MuJoCo rollouts; Gymnasium for anything else), "closed-form", "mujoco"
             or "gymnasium".

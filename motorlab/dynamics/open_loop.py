@@ -47,9 +47,9 @@ def open_loop(model: ForwardModel, episodes: int, seed: int = 0, steps: int | No
 def state_labels(env_id: str, labels: list[str], size: int) -> list[str]:
     """Names of the state's entries: the env's own observation labels where motorlab knows them
     (the observation layout), else the layout's."""
-    from motorlab.report.plots import OBS_LABELS
+    from motorlab.envs.catalog import facts
 
-    known = next((v for k, v in OBS_LABELS.items() if env_id.split(":")[-1].startswith(k)), None)
+    known = facts(env_id).obs_labels
     if known is not None and len(known) == size and all(x.startswith("obs[") for x in labels):
         return list(known)
     return labels if len(labels) == size else [f"state[{i}]" for i in range(size)]

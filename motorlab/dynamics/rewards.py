@@ -4,9 +4,11 @@ A `StateFn` takes batched torch tensors (state, action, next_state, goal) with s
 (..., A), (..., S), (..., G) and returns (...,): a reward (float) or a termination (bool). The
 planner scores predicted paths with them; `resolve_task` picks them from one of three sources:
 
-- `builtin`: the bundled rewards below, the Gymnasium envs' own (same weights, scored on the
-  observation before or after the step as the env does; tests/test_rewards.py checks them against
-  the envs' transitions). Add one with `register(env_id, layout, reward, termination)`.
+- `builtin`: the env's catalogue entry's task (motorlab.envs.catalog, `EnvFacts.planning`): for the
+  bundled envs the rewards below, the Gymnasium envs' own (same weights, scored on the observation
+  before or after the step as the env does; tests/test_rewards.py checks them against the envs'
+  transitions). Add one with `register(env_id, layout, reward, termination)`, or declare a user
+  function for your env: `motorlab.register_env(ENV_ID, reward="module:function")`.
 - `MODULE:FUNCTION`: the user's torch function (obs, action, next_obs) -> reward (or -> bool for a
   termination), batched over any leading dimensions; it sees the planner's state (the observation
   in the default "observation" layout). `load_function` imports it, `resolve_task` checks it on
@@ -32,6 +34,7 @@ from typing import NamedTuple
 
 import torch
 
+from motorlab.envs.catalog import Planning, facts, planned_ids, register_env
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.user_modules import import_modules
 
@@ -48,24 +51,43 @@ class _Builtin(NamedTuple):
     state_size: int | None  # the state size the functions index into (None: not checked)
 
 
-_BUILTINS: dict[tuple[str, str], _Builtin] = {}
-
-
 def register(env_id: str, layout: str, reward: StateFn, termination: StateFn | None = None, *,
              state_size: int | None = None) -> None:
     """Make `reward` (and `termination`, a bool StateFn; None: the env never terminates) the bundled
-    task of env_id under the named state layout. `state_size`: the state size they are written for
-    (a model whose state differs, e.g. an env made with other observation options, is refused)."""
-    _BUILTINS[(env_id, layout)] = _Builtin(reward, termination, state_size)
+    task of env_id under the named state layout, in the env catalogue. `state_size`: the state size
+    they are written for (a model whose state differs, e.g. an env made with other observation
+    options, is refused)."""
+    kept = tuple(p for p in facts(env_id).planning if p.layout != layout)
+    register_env(env_id, planning=(*kept, Planning(layout, reward, termination, state_size)))
 
 
 def builtin_envs(layout: str | None = None) -> list[str]:
-    """Env ids with a bundled reward (under `layout`, or any), in registration order."""
-    return list(dict.fromkeys(e for e, lay in _BUILTINS if layout is None or lay == layout))
+    """Env ids (and family patterns) with a bundled reward (under `layout`, or any), the bundled first."""
+    return planned_ids(layout)
 
 
 def _termination_envs() -> list[str]:
-    return list(dict.fromkeys(e for (e, _), b in _BUILTINS.items() if b.termination is not None))
+    return [e for e in planned_ids() if any(p.termination is not None for p in facts(e).planning)]
+
+
+def _function(ref, what: str) -> StateFn | None:
+    """A catalogue entry's reward or termination: a StateFn of this module named "module:function",
+    a callable given to `register`, or a user's (obs, action, next_obs) function by name."""
+    if ref is None or callable(ref):
+        return ref
+    module, _, name = ref.partition(":")
+    if module == __name__:
+        return globals()[name]
+    return UserFunction(load_function(ref, what), ref, what)
+
+
+def _entry(env_id: str, layout: str) -> _Builtin | None:
+    """env_id's builtin task under the layout, from its catalogue entry (None where it has none)."""
+    planning = next((p for p in facts(env_id).planning if p.layout == layout), None)
+    if planning is None:
+        return None
+    return _Builtin(_function(planning.reward, "reward"), _function(planning.termination, "termination"),
+                    planning.state_size)
 
 
 # ---- the bundled rewards and terminations -----------------------------------------------
@@ -161,19 +183,8 @@ def humanoid_standup_v4(state, action, next_state, goal):
     return _standup(next_state, action, 14 * 6)
 
 
-register("Reacher-v5", "reacher", reacher_v5, state_size=8)
-register("Reacher-v4", "reacher", reacher_v4, state_size=8)
-register("Reacher-v5", "observation", reacher_obs_v5, state_size=10)
-register("Reacher-v4", "observation", reacher_obs_v4, state_size=11)
-register("Pusher-v5", "observation", pusher_v5, state_size=23)
-register("Pusher-v4", "observation", pusher_v4, state_size=23)
-register("InvertedPendulum-v5", "observation", inverted_pendulum_v5, inverted_pendulum_termination, state_size=4)
-register("InvertedPendulum-v4", "observation", inverted_pendulum_v4, inverted_pendulum_termination, state_size=4)
-register("HumanoidStandup-v5", "observation", humanoid_standup_v5, state_size=348)
-register("HumanoidStandup-v4", "observation", humanoid_standup_v4, state_size=376)
-# Not InvertedDoublePendulum: the env scores the tip MuJoCo placed during the last RK4 substep
-# (not the observed angles', ~1e-5 m apart) and unclipped velocities (the observation clips them
-# at 10), so a reward or termination from the observation is close but not the env's own.
+# Which env uses which of them (Reacher-v5: reacher_v5 and reacher_obs_v5, ...) is in the env
+# catalogue (motorlab.envs.catalog), with why InvertedDoublePendulum has none.
 
 
 class GoalDistance:
@@ -212,11 +223,12 @@ def _ways(what: str, builtin: bool = True) -> str:
 
 def _no_builtin_reason(env_id: str, layout: str, state_size: int | None) -> str:
     """Why env_id's bundled reward does not apply here ("" where it has none)."""
-    entry = _BUILTINS.get((env_id, layout))
+    planning = facts(env_id).planning
+    entry = next((p for p in planning if p.layout == layout), None)
     if entry is not None and entry.state_size not in (None, state_size):
         return (f" (its bundled reward reads the {entry.state_size}-number {layout} state, this model's has "
                 f"{state_size}: an env made with other observation options?)")
-    others = [lay for e, lay in _BUILTINS if e == env_id and lay != layout]
+    others = [p.layout for p in planning if p.layout != layout]
     if not others:
         return ""
     return (f" with the {layout!r} state layout (its bundled reward is for the {' and '.join(others)} "
@@ -231,7 +243,7 @@ def missing_reward_message(env_id: str, layout: str = "observation", state_size:
 
 def reward_for(env_id: str, layout: str) -> StateFn:
     """The bundled reward of env_id under the layout (MotorlabError listing the three ways if none)."""
-    entry = _BUILTINS.get((env_id, layout))
+    entry = _entry(env_id, layout)
     if entry is None:
         raise MotorlabError(missing_reward_message(env_id, layout))
     return entry.reward
@@ -379,9 +391,16 @@ class Task:
     termination_source: str  # "builtin", "learned", "none", or "module:function"
 
 
-def _builtin(env_id: str, layout: str, state_size: int) -> _Builtin | None:
-    entry = _BUILTINS.get((env_id, layout))
-    return entry if entry is not None and entry.state_size in (None, state_size) else None
+def _builtin(env_id: str, layout: str, state_size: int, action_size: int) -> _Builtin | None:
+    """env_id's builtin task for a model of this state size; a user's functions declared in the
+    catalogue are checked on probe tensors as --reward MODULE:FUNCTION is."""
+    entry = _entry(env_id, layout)
+    if entry is None or entry.state_size not in (None, state_size):
+        return None
+    for fn in entry[:2]:
+        if isinstance(fn, UserFunction):
+            check_function(fn.fn, fn.spec, fn.what, state_size, action_size)
+    return entry
 
 
 def _unknown(what: str, value: str, choices: tuple[str, ...]) -> MotorlabError:
@@ -421,7 +440,7 @@ def resolve_task(env_id: str, layout: str, state_size: int, action_size: int, go
         MotorlabError: one line naming what is missing and the ways to give it.
     """
     learned = frozenset(learned)
-    builtin = _builtin(env_id, layout, state_size)
+    builtin = _builtin(env_id, layout, state_size, action_size)
     reward = reward.strip()
     if reward == "auto":
         if builtin is not None:

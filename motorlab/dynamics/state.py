@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import gymnasium as gym
 import numpy as np
 
+from motorlab.envs.catalog import facts
 from motorlab.envs.spaces import KeySlice, is_dict, obs_layout
 from motorlab.errors import MotorlabError
 
@@ -117,10 +118,11 @@ def _observation_layout(obs_dim: int, keys: Sequence[KeySlice]) -> StateLayout:
 
 
 def layout_for(env_id: str, obs_dim: int, name: str = "auto", keys: Sequence[KeySlice] = ()) -> StateLayout:
-    """The state layout NAME ("auto": reacher for Reacher ids, else the observation), for an env
-    with `obs_dim` observations (`keys`: their Dict keys' slices, see `observation_keys`)."""
+    """The state layout NAME ("auto": the env's catalogue entry's `state_layout`, reacher for Reacher
+    ids, else the observation; always the observation for a Dict one), for an env with `obs_dim`
+    observations (`keys`: their Dict keys' slices, see `observation_keys`)."""
     if name == "auto":
-        name = "reacher" if env_id.startswith("Reacher-") and not keys else "observation"
+        name = facts(env_id).state_layout if not keys else "observation"
     if name == "reacher":
         if obs_dim not in (10, 11) or keys:
             raise MotorlabError(f"the reacher state layout needs Reacher's 10 (v5) or 11 (v4) observations, "

@@ -19,7 +19,7 @@ from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric, Number
 from motorlab.runs import atomic_write_npz
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Artifact, Ref, StepKind
+from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
 
 # ---- dynamics-collect -------------------------------------------------------------------------
 
@@ -67,6 +67,9 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
                Metric("collect_seconds", "collection time", "s", setup=True))
     refs = (Ref("policy", ("policy",)),)
     provides = Artifact("transitions", TRANSITIONS)
+    arguments = ("env",)
+    examples = ("motorlab dynamics collect Reacher-v5 --episodes 20000 --out runs/reacher-data",
+                "motorlab dynamics collect InvertedPendulum-v5 --episodes 200 --policy runs/ppo")
 
     def check(self, settings: DynamicsCollectSettings) -> None:
         check_env_id(settings.env)
@@ -87,6 +90,11 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
             return_mean=float(np.bincount(data.episode, weights=data.rewards)[np.unique(data.episode)].mean()),
             numerical_faults=data.meta["numerical_faults"])
         return self.finish(run_dir, settings, summary, data.meta["fault_log"])
+
+    def report(self, s: DynamicsCollectSummary, settings: DynamicsCollectSettings, console: Console) -> None:
+        console.print(f"{s.transitions:,} transitions ({s.state_size} state, {s.action_size} action entries) "
+                      f"at {s.transitions_per_second:,.0f}/s via {s.simulator} -> {s.run_dir}/transitions.npz")
+        warn_faults(s)
 
 
 DYNAMICS_COLLECT = DynamicsCollectKind()
@@ -172,6 +180,9 @@ class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
                Metric("wall_seconds", "training time", "s", setup=True))
     refs = (Ref("transitions", ("transitions",)),)
     provides = Artifact("model")
+    arguments = ("transitions",)
+    examples = ("motorlab dynamics fit runs/reacher-data --out runs/reacher-model",
+                "motorlab dynamics fit runs/reacher-data/transitions.npz --hidden 128,128 --ensemble 5 --patience 5")
 
     def run(self, settings: DynamicsFitSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> DynamicsFitSummary:
@@ -193,6 +204,11 @@ class DynamicsFitKind(StepKind[DynamicsFitSettings, DynamicsFitSummary]):
                                      heads=list(model.heads))
         model.save(run_dir, metrics={k: v for k, v in summary.keys().items() if k not in ("env_id", "state_layout")})
         return self.finish(run_dir, settings, summary)
+
+    def report(self, s: DynamicsFitSummary, settings: DynamicsFitSettings, console: Console) -> None:
+        valid = f"valid_mse {s.valid_mse:.2e} (normalized)" if s.valid_mse is not None else "no validation"
+        console.print(f"{valid} after {s.epochs_run} epochs, {s.wall_seconds:.1f} s -> {s.run_dir}/model.json, "
+                      f"plots/loss.png")
 
 
 DYNAMICS_FIT = DynamicsFitKind()
@@ -247,6 +263,8 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
     what = "check {model} open loop, {episodes} episodes"
     key_figures = ("plots/tip_error.png", "plots/error_by_dimension.png", "plots/traces.png")
     refs = (Ref("model", ("model",)),)
+    arguments = ("model",)
+    examples = ("motorlab dynamics check runs/reacher-model --episodes 5",)
 
     def run(self, settings: DynamicsCheckSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> DynamicsCheckSummary:
@@ -318,6 +336,16 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
         """The open-loop fingertip error where the state has a fingertip, else the state's NRMSE."""
         tips = [k for k in h if k.startswith("tip_error_mean_")]
         return [n for k in (tips or [k for k in h if k.startswith("state_nrmse_")]) if (n := self.metric(k).number(h))]
+
+    def report(self, s: DynamicsCheckSummary, settings: DynamicsCheckSettings, console: Console) -> None:
+        keys = s.keys()
+        tip = {k: v for k, v in keys.items() if k.startswith("tip_error_mean_h")}
+        console.print("open-loop error: " + ", ".join(
+            [f"{k.removeprefix('tip_error_mean_')} {v * 1000:.1f} mm" for k, v in tip.items()]
+            or [f"{k.removeprefix('state_nrmse_')} {v:.3f}" for k, v in keys.items() if k.startswith("state_nrmse_h")]))
+        console.print(f"worst entry: {s.worst_dimension} ({s.worst_dimension_nrmse:.3f} after "
+                      f"{s.worst_dimension_horizon} steps); written: {s.run_dir}/error_by_dimension.csv, "
+                      "plots/error_vs_horizon.png, error_by_dimension.png, traces.png")
 
 
 DYNAMICS_CHECK = DynamicsCheckKind()

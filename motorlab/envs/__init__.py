@@ -4,7 +4,8 @@
 
 Reward shaping sees the true state; the policy sees delayed, stacked observations.
 Upkie ids (`Upkie-PyBullet-Pendulum`, ...) get motorlab's learning defaults and
-balancing reward as their base env (see `motorlab.envs.upkie`).
+balancing reward as their base env (see `motorlab.envs.upkie`). What motorlab knows about an env
+family (falls, success, the extra that installs it, ...) is in `motorlab.envs.catalog`.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any, ClassVar, Literal
 import gymnasium as gym
 from pydantic import ConfigDict, Field, field_validator, model_validator
 
+from motorlab.envs.catalog import EnvFacts, facts, register_env
 from motorlab.envs.disturbances import (
     GaussianNoise,
     Latency,
@@ -28,7 +30,7 @@ from motorlab.envs.disturbances import (
 )
 from motorlab.envs.rewards import resolve_reward
 from motorlab.envs.spaces import is_dict, obs_layout, require_actions
-from motorlab.envs.upkie import is_upkie, make_upkie, register_upkie
+from motorlab.envs.upkie import make_upkie, register_upkie
 from motorlab.envs.wrappers import DelayOn, LowPassDelay, NumericalGuard, RewardShaping, delay_alpha, env_dt_of
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.extras import missing
@@ -42,7 +44,8 @@ from motorlab.user_modules import (
 )
 
 __all__ = ["EnvConfig", "EnvSettings", "ENV_KEYS", "DISTURBANCES", "describe_env", "make_env", "check_env_id", "max_return", "env_dt", "LowPassDelay", "RewardShaping",
-           "delay_alpha", "register_myosuite", "register_robotics", "reads_observations"]
+           "delay_alpha", "register_myosuite", "register_robotics", "reads_observations", "early_end_label", "EnvFacts",
+           "facts", "register_env"]
 
 def _route_mujoco_warnings() -> None:
     """Send MuJoCo's C-level warnings to Python logging instead of stderr and a
@@ -55,10 +58,6 @@ def _route_mujoco_warnings() -> None:
 
 
 _route_mujoco_warnings()
-
-# Envs whose reward is +1 per step alive: the maximum return is the time limit.
-_ALIVE_REWARD_PREFIXES = ("InvertedPendulum-",)
-
 
 class EnvConfig(StrictModel):
     """Which env, and how it is wrapped."""
@@ -109,9 +108,9 @@ class EnvConfig(StrictModel):
                                    description="keyword arguments for the env (gymnasium.make), e.g. Upkie's time_limit")
     # How an episode's success is read from the env's per-step flag (info["solved"]): "any" step
     # (manipulation: the object reached its goal once), or the "final" step (walking: upright and
-    # at the commanded speed when the episode ended). "auto" picks final for MyoSuite's walking
-    # tasks, whose flag is a state, not an event: under "any", even a policy that falls forward
-    # is counted as walking once (see motorlab.evaluation.success_mode).
+    # at the commanded speed when the episode ended). "auto" takes the env's catalogue entry: final
+    # for MyoSuite's walking tasks, whose flag is a state, not an event: under "any", even a policy
+    # that falls forward is counted as walking once (see motorlab.evaluation.success_mode).
     success: Literal["auto", "any", "final"] = Field(
         "auto", description="When an episode counts as a success, from the env's per-step flag (MyoSuite: "
         "info['solved']): any (solved at any step), final (solved at its last step), or auto (final for "
@@ -202,13 +201,6 @@ def register_myosuite() -> bool:
     return True
 
 
-# Gymnasium-Robotics' families (the `robotics` extra), for the install hint when it is missing
-ROBOTICS_PREFIXES = ("PointMaze_", "AntMaze_", "Fetch", "HandReach", "HandManipulate", "AdroitHand", "FrankaKitchen")
-# Its Fetch and Shadow-hand models fail while they are built, inside Gymnasium-Robotics 1.4.2 under
-# MuJoCo 4 (its set_joint_qpos asserts on their free joints: an upstream incompatibility)
-ROBOTICS_BROKEN = ("Fetch", "HandReach", "HandManipulate", "FrankaKitchen")
-
-
 def register_robotics() -> bool:
     """Import Gymnasium-Robotics, which registers its env ids (PointMaze_UMaze-v3, AntMaze_*,
     AdroitHand*, ...), without the notice it prints to stderr on import.
@@ -230,7 +222,7 @@ def register_robotics() -> bool:
 
 def is_robotics(env_id: str) -> bool:
     """An id of Gymnasium-Robotics' families (registered or not)."""
-    return split_env_id(env_id)[1].startswith(ROBOTICS_PREFIXES)
+    return facts(env_id).extra == "robotics"
 
 
 def check_env_id(env_id: str) -> None:
@@ -250,7 +242,7 @@ def check_env_id(env_id: str) -> None:
             raise MotorlabError(f"module {module!r} registers no env {name!r}; it registers "
                                 f"{', '.join(ids) if ids else 'no env at all'}.")
         return
-    if is_upkie(env_id):
+    if facts(env_id).extra == "upkie":
         register_upkie()  # clear message when upkie or pybullet is missing
     if env_id not in gym.registry and is_robotics(env_id):  # registered on first use, like MyoSuite's
         if not register_robotics():
@@ -259,7 +251,7 @@ def check_env_id(env_id: str) -> None:
         installed = register_myosuite()
         if env_id in gym.registry:
             return
-        if env_id.startswith("myo") and not installed:
+        if facts(env_id).extra == "myosuite" and not installed:
             raise missing(f"{env_id} needs MyoSuite", "myosuite")
         if not is_robotics(env_id) and register_robotics() and env_id in gym.registry:
             return  # one of its families this list does not name
@@ -315,7 +307,7 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
     """
     check_env_id(cfg.id)
     name = split_env_id(cfg.id)[1]
-    if is_upkie(cfg.id):
+    if facts(cfg.id).extra == "upkie":
         env = make_upkie(cfg.id, render_mode, **{**cfg.kwargs, **kwargs})
     else:
         env = _gym_make(cfg, name, render_mode, kwargs)
@@ -370,7 +362,7 @@ def _gym_make(cfg: EnvConfig, name: str, render_mode: str | None, kwargs: dict[s
                                     "from render().") from None
             raise MotorlabError(f"{cfg.id} does not take these settings: {e}.") from None
         except AssertionError:
-            if not name.startswith(ROBOTICS_BROKEN):
+            if not facts(name).broken:
                 raise
             import mujoco
 
@@ -436,23 +428,21 @@ def env_dt(env: gym.Env) -> float | None:
 def max_return(env_id: str) -> float | None:
     """The best return an episode can reach, where the task defines one.
 
-    InvertedPendulum pays +1 per step, so it is the time limit (1000);
-    otherwise the env's registered reward threshold, else None.
+    The catalogue's `max_return` (a number, or the time limit where the reward is +1 per step
+    alive: InvertedPendulum's 1000); otherwise the env's registered reward threshold, else None.
     """
     check_env_id(env_id)
     spec = gym.spec(split_env_id(env_id)[1])
-    if env_id.startswith(_ALIVE_REWARD_PREFIXES) and spec.max_episode_steps:
-        return float(spec.max_episode_steps)
+    best = facts(env_id).max_return
+    if best == "time_limit":
+        if spec.max_episode_steps:
+            return float(spec.max_episode_steps)
+    elif best is not None:
+        return float(best)
     return float(spec.reward_threshold) if spec.reward_threshold is not None else None
 
 
-# Envs whose early end of an episode is a fall: the pole or the body fell (Gymnasium's
-# "unhealthy" states, Upkie's fall detection, MyoSuite's legs below their height limit).
-# Elsewhere (the MyoSuite hand drops its object, a user's task ends) it is only an early end.
-_FALL_PREFIXES = ("InvertedPendulum", "InvertedDoublePendulum", "Upkie", "Hopper", "Walker2d", "Humanoid-",
-                  "Ant-", "myoLeg")
-
-
 def early_end_label(env_id: str) -> str:
-    """What reports call episodes of this env that ended before the time limit."""
-    return "falls" if env_id.startswith(_FALL_PREFIXES) else "ended early"
+    """What reports call episodes of this env that ended before the time limit: "falls" where the
+    catalogue says an early end is a fall (the pole or the body fell), else "ended early"."""
+    return facts(env_id).early_end

@@ -36,18 +36,12 @@ from motorlab.envs.isolated import ProcessEnv
 from motorlab.errors import MotorlabError
 from motorlab.extras import require
 
-PREFIXES = ("Upkie-", "Cookie-")
-
 DEFAULTS: dict[str, Any] = {"gui": False, "regulate_frequency": False, "frequency": 200.0, "time_limit": 10.0}
 
 # Balancing reward: 1 for every step the robot stays up, plus up to 0.5 for being
 # upright and up to 0.5 for standing still; 0 on the step it falls.
 PITCH_SCALE = 0.1  # rad: the upright term is exp(-(pitch / 0.1)^2)
 VELOCITY_SCALE = 0.5  # m/s: the stillness term is exp(-(ground velocity / 0.5)^2)
-
-
-def is_upkie(env_id: str) -> bool:
-    return env_id.startswith(PREFIXES)
 
 
 def register_upkie() -> None:

@@ -36,26 +36,26 @@ from typing import Any, NamedTuple
 import gymnasium as gym
 import numpy as np
 
-from motorlab.envs import EnvConfig, env_dt, make_env
+from motorlab.envs import EnvConfig, env_dt, facts, make_env
+from motorlab.envs.catalog import SUCCESS_KEYS
 from motorlab.errors import MotorlabError
 from motorlab.faults import fault_of
 from motorlab.user_modules import ENV_VAR, import_modules, imported_names
 
-SUCCESS_KEYS = ("solved", "success", "is_success")
 
-
-def step_success(info: dict) -> bool | None:
-    """The env's own success flag for this step (MyoSuite: info["solved"]), or None."""
-    for key in SUCCESS_KEYS:
+def step_success(info: dict, keys: tuple[str, ...] = SUCCESS_KEYS) -> bool | None:
+    """The env's own success flag for this step (MyoSuite: info["solved"]), or None. `keys`: the
+    info keys to read, in order (the env's catalogue entry's `success_keys`)."""
+    for key in keys:
         if key in info:
             return bool(info[key])
     return None
 
 
-def success_code(info: dict) -> int:
+def success_code(info: dict, keys: tuple[str, ...] = SUCCESS_KEYS) -> int:
     """`step_success` and which key said it, as one small int: -1 no flag, else 2 x the key's
-    index in SUCCESS_KEYS + the flag (so a worker's reply stays one int8 per step)."""
-    for k, key in enumerate(SUCCESS_KEYS):
+    index in `keys` + the flag (so a worker's reply stays one int8 per step)."""
+    for k, key in enumerate(keys):
         if key in info:
             return 2 * k + int(bool(info[key]))
     return -1
@@ -80,15 +80,17 @@ class Steps(NamedTuple):
         value = int(self.success[j])
         return None if value < 0 else bool(value & 1)
 
-    def flag_key(self, j: int) -> str | None:
-        """The info key of entry j's success flag (None: the env reports none)."""
+    def flag_key(self, j: int, keys: tuple[str, ...] = SUCCESS_KEYS) -> str | None:
+        """The info key of entry j's success flag (None: the env reports none); `keys`: those the
+        envs were stepped with (the pool's `success_keys`)."""
         value = int(self.success[j])
-        return None if value < 0 else SUCCESS_KEYS[value >> 1]
+        return None if value < 0 else keys[value >> 1]
 
 
 def step_envs(envs: Sequence[gym.Env], rows: np.ndarray, actions: np.ndarray, offset: int = 0,
-              restarts: np.ndarray | None = None) -> Steps:
-    """Step envs[r] with actions[j] for each r = rows[j]; rows are reported as r + offset.
+              restarts: np.ndarray | None = None, keys: tuple[str, ...] = SUCCESS_KEYS) -> Steps:
+    """Step envs[r] with actions[j] for each r = rows[j]; rows are reported as r + offset; `keys`:
+    the info keys of the envs' success flag.
 
     `restarts[j]` >= 0: if this step ends row r's episode, reset its env at once with that seed
     (the row's next episode), so the next step needs no round trip of its own."""
@@ -99,7 +101,7 @@ def step_envs(envs: Sequence[gym.Env], rows: np.ndarray, actions: np.ndarray, of
         reward.append(rew)
         terminated.append(term)
         truncated.append(trunc)
-        success.append(success_code(info))
+        success.append(success_code(info, keys))
         if (why := fault_of(info)) is not None:
             fault[int(r) + offset] = why
         again = bool((term or trunc) and restarts is not None and restarts[j] >= 0)
@@ -134,6 +136,7 @@ class SerialPool:
         self.observation_space = self.envs[0].observation_space
         self.action_space = self.envs[0].action_space
         self.dt = env_dt(self.envs[0])
+        self.success_keys = facts(env_cfg.id).success_keys  # read once the env's module is imported
 
     def reset(self, seeds: Sequence[int]) -> np.ndarray:
         """Reset env i with seeds[i] (the first len(seeds) envs); their observations, stacked."""
@@ -143,7 +146,8 @@ class SerialPool:
         """Step env i with actions[i] for every row i where active[i] (at least one); a row whose
         episode ends is reset with restarts[i] where that is >= 0 (see `step_envs`)."""
         rows = np.flatnonzero(active)
-        return step_envs(self.envs, rows, actions[rows], 0, None if restarts is None else restarts[rows])
+        return step_envs(self.envs, rows, actions[rows], 0, None if restarts is None else restarts[rows],
+                         self.success_keys)
 
     def close(self) -> None:
         for env in self.envs:
@@ -164,6 +168,7 @@ def _serve(conn, imports: list[str]) -> None:
     offset)) and ("close", None) until told to close or the parent goes away."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
     envs: list[gym.Env] = []
+    keys = SUCCESS_KEYS
     try:
         # forkserver children inherit the server's environment from when it started: set the user's
         # modules from the parent's (passed on, like every process motorlab starts)
@@ -173,7 +178,7 @@ def _serve(conn, imports: list[str]) -> None:
             command, arg = conn.recv()
             if command == "step":
                 rows, actions, offset, restarts = arg
-                conn.send(("ok", step_envs(envs, rows, actions, offset, restarts)))
+                conn.send(("ok", step_envs(envs, rows, actions, offset, restarts, keys)))
             elif command == "reset":
                 conn.send(("ok", [env.reset(seed=s)[0] for env, s in zip(envs, arg, strict=False)]))
             elif command == "build":  # new envs (the last pool's are closed first)
@@ -181,7 +186,8 @@ def _serve(conn, imports: list[str]) -> None:
                 env_cfg, count = arg
                 for _ in range(count):
                     envs.append(make_env(env_cfg, shaped=False))
-                conn.send(("ok", (envs[0].observation_space, envs[0].action_space, env_dt(envs[0]))))
+                keys = facts(env_cfg.id).success_keys
+                conn.send(("ok", keys))
             else:
                 break
     except (EOFError, BrokenPipeError, KeyboardInterrupt):
@@ -287,8 +293,13 @@ class ProcessPool:
             self._local.close()
             self._local = None
         self._local = SerialPool(env_cfg, self.slices[0][1])  # while the children build theirs
+        self.success_keys = self._local.success_keys
         for k in range(1, self.workers):
-            self._receive(k, "building its envs")
+            keys = self._receive(k, "building its envs")
+            if keys != self.success_keys:  # their flags' codes would be read with the wrong keys
+                raise self._fail(k, f"reads the success flag from info{list(keys)}, this process from "
+                                 f"info{list(self.success_keys)}: declare the env's facts with register_env "
+                                 "in the module --import names, so every process declares them.")
         self.observation_space = self._local.observation_space
         self.action_space = self._local.action_space
         self.dt = self._local.dt

@@ -8,7 +8,6 @@ Returns are the task's own returns (reward shaping is for training only).
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -16,7 +15,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from motorlab.envs import EnvConfig, max_return
+from motorlab.envs import EnvConfig, facts, max_return
 from motorlab.envs.spaces import env_actions
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.pool import SUCCESS_KEYS, EnvPool, auto_workers, make_pool, step_success
@@ -64,22 +63,17 @@ class Rollouts:
         }
 
 
-# MyoSuite's walking tasks (myoLegWalk-v0, myoLeg{Hilly,Rough,Stair}TerrainWalk-v0): their
-# "solved" is "upright and within 0.5 m/s of the commanded speed" at that step, which a body
-# falling forward also meets for a moment before it is counted as fallen.
-_STATE_SUCCESS_IDS = re.compile(r"^myoLeg.*Walk")
-
-
 def success_mode(env_cfg: EnvConfig) -> str:
     """How episodes of this env count as successes: "any" step solved, or the "final" step.
 
     Args:
-        env_cfg: its `success` setting; "auto" means "final" for MyoSuite's walking tasks
-            and "any" for everything else (the SAR study's manipulation tasks).
+        env_cfg: its `success` setting; "auto" means the env's catalogue entry (motorlab.envs.catalog):
+            "final" for MyoSuite's walking tasks, whose flag is a state a body falling forward also
+            meets for a moment, and "any" for everything else (the SAR study's manipulation tasks).
     """
     if env_cfg.success != "auto":
         return env_cfg.success
-    return "final" if _STATE_SUCCESS_IDS.match(env_cfg.id) else "any"
+    return facts(env_cfg.id).success_mode
 
 
 def success_by(env_cfg: EnvConfig, key: str | None) -> str | None:
@@ -101,16 +95,17 @@ class EpisodeSuccess:
     reaches the task's maximum (InvertedPendulum: 1000).
     """
 
-    def __init__(self, n: int, target: float | None, mode: str = "any"):
+    def __init__(self, n: int, target: float | None, mode: str = "any", keys: tuple[str, ...] = SUCCESS_KEYS):
         if mode not in ("any", "final"):
             raise ValueError(f"success mode {mode!r}: any or final")
         self.target = target
+        self.keys = keys  # the info keys of the env's flag (its catalogue entry's success_keys)
         self.final = mode == "final"
         self.solved = np.zeros(n, dtype=bool)
         self.flagged = np.zeros(n, dtype=bool)
 
     def step(self, i: int, info: dict) -> None:
-        self.flag(i, step_success(info))
+        self.flag(i, step_success(info, self.keys))
 
     def flag(self, i: int, flag: bool | None) -> None:
         """Row i's step reported `flag` (`step_success` of its info; None: no flag)."""
@@ -222,7 +217,7 @@ class Evaluator:
                 lengths[i] += 1
                 outcome.flag(r, steps.flag(j))
                 if key is None:
-                    key = steps.flag_key(j)
+                    key = steps.flag_key(j, self.pool.success_keys)
                 if record:
                     traces_o[i].append(steps.obs[j])
                     traces_a[i].append(actions[r])

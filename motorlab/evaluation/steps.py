@@ -7,18 +7,36 @@ import statistics
 from pathlib import Path
 from typing import Any, ClassVar
 
-from pydantic import Field
+from pydantic import Field, model_validator
 from rich.console import Console
 from rich.table import Table
 
-from motorlab.envs import ENV_KEYS, EnvSettings, describe_env, fold_env, make_env, max_return
+from motorlab.envs import (
+    ENV_KEYS,
+    EnvSettings,
+    describe_env,
+    early_end_label,
+    fold_env,
+    make_env,
+    max_return,
+    register_myosuite,
+)
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.rollouts import evaluate, success_by, success_mode, trained_env_settings
 from motorlab.policies import BUILTIN_POLICIES, load_policy, unknown_policy_message
 from motorlab.report.results import Metric, Number, show
 from motorlab.runs import require_run_dir
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import SCORED_METRICS, Artifact, Ref, Scores, StepKind, scored_numbers, seeds_headline
+from motorlab.stepkind import (
+    SCORED_METRICS,
+    Artifact,
+    Ref,
+    Scores,
+    StepKind,
+    scored_numbers,
+    seeds_headline,
+    warn_faults,
+)
 
 # ---- evaluate ---------------------------------------------------------------------------------
 
@@ -57,23 +75,9 @@ class EvaluateSummary(Summary):
     numerical_faults: int
 
 
-def settings_for(policy: str, env: dict[str, Any], episodes: int | None = None,
-                 seed: int | None = None, workers: int | None = None) -> EvaluateSettings:
-    """Evaluation settings for `policy` on the env its run folder trained on (if it is a run
-    folder), with the given env settings (id, delay, history, kwargs, ...) on top.
-
-    Raises:
-        MotorlabError: no env id known (a built-in controller without --env), a bad setting.
-    """
-    base: dict[str, Any] = {}
-    if Path(policy).exists():
-        base = trained_env_settings(require_run_dir(Path(policy)))
-    elif policy.split(":", 1)[0] not in BUILTIN_POLICIES:
-        raise MotorlabError(unknown_policy_message(policy))
-    merged = merge_env(base, env)
-    if "id" not in merged:
-        raise MotorlabError(f"no env for {policy!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")
-    return EVALUATE.make(policy=policy, env=merged, episodes=episodes, seed=seed, workers=workers)
+def is_folder_policy(policy: Any) -> bool:
+    """Whether `policy` names a run folder that exists (not a built-in controller, nor a recipe's "@step")."""
+    return isinstance(policy, (str, Path)) and not str(policy).startswith("@") and Path(policy).exists()
 
 
 def merge_env(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
@@ -85,9 +89,21 @@ def merge_env(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]
 
 
 class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
-    """Evaluate a policy; returns are the task's own (training-time reward shaping is not applied)."""
+    """Evaluate a policy deterministically; print a table, write summary.json.
+
+    summary.json: return_mean, return_std, return_min, return_max, success_rate,
+    episode_lengths. Returns are the task's own (training-time reward shaping is not applied).
+    By default a run folder's policy acts in the env it trained in (its id, arguments, delay,
+    history and synergies); the env settings given here go on top.
+    """
 
     name = "evaluate"
+    arguments = ("policy",)
+    examples = (
+        "motorlab evaluate runs/ppo --delay 0.2 --episodes 20",
+        "motorlab evaluate pid --env InvertedPendulum-v5",
+        "motorlab evaluate 'pid:kp=[1,20,0,0],kd=[1,3,0,0]' --env InvertedPendulum-v5",
+    )
     refs = (Ref("policy", ("policy",)), Ref("sar", ("sar",)))
     provides = Artifact("evaluation")
     scored = True
@@ -106,6 +122,31 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
         if sar and "sar" not in data["env"]:  # in the synergy space it trained in; "@fit": once that step ran
             data["sar"] = sar
         return data
+
+    def validate(self, fields: dict[str, Any]) -> EvaluateSettings:
+        """Settings from flat or folded fields; a run folder's policy acts in the env it trained in
+        (without its reward shaping), under the env settings given."""
+        if is_folder_policy(fields.get("policy")):
+            data = fold_env(fields)
+            data["env"] = merge_env(trained_env_settings(require_run_dir(Path(fields["policy"]))), data["env"])
+            fields = data
+        return super().validate(fields)
+
+    def make(self, **fields: Any) -> EvaluateSettings:
+        """Settings as the command line and the Python API give them.
+
+        Raises:
+            MotorlabError: a policy that is neither a run folder nor a built-in controller, no env
+                id known (a built-in controller without --env), a bad setting.
+        """
+        policy = fields.get("policy")
+        if isinstance(policy, str) and not is_folder_policy(policy) and not policy.startswith("@") \
+                and policy.split(":", 1)[0] not in BUILTIN_POLICIES:
+            raise MotorlabError(unknown_policy_message(policy))
+        settings = super().make(**fields)
+        if "id" not in settings.env.model_fields_set:
+            raise MotorlabError(f"no env for {policy!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")
+        return settings
 
     def check(self, settings: EvaluateSettings) -> None:
         make_env(settings.env).close()
@@ -158,6 +199,17 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
 
         plot_run(run_dir)
 
+    def report(self, s: EvaluateSummary, settings: EvaluateSettings, console: Console) -> None:
+        env_cfg = settings.env
+        table = Table(title=f"{settings.policy} on {describe_env(env_cfg)}")
+        for col in ("episodes", "return mean ± std", "min", "max", "success", "mean length",
+                    early_end_label(env_cfg.id)):
+            table.add_column(col, justify="right")
+        table.add_row(str(s.episodes), f"{s.return_mean:.1f} ± {s.return_std:.1f}", f"{s.return_min:.1f}",
+                      f"{s.return_max:.1f}", f"{s.success_rate:.0%}", f"{s.episode_length_mean:.0f}", str(s.falls))
+        console.print(table)
+        super().report(s, settings, console)  # written: summary.json, and a warning on numerical faults
+
 
 EVALUATE = EvaluateKind()
 
@@ -176,6 +228,38 @@ class ZeroshotSettings(Settings):
                                 "(default: every core when the evaluation is large enough to pay for starting "
                                 "the others; 1: this process only); results are the same for any number")
 
+    @model_validator(mode="before")
+    @classmethod
+    def _env_ids_among_runs(cls, data: Any) -> Any:
+        """`--envs A B` on the command line gives B to the runs: an entry of `runs` that is no path
+        but an env id belongs to `envs`; envs may also be written A,B.
+
+        Raises:
+            MotorlabError: no run folder or no env left.
+        """
+        if not isinstance(data, dict) or "runs" not in data:
+            return data  # nothing to sort (a missing field is the model's own error)
+        runs = [str(r) for r in _listed(data.get("runs"))]
+        envs = [e for item in _listed(data.get("envs")) for e in str(item).split(",") if e]
+        maybe_env = [r for r in runs if not r.startswith("@") and not Path(r).exists()]
+        if maybe_env:
+            import gymnasium as gym
+
+            register_myosuite()  # its ids, when MyoSuite is installed
+            moved = [r for r in maybe_env if r in gym.registry]
+            runs = [r for r in runs if r not in moved]
+            envs = [*envs, *(e for r in moved for e in r.split(",") if e)]
+        if not runs or not envs:
+            raise MotorlabError("give at least one run folder and one env (--envs ID ...).")
+        return {**data, "runs": runs, "envs": envs}
+
+
+def _listed(value: Any) -> list[Any]:
+    """A list field's value as a list (one value: a list of it; none: empty)."""
+    if value is None:
+        return []
+    return list(value) if isinstance(value, (list, tuple)) else [value]
+
 
 class ZeroshotSummary(Summary):
     """Also "<run>.<env>.success_rate", "<run>.<env>.return_mean", ... for every run and env."""
@@ -193,6 +277,9 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
     name = "zeroshot"
     key_figures = ("plots/zeroshot.png",)
     refs = (Ref("runs", ("policy",)),)
+    arguments = ("runs",)
+    examples = ("motorlab zeroshot runs/sar-rl runs/rl-e2e --envs myoHandReorientID-v0 myoHandReorientOOD-v0 "
+                "--episodes 500",)
 
     def run(self, settings: ZeroshotSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> ZeroshotSummary:
@@ -261,6 +348,10 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
 
     def notes(self, settings: ZeroshotSettings, h: dict[str, Any]) -> str:
         return f"success: mean over each step's seeds, {show(settings.episodes, 'count')} episodes per env"
+
+    def report(self, s: ZeroshotSummary, settings: ZeroshotSettings, console: Console) -> None:
+        console.print(f"written: {s.run_dir}/summary.json, {s.run_dir}/plots/zeroshot.png")  # the table: in `run`
+        warn_faults(s)
 
 
 ZEROSHOT = ZeroshotKind()

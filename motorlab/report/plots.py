@@ -44,18 +44,12 @@ def steps_axis(axis) -> None:
     """Label `axis` (ax.xaxis or ax.yaxis) as environment steps."""
     axis.set_major_formatter(matplotlib.ticker.FuncFormatter(step_count))
 
-# Observation labels (with units) for envs whose layout is known.
-OBS_LABELS = {
-    "InvertedPendulum": ["cart position (m)", "pole angle (rad)", "cart velocity (m/s)", "pole angular velocity (rad/s)"],
-    "Upkie-PyBullet-Pendulum": ["pitch (rad)", "ground position (m)", "pitch rate (rad/s)", "ground velocity (m/s)"],
-}
-
-
 def obs_labels(env_id: str, n: int) -> list[str]:
-    for prefix, labels in OBS_LABELS.items():
-        if env_id.startswith(prefix) and len(labels) == n:
-            return labels
-    return [f"obs[{i}]" for i in range(n)]
+    """Names (with units) of the observation's entries, where the env catalogue knows them."""
+    from motorlab.envs.catalog import facts
+
+    labels = facts(env_id).obs_labels
+    return list(labels) if labels and len(labels) == n else [f"obs[{i}]" for i in range(n)]
 
 
 CAPTION = "Description"  # the PNG text chunk holding a figure's caption (reports show it under the figure)

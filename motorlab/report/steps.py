@@ -6,9 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from rich.console import Console
 
+from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric, Number, show
 from motorlab.runs import require_run_dir
 from motorlab.settings import Settings, Summary
@@ -43,6 +44,9 @@ class VideoKind(StepKind[VideoSettings, VideoSummary]):
     name = "video"
     headline_keys = ("videos", "returns", "fps")
     refs = (Ref("run", ("policy", "evaluation")),)
+    arguments = ("run",)
+    out_help = "Folder for the videos (default RUN_DIR/videos)."
+    examples = ("MUJOCO_GL=egl motorlab video runs/play --episodes 5 --camera hand_side_inter",)
 
     def run(self, settings: VideoSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> VideoSummary:
@@ -73,6 +77,10 @@ class VideoKind(StepKind[VideoSettings, VideoSummary]):
     def notes(self, settings: VideoSettings, h: dict[str, Any]) -> str:
         return ", ".join(f"{Path(v).parent.name}/{Path(v).name}" for v in h["videos"])
 
+    def report(self, s: VideoSummary, settings: VideoSettings, console: Console) -> None:
+        for path, ret in zip(s.videos, s.returns, strict=True):
+            console.print(f"written: {path}  (return {ret:.1f})")
+
 
 VIDEO = VideoKind()
 
@@ -80,18 +88,56 @@ VIDEO = VideoKind()
 # ---- compare ----------------------------------------------------------------------------------
 
 
+GROUP_FORM = "write LABEL=RUN_DIR[,RUN_DIR...], e.g. --group SAR-RL=runs/a,runs/b."
+
+
 class CompareSettings(Settings):
-    groups: dict[str, list[str]] = Field(min_length=1, description="LABEL = [RUN_DIR, ...]: one setting, its seeds")
+    groups: dict[str, list[str]] = Field(min_length=1, description="LABEL=RUN_DIR[,RUN_DIR...]: one setting, its "
+                                         "seeds (a recipe: LABEL = [RUN_DIR, ...])")
     title: str = Field("Learning curves", description="Figure title")
+
+    @field_validator("groups", mode="before")
+    @classmethod
+    def _groups(cls, v: Any) -> Any:
+        """Groups as a table (LABEL = [RUN_DIR, ...], or LABEL = "RUN_DIR,RUN_DIR" as the command line's
+        --group LABEL=... gives them) or as the command line's items, "LABEL=RUN_DIR[,RUN_DIR...]".
+
+        Raises:
+            MotorlabError: an item without a label or a run folder.
+        """
+        if isinstance(v, str):
+            v = [v]
+        if isinstance(v, (list, tuple)) and all(isinstance(item, str) for item in v):
+            groups: dict[str, Any] = {}
+            for item in v:
+                label, sep, runs = item.partition("=")
+                if not sep or not label or not runs:
+                    raise MotorlabError(f"--group {item!r}: {GROUP_FORM}")
+                groups[label] = runs
+            v = groups
+        if isinstance(v, dict):
+            out = {}
+            for label, runs in v.items():
+                if isinstance(runs, str):  # "runs/a,runs/b"
+                    if not label or not [r for r in runs.split(",") if r]:
+                        raise MotorlabError(f"--group {f'{label}={runs}'!r}: {GROUP_FORM}")
+                    runs = [r for r in runs.split(",") if r]
+                out[label] = runs
+            return out
+        return v
 
 
 class CompareKind(StepKind[CompareSettings, Summary]):
-    """Learning curves (return and success vs env steps) of settings across seeds: mean and 95% band, PNG;
-    summary.json: "<group>.<key>" per group, rliable's IQMs and probabilities of improvement."""
+    """Learning curves (return and success vs env steps) of settings across seeds, with 95% bands.
+
+    Writes plots/learning_curves.png (mean and 95% band per group) and summary.json: "<group>.<key>"
+    per group, rliable's IQMs and probabilities of improvement."""
 
     name = "compare"
     key_figures = ("plots/learning_curves.png",)
     refs = (Ref("groups", ("policy",)),)
+    flags = {"groups": ("--group",)}
+    examples = ("motorlab compare --group SAR-RL=runs/sar-s0,runs/sar-s1 --group RL-E2E=runs/e2e-s0,runs/e2e-s1",)
 
     def run(self, settings: CompareSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> Summary:
@@ -141,6 +187,9 @@ class CompareKind(StepKind[CompareSettings, Summary]):
 
     def notes(self, settings: CompareSettings, h: dict[str, Any]) -> str:
         return "learning curves: plots/learning_curves.png"
+
+    def report(self, s: Summary, settings: CompareSettings, console: Console) -> None:
+        console.print(f"written: {s.run_dir}/plots/learning_curves.png")
 
 
 COMPARE = CompareKind()

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from motorlab.envs import EnvConfig, env_dt, make_env
+from motorlab.envs import EnvConfig, env_dt, facts, make_env
 from motorlab.envs.disturbances import mujoco_model_data
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import trained_env_settings
@@ -35,6 +35,8 @@ class MujocoCamera:
         model, self.data = mujoco_model_data(env)
         model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
         model.vis.global_.offheight = max(model.vis.global_.offheight, height)
+        if camera is None and env.spec is not None:
+            camera = facts(env.spec.id).camera  # the env's catalogue entry (None for the bundled ones)
         if camera is None:
             camera = 0 if model.ncam else -1  # the model's first camera, else the free camera
         elif isinstance(camera, str) and camera.lstrip("-").isdigit():

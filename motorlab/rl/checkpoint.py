@@ -4,7 +4,7 @@ that was killed (even with SIGKILL) to the same total budget.
     RUN_DIR/checkpoint/latest.json         step counter, tracker state, the files below (written last)
     RUN_DIR/checkpoint/model-<steps>.safetensors   networks' and optimizers' tensors
     RUN_DIR/checkpoint/model-<steps>.json  the rest of their state dicts (optimizer settings, step counts)
-    RUN_DIR/checkpoint/buffer-<steps>.npz  the replay buffer (SAC, TD3): plain arrays; a Dict
+    RUN_DIR/checkpoint/buffer-<steps>.npz  the replay buffer (off-policy: SAC, TD3, TQC, CrossQ): arrays; a Dict
                                            observation's per key ("observations.<key>"); with --her,
                                            HerReplayBuffer's episode bounds (ep_start, ep_length)
     RUN_DIR/checkpoint/normalize-<steps>.npz   VecNormalize's running mean, variance and count

@@ -8,59 +8,40 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from pydantic import Field, field_validator, model_validator
 
 from motorlab.control.lqr import LQRSettings
 from motorlab.envs import EnvSettings, fold_env
 from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.rl import algos
 from motorlab.rl.schedules import schedule_ends
 
-Algo = Literal["ppo", "sac", "td3", "lqr"]
-
-PRESETS: dict[str, dict[str, Any]] = {
-    # motorlab's most sample-efficient configuration for balance/regulation tasks:
-    # least-squares linear model + LQR, refitted every 100 steps (see control/lqr.py).
-    # InvertedPendulum: ~100 env steps plain, ~100-300 with 0.2 s actuation + perception delay.
-    "fast": {"algo": "lqr", "lqr": {}},
-    # The reference SAC settings of the SAR study (MyoSuite, Berg et al. 2023): play phase.
-    "sar-sac": {
-        "algo": "sac",
-        "lr": "linear:1e-3,0",
-        "normalize": True,  # VecNormalize observations, clip 10
-        "hyperparams": {
-            "policy_kwargs": {"net_arch": {"pi": [400, 300], "qf": [400, 300]}},
-            "buffer_size": 300_000, "learning_starts": 1000, "batch_size": 256, "tau": 0.02, "gamma": 0.98,
-            "train_freq": [1, "episode"], "gradient_steps": -1,
-        },
-    },
-    # Stable-Baselines3 defaults, named so recipes can say so.
-    "sb3-ppo": {"algo": "ppo", "hyperparams": {}},
-    "sb3-sac": {"algo": "sac", "hyperparams": {}},
-}
+# Every algorithm's presets, from its own module (motorlab/rl/algos/<name>.py).
+PRESETS: dict[str, dict[str, Any]] = algos.presets()
 
 
 class TrainConfig(EnvSettings):
     """Everything `motorlab train` needs; written to the run folder's config.toml."""
 
-    algo: Algo = Field("ppo", description="ppo | sac | td3 (Stable-Baselines3) | lqr (model-based: linear model + "
-                       "LQR)")
-    preset: str | None = Field(None, description="named settings under the given ones (see PRESETS)")
+    algo: str = Field("ppo", description="the learner: " + algos.summary_help())
+    preset: str | None = Field(None, description="named settings under the given ones: " + algos.preset_help())
     preset_file: str | None = Field(None, description="TOML file of these fields (e.g. best.toml of motorlab tune), "
                                     "applied over the named preset and under the given settings")
     timesteps: int = Field(100_000, gt=0, description="Env-step budget")
     seed: int = Field(0, ge=0, description="Random seed (training, env resets, evaluation)")
     lr: str | None = Field(None, description="Learning-rate schedule: 3e-4 (constant) or linear:START,END (over "
                            "the budget)")
-    clip_range: str | None = Field(None, description="PPO clip-range schedule, e.g. linear:0.3,0.1")
+    clip_range: str | None = Field(None, description=algos.titles_with("clip_range") + " clip-range schedule, e.g. "
+                                   "linear:0.3,0.1")
     until_solved: bool = Field(False, description="Stop once solve_episodes deterministic episodes all reach the "
                                "maximum return; summary.json gets steps_to_success")
     solve_episodes: int = Field(10, gt=0, description="Episodes that must all succeed")
     solve_return: float | None = Field(None, description="Return that counts as solved (default: the env's "
                                        "maximum, 1000 for InvertedPendulum)")
-    eval_every: int | None = Field(None, gt=0, description="Env steps between evaluations (default: every PPO "
-                                   "rollout, 1000 for SAC/TD3, each LQR refit)")
+    eval_every: int | None = Field(None, gt=0, description="Env steps between evaluations (default: "
+                                   + algos.eval_cadence_help() + ")")
     n_envs: int = Field(1, gt=0, description="Parallel envs (subprocesses when > 1)")
     normalize: bool = Field(False, description="Normalize observations with running statistics (VecNormalize)")
     device: str = Field("auto", description="auto (CUDA when present) | cpu | cuda")
@@ -70,12 +51,12 @@ class TrainConfig(EnvSettings):
     checkpoint_every: int | None = Field(None, ge=0, description="Env steps between checkpoints for --resume "
                                          "(default: a tenth of the budget; 0: none)")
     hyperparams: dict[str, Any] = Field(default_factory=dict, description="extra keyword arguments for the SB3 algorithm")
-    her: bool = Field(False, description="Hindsight experience replay (SAC, TD3) on a goal-conditioned env (a Dict "
+    her: bool = Field(False, description="Hindsight experience replay (" + algos.titles_with("her") + ") on a goal-conditioned env (a Dict "
                       "observation with achieved_goal and desired_goal, e.g. PointMaze_UMaze-v3): SB3's "
                       "HerReplayBuffer relabels each transition with 4 goals reached later in its episode (future; "
                       "--set replay_buffer_kwargs={...} changes them); learning starts after the first full episode "
                       "unless learning_starts is set")
-    lqr: LQRSettings = Field(default_factory=LQRSettings)
+    lqr: LQRSettings = Field(default_factory=LQRSettings, json_schema_extra={"cli": False})  # recipes and --config only
 
     @field_validator("lr", "clip_range")
     @classmethod
@@ -85,57 +66,18 @@ class TrainConfig(EnvSettings):
         return v
 
 
-    @model_validator(mode="after")
-    def _clip_range_is_ppo_only(self):
-        if self.clip_range is not None and self.algo != "ppo":
-            raise MotorlabError(f"--clip-range applies to PPO only, not {self.algo}; drop it or use --algo ppo.")
-        return self
+    @field_validator("algo")
+    @classmethod
+    def _known_algo(cls, v: str) -> str:
+        algos.get(v)  # one line with close matches for an unknown name
+        return v
 
     @model_validator(mode="after")
-    def _her_is_off_policy_only(self):
-        if self.her and self.algo not in ("sac", "td3"):
-            raise MotorlabError(f"--her relabels the goals of a replay buffer, which {self.algo.upper()} has none of; "
-                                "use --algo sac or --algo td3, or drop --her.")
+    def _algo_takes_settings(self):
+        algos.get(self.algo).check(self)  # --clip-range, --her: by what the algorithm is
         if self.her and "replay_buffer_class" in self.hyperparams:
             raise MotorlabError("--her sets replay_buffer_class (SB3's HerReplayBuffer); drop one of them.")
         return self
-
-
-# Training in synergy space uses the same settings with a longer warm-up.
-PRESETS["sar-sac-synergy"] = {**PRESETS["sar-sac"],
-                              "hyperparams": {**PRESETS["sar-sac"]["hyperparams"], "learning_starts": 5000}}
-
-# The reference SAC with what a 2-core CPU can afford: the same networks, learning rate,
-# buffer, batch, tau, gamma and normalization, four env processes, and one gradient step
-# per 25 env steps instead of one per env step. An update of the [400, 300] nets on a
-# 256 batch is ~2 GFLOP (~45 updates/s on one core, ~58 on two), so one update per env
-# step caps the reference at ~40 env steps/s (~35 h for the 5M-step hand study); at 1/25
-# the study takes under 2 h. It learns less per env step than the reference (see the
-# issue notes); PPO, though faster still, did not learn Reorient8 in 300k steps.
-PRESETS["sar-sac-fast"] = {
-    **PRESETS["sar-sac"],
-    "n_envs": 4,         # more steps per policy call and per pipe round trip; 2 per core
-    "torch_threads": 2,  # the envs wait while the networks train
-    # SB3 counts train_freq in vectorized steps: every 25 x 4 env steps, 4 gradient steps
-    "hyperparams": {**PRESETS["sar-sac"]["hyperparams"], "train_freq": 25, "gradient_steps": 4},
-}
-
-
-# Upkie's own sim-to-real PPO balancer (upkie/ppo_balancer, settings.gin), as far as motorlab's
-# Upkie-PyBullet-Pendulum env allows: domain randomization (an action lag whose time constant is
-# drawn per episode from 0.05..0.15 s, Gaussian action and observation noise, random initial pitch,
-# velocity and pitch rate), 10 stacked observations, and its PPO settings (small networks, lr 3e-3,
-# clip 0.1). Its own wrappers also add the last action to the observation and bound the command's
-# rate of change; motorlab has neither. Upkie's training runs 2M steps; recipes run far fewer.
-PRESETS["upkie-balancer"] = {
-    "algo": "ppo",
-    "lr": "3e-3",
-    "clip_range": "0.1",
-    "env": {"delay": "0.05..0.15", "delay_on": "action", "action_noise": 0.05, "obs_noise": 0.01, "history": 10,
-            "kwargs": {"init_rand": {"pitch": 0.25, "v_x": 0.1, "omega_y": 0.1}}},
-    "hyperparams": {"n_steps": 2048, "batch_size": 64, "n_epochs": 10, "gae_lambda": 0.95, "ent_coef": 0.0,
-                    "policy_kwargs": {"net_arch": {"pi": [16, 16], "vf": [32, 32]}}},
-}
 
 
 def resolve(settings: dict[str, Any]) -> TrainConfig:

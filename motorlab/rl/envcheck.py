@@ -1,9 +1,10 @@
 """What a training run needs of its env, checked before anything is written: the algorithm fits
 the env's action space, and hindsight relabelling (--her) has goals to relabel.
 
-    SAC, TD3, LQR   continuous (Box) actions
-    PPO             Box, Discrete, MultiDiscrete or MultiBinary actions
-    --her           SAC or TD3 (rl.config), a goal-conditioned env (motorlab.envs.spaces.is_goal_conditioned)
+    actions         those the algorithm declares (rl/algos/<name>.py: Box only, or also
+                    Discrete, MultiDiscrete, MultiBinary for PPO and RecurrentPPO)
+    observations    a Dict one only for an algorithm with a multi-input policy
+    --her           an algorithm that takes it (rl.config), a goal-conditioned env (motorlab.envs.spaces.is_goal_conditioned)
                     whose Dict observation reaches the replay buffer as it is, and the env's own reward
                     (HER recomputes rewards with the env's compute_reward)
 
@@ -15,12 +16,10 @@ from __future__ import annotations
 import gymnasium as gym
 
 from motorlab.envs import EnvConfig, make_env, reads_observations
-from motorlab.envs.spaces import describe_space, is_goal_conditioned, require_actions
+from motorlab.envs.spaces import describe_space, is_dict, is_goal_conditioned, require_actions
 from motorlab.errors import MotorlabError
+from motorlab.rl import algos
 from motorlab.rl.config import TrainConfig
-
-ALGO_NAMES = {"ppo": "PPO", "sac": "SAC", "td3": "TD3", "lqr": "LQR (--algo lqr)"}
-PPO_ACTIONS = (gym.spaces.Box, gym.spaces.Discrete, gym.spaces.MultiDiscrete, gym.spaces.MultiBinary)
 
 
 def check_train_env(cfg: TrainConfig) -> None:
@@ -30,9 +29,12 @@ def check_train_env(cfg: TrainConfig) -> None:
         MotorlabError: a bad env setting (from make_env), an algorithm that cannot act in the env's
             action space, --her where it cannot relabel.
     """
-    env = make_env(cfg.env, dict_obs=cfg.algo != "lqr")  # the observation training sees
+    algo = algos.get(cfg.algo)
+    env = make_env(cfg.env, dict_obs=algo.dict_obs)  # the observation training sees
     try:
         check_actions(cfg, env.action_space)
+        if algo.sb3:
+            algo.policy(is_dict(env.observation_space), cfg.env.id)  # a Dict observation needs a multi-input policy
         if cfg.her:
             check_her(cfg.env, env)
     finally:
@@ -41,12 +43,15 @@ def check_train_env(cfg: TrainConfig) -> None:
 
 def check_actions(cfg: TrainConfig, space: gym.Space) -> None:
     """One line naming the space and the algorithms that fit it, when `cfg.algo` does not."""
-    if cfg.algo == "ppo":
-        if not isinstance(space, PPO_ACTIONS):
-            raise MotorlabError(f"PPO needs Box, Discrete, MultiDiscrete or MultiBinary actions, and {cfg.env.id}'s "
-                                f"actions are {describe_space(space)}.")
+    algo = algos.get(cfg.algo)
+    if algo.acts_in(space):
         return
-    require_actions(space, ALGO_NAMES[cfg.algo], instead="use --algo ppo", env_id=cfg.env.id)
+    fitting = [a.name for a in algos.registry().values() if a.acts_in(space)]
+    instead = "use " + " or ".join(f"--algo {name}" for name in fitting) if fitting else ""
+    if algo.actions == ("Box",):
+        require_actions(space, algo.title, instead=instead, env_id=cfg.env.id)
+    raise MotorlabError(f"{algo.title} needs {', '.join(algo.actions[:-1])} or {algo.actions[-1]} actions, and "
+                        f"{cfg.env.id}'s actions are {describe_space(space)}" + (f"; {instead}." if instead else "."))
 
 
 def check_her(env_cfg: EnvConfig, env: gym.Env) -> None:

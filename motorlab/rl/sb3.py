@@ -1,4 +1,5 @@
-"""Stable-Baselines3 training (PPO, SAC, TD3) with motorlab's tracking.
+"""Stable-Baselines3 training with motorlab's tracking, for every SB3 algorithm in rl/algos/
+(each says its class, policy, HER, settings checks and evaluation cadence; on- or off-policy is its type).
 
 Training envs keep a Dict observation (goal-conditioned tasks) as a Dict: the networks are SB3's
 MultiInputPolicy, and --her relabels goals with SB3's HerReplayBuffer. Everything after training
@@ -15,7 +16,6 @@ from pathlib import Path
 
 from pydantic import TypeAdapter, ValidationError
 from pydantic.errors import PydanticSchemaGenerationError
-from stable_baselines3 import PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
@@ -30,12 +30,15 @@ from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.evaluation import EpisodeSuccess, success_mode
 from motorlab.faults import fault_of
 from motorlab.policies import SB3Policy, flat_statistics, normalization, save_sb3_policy
+from motorlab.rl import algos
+from motorlab.rl.algos import OnPolicy, SB3Algorithm
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.schedules import parse_schedule
 from motorlab.rl.tracking import Tracker
 from motorlab.runs import atomic_write_bytes
 
-ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3}
+# The SB3 algorithms (those that take hyperparameters), by name: `algo in ALGORITHMS` asks that.
+ALGORITHMS: dict[str, SB3Algorithm] = {name: a for name, a in algos.registry().items() if isinstance(a, SB3Algorithm)}
 
 
 class TrackingCallback(BaseCallback):
@@ -54,6 +57,7 @@ class TrackingCallback(BaseCallback):
         self.run_dir, self.checkpoint_every = run_dir, checkpoint_every
         self.next_checkpoint = (start // checkpoint_every + 1) * checkpoint_every if checkpoint_every else None
         self.solved = False
+        self.algorithm = ALGORITHMS[tracker.cfg.algo]
 
     def _on_training_start(self) -> None:
         # training success only where the env says what success is (its flag): without one, a
@@ -68,8 +72,9 @@ class TrackingCallback(BaseCallback):
         venv = self.model.get_env()
         stats = normalization(venv, self.model.observation_space) if isinstance(venv, VecNormalize) else None
         if stats is not None:
-            return SB3Policy(self.model.policy, *flat_statistics(stats), venv.clip_obs, venv.epsilon)
-        return SB3Policy(self.model.policy)
+            return SB3Policy(self.model.policy, *flat_statistics(stats), venv.clip_obs, venv.epsilon,
+                             algorithm=self.algorithm)
+        return SB3Policy(self.model.policy, algorithm=self.algorithm)
 
     def _maybe_evaluate(self) -> None:
         if self.num_timesteps >= self.next_eval:
@@ -114,8 +119,10 @@ def build_model(cfg: TrainConfig, run_dir: Path) -> BaseAlgorithm:
                         vec_env_cls=vec_cls)
     if cfg.normalize:  # a Dict observation: running statistics per key
         venv = VecNormalize(venv, norm_obs=True, norm_reward=False, clip_obs=10.0)
-    name = cfg.algo.upper()
+    algo = ALGORITHMS[cfg.algo]
+    name = algo.title
     try:
+        policy = algo.policy(is_dict(venv.observation_space), cfg.env.id)
         kwargs = check_hyperparams(cfg.algo, cfg.hyperparams)
         if cfg.her:
             kwargs.update(her_settings(kwargs, episode_steps(venv)))
@@ -126,10 +133,9 @@ def build_model(cfg: TrainConfig, run_dir: Path) -> BaseAlgorithm:
         kwargs["learning_rate"] = parse_schedule(cfg.lr, "learning-rate")
     if cfg.clip_range is not None:
         kwargs["clip_range"] = parse_schedule(cfg.clip_range, "clip-range")
-    policy = "MultiInputPolicy" if is_dict(venv.observation_space) else "MlpPolicy"
     try:
-        return ALGORITHMS[cfg.algo](policy, venv, seed=cfg.seed, device=cfg.device, verbose=0,
-                                    tensorboard_log=str(run_dir / "tensorboard"), **kwargs)
+        return algo.sb3_class()(policy, venv, seed=cfg.seed, device=cfg.device, verbose=0,
+                                tensorboard_log=str(run_dir / "tensorboard"), **kwargs)
     except (TypeError, ValueError, AssertionError) as e:  # SB3 checks its arguments with asserts
         venv.close()
         raise MotorlabError(f"bad hyperparameters for {name} ({e or type(e).__name__}); "
@@ -176,14 +182,15 @@ def check_hyperparams(algo: str, params: dict) -> dict:
     Raises:
         MotorlabError: naming the parameter, what it should be and close matches.
     """
-    cls = ALGORITHMS[algo]
+    title = ALGORITHMS[algo].title
+    cls = ALGORITHMS[algo].sb3_class()
     fixed = {"self", "policy", "env", "seed", "device", "verbose", "tensorboard_log", "_init_setup_model"}
     allowed = [p for p in inspect.signature(cls.__init__).parameters if p not in fixed]
     hints = _init_annotations(cls)
     checked = dict(params)
     for key, value in params.items():
         if key not in allowed:
-            raise MotorlabError(f"unknown hyperparameter {key!r} for {algo.upper()}{did_you_mean(key, allowed)}.")
+            raise MotorlabError(f"unknown hyperparameter {key!r} for {title}{did_you_mean(key, allowed)}.")
         if key not in hints:
             continue
         try:
@@ -192,7 +199,7 @@ def check_hyperparams(algo: str, params: dict) -> dict:
             continue  # a type pydantic cannot check (e.g. a class); SB3 checks it
         except ValidationError:
             hint = getattr(hints[key], "__name__", str(hints[key]).replace("typing.", ""))
-            raise MotorlabError(f"hyperparameter {key}={value!r} for {algo.upper()} should be {hint}.") from None
+            raise MotorlabError(f"hyperparameter {key}={value!r} for {title} should be {hint}.") from None
     return checked
 
 
@@ -200,15 +207,16 @@ def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, tracker: Tr
     """Train `model` (from build_model; restored from a checkpoint when resuming) to the
     budget, checkpointing as it goes; save model.zip (for continuing with SB3) and the
     pickle-free policy. Returns env steps used."""
-    on_policy = cfg.algo == "ppo"
-    eval_every = cfg.eval_every or (model.n_steps * cfg.n_envs if on_policy else 1000)
+    algo = ALGORITHMS[cfg.algo]
+    on_policy = isinstance(algo, OnPolicy)  # its type says when the policy changes, so when to evaluate
+    eval_every = cfg.eval_every or algo.eval_every(model, cfg.n_envs)
     every = cfg.checkpoint_every if cfg.checkpoint_every is not None else max(1, cfg.timesteps // 10)
     start = int(model.num_timesteps)
     callback = TrackingCallback(tracker, eval_every, on_policy, cfg.until_solved, run_dir, every, start)
     if start < cfg.timesteps and not (cfg.until_solved and tracker.steps_to_success is not None):
         # resumed: SB3 counts on from num_timesteps; the schedules see the same total budget
         model.learn(total_timesteps=cfg.timesteps - start, callback=callback, progress_bar=cfg.progress,
-                    tb_log_name=cfg.algo.upper(), reset_num_timesteps=start == 0)
+                    tb_log_name=algo.title, reset_num_timesteps=start == 0)
     steps = int(model.num_timesteps)
     # stopped once solved: the saved policy is the one the solving evaluation judged
     stopped = cfg.until_solved and tracker.steps_to_success is not None

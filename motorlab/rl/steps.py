@@ -6,14 +6,32 @@ import statistics
 from pathlib import Path
 from typing import Any
 
+from pydantic import Field
 from rich.console import Console
 
-from motorlab.envs import describe_env
+from motorlab.command import Tracked
+from motorlab.envs import describe_env, fold_env
+from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric, Number, write_run_results
 from motorlab.rl.config import TrainConfig, resolve
-from motorlab.runs import last_timesteps
+from motorlab.runs import FolderMode, is_complete, last_timesteps
 from motorlab.settings import Summary
-from motorlab.stepkind import SCORED_METRICS, Artifact, Ref, Scores, StepKind, scored_numbers, seeds_headline
+from motorlab.stepkind import (
+    SCORED_METRICS,
+    Artifact,
+    Ref,
+    Scores,
+    StepKind,
+    scored_numbers,
+    seeds_headline,
+    warn_faults,
+)
+
+# where TrainKind.validate keeps the fields it was given (flat, as given: not the preset's), on the
+# settings it returns: `--config` puts them over a run's config.toml, and `--resume` refuses them
+GIVEN = "_motorlab_given"
+# a resumed run's summary says so to `report` (its resumed_from is None where no checkpoint was left)
+RESUMED = "_motorlab_resumed"
 
 
 class TrainSummary(Summary):
@@ -52,10 +70,43 @@ class TrainSummary(Summary):
     eval_episode_lengths: list[int]
 
 
+class TrainInvocation(Tracked):
+    """How `motorlab train` runs: --out, --overwrite, --track, and where its settings come from
+    (--config) or which interrupted run it continues (--resume)."""
+
+    config: Path | None = Field(None, description="Start from a run's config.toml (repeat a run, or run one a sweep "
+                                "or study planned); flags given here override it")
+    resume: Path | None = Field(None, description="Continue the interrupted run in this folder from its last "
+                                "checkpoint, to the same total budget, with its own settings")
+
+    def mode(self) -> FolderMode:
+        if self.resume is not None and self.overwrite:
+            raise MotorlabError(f"--resume continues {self.resume} and --overwrite replaces it; give one of them.")
+        return super().mode()
+
+
 class TrainKind(StepKind[TrainConfig, TrainSummary]):
-    """Train a policy (PPO, SAC, TD3 or the model-based LQR learner) on an env."""
+    """Train a policy on ENV_ID and write a run folder.
+
+    The folder holds config.toml, metrics.csv, tensorboard/, the policy (policy.json +
+    policy.safetensors, pickle-free; SB3's model.zip for continuing training) and
+    summary.json with steps_to_success (null if the budget ran out first) and wall_seconds.
+    """
 
     name = "train"
+    arguments = ("env",)
+    flags = {"hyperparams": ("--set",)}
+    invocation = TrainInvocation
+    examples = (
+        "motorlab train InvertedPendulum-v5 --until-solved --out runs/ppo",
+        "motorlab train InvertedPendulum-v5 --preset fast --delay 0.2 --until-solved",
+        "motorlab train InvertedPendulum-v5 --preset-file runs/tune/best.toml --seed 7",
+        "motorlab train InvertedPendulum-v5 --algo ppo --lr linear:3e-4,0 --clip-range linear:0.3,0.1 --history 10 "
+        "--delay 0.2",
+        "motorlab train Upkie-PyBullet-Pendulum --n-envs 2 --timesteps 150000 --env-arg 'init_rand={\"pitch\": 0.1}'",
+        "motorlab train --config runs/ppo/config.toml --seed 1 --out runs/ppo-seed1   # a run again, on another seed",
+        "motorlab train --resume runs/ppo   # go on after an interruption",
+    )
     refs = (Ref("sar", ("sar",)),)  # train in the synergy space a fit step made
     provides = Artifact("policy")
     scored = True
@@ -68,7 +119,62 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
                Metric("wall_seconds", "training time", "s", setup=True))
 
     def validate(self, fields: dict[str, Any]) -> TrainConfig:
-        return resolve(fields)  # the named preset under the given settings
+        fields = dict(fields)
+        if isinstance(fields.get("preset_file"), (str, Path)):  # config.toml records where it was read
+            fields["preset_file"] = str(Path(fields["preset_file"]).resolve())
+        settings = resolve(fields)  # the named preset under the given settings
+        object.__setattr__(settings, GIVEN, fields)  # not a field: config.toml does not record it
+        return settings
+
+    def given(self, settings: TrainConfig) -> dict[str, Any]:
+        """The fields `settings` were made from, as given (settings made otherwise: those set)."""
+        given = getattr(settings, GIVEN, None)
+        return dict(given) if given is not None else settings.model_dump(exclude_unset=True)
+
+    def execute(self, settings: TrainConfig, how: TrainInvocation, console: Console | None,
+                progress: bool) -> TrainSummary:
+        """Train as the settings say; with --config, its config.toml under the settings given; with
+        --resume, the interrupted run in that folder, on its own settings."""
+        given = self.given(settings)
+        if how.resume is not None:
+            return self._resume(how, given, settings.progress, console, progress)
+        if how.config is not None:
+            # the progress bar is the flags' (on by default), never the config's
+            settings = self.validate({**self.with_config(how.config, given), "progress": settings.progress})
+        elif "id" not in fold_env(given)["env"]:
+            raise MotorlabError("give an env id (motorlab train InvertedPendulum-v5) or --config RUN/config.toml.")
+        return self.run(settings, how.out, console=console, progress=progress)
+
+    def _resume(self, how: TrainInvocation, given: dict[str, Any], show: bool, console: Console | None,
+                progress: bool) -> TrainSummary:
+        run_dir = Path(how.resume)
+        if set(given) - {"progress"} or how.config is not None or how.out is not None:
+            raise MotorlabError(f"--resume continues {run_dir} with the settings in its config.toml; "
+                                "drop the other settings (and --out, --config).")
+        if not (run_dir / "config.toml").is_file():
+            raise MotorlabError(f"{run_dir} is not a training run folder (no config.toml); give the --out of the "
+                                "interrupted motorlab train.")
+        if is_complete(run_dir):
+            raise MotorlabError(f"{run_dir} finished already (it has summary.json); there is nothing to resume.")
+        settings = self.validate({**self.with_config(run_dir / "config.toml", {}), "progress": show})
+        summary = self.run(settings, run_dir, console=console, progress=progress, resume=True)
+        object.__setattr__(summary, RESUMED, True)
+        return summary
+
+    def report(self, s: TrainSummary, settings: TrainConfig, console: Console) -> None:
+        start = s.resumed_from
+        if start is not None or getattr(s, RESUMED, False):  # resumed (with no checkpoint left: started over)
+            console.print(f"[green]done[/green] {s.run_dir}: "
+                          + (f"resumed at {start:,} steps; " if start else "no checkpoint yet, started over; ")
+                          + f"return {s.eval_return_mean:.1f} over {s.eval_episodes} episodes, {s.timesteps:,} steps")
+        else:
+            sts = s.steps_to_success
+            console.print(f"[green]done[/green] {s.run_dir}: "
+                          f"return {s.eval_return_mean:.1f} (min {s.eval_return_min:.0f}) over "
+                          f"{s.eval_episodes} episodes, {s.timesteps:,} steps, {s.wall_seconds:.1f} s"
+                          + (f", steps_to_success {sts:,}" if sts is not None
+                             else (", not solved" if s.until_solved else "")))
+        warn_faults(s)
 
     def run(self, settings: TrainConfig, out: Path | None = None, console: Console | None = None,
             progress: bool = True, resume: bool = False) -> TrainSummary:
@@ -85,9 +191,9 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
 
         # a bad id, delay or reward, an algorithm that does not fit the env, --her misused: before any step runs
         check_train_env(settings)
-        if settings.algo != "lqr":
-            from motorlab.rl.sb3 import check_hyperparams
+        from motorlab.rl.sb3 import ALGORITHMS, check_hyperparams
 
+        if settings.algo in ALGORITHMS:  # SB3's take keyword arguments; the LQR learner takes none
             check_hyperparams(settings.algo, settings.hyperparams)  # unknown names, wrong types
 
     def describe(self, settings: TrainConfig, copies: int = 1) -> str:
@@ -144,20 +250,15 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
     def progress(self, settings: TrainConfig, run_dir: Path) -> tuple[int, int]:
         return last_timesteps(run_dir), settings.timesteps
 
-    def process_argv(self, settings_file: Path, run_dir: Path) -> list[str]:
-        return [*self.command.split(), "--config", str(settings_file), "--out", str(run_dir), "--no-progress"]
-
     def warm_up(self) -> None:
         import motorlab.report.run  # noqa: F401  (the study's figures: SB3 policies, torch)
-        import motorlab.rl.checkpoint  # noqa: F401  (resume_argv, in the background thread)
+        import motorlab.rl.checkpoint  # noqa: F401  (can_resume, in the background thread)
         import motorlab.rl.sb3  # noqa: F401  (torch and SB3 themselves: the modules above import them when used)
 
-    def resume_argv(self, run_dir: Path) -> list[str] | None:
+    def can_resume(self, run_dir: Path) -> bool:
         from motorlab.rl.checkpoint import has_checkpoint
 
-        if has_checkpoint(run_dir):
-            return [*self.command.split(), "--resume", str(run_dir), "--no-progress"]
-        return None
+        return has_checkpoint(run_dir)
 
 
 TRAIN = TrainKind()

@@ -17,43 +17,17 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rich.progress import Progress
-
 from motorlab import trackers
-from motorlab.control.lqr import learn_lqr
 from motorlab.envs import max_return
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import success_by, success_mode
-from motorlab.policies import load_policy_files, save_controller
+from motorlab.policies import load_policy_files
 from motorlab.report.run import plot_learning_curve
+from motorlab.rl import algos
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.envcheck import check_train_env
 from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker
 from motorlab.runs import prepare_run_dir, run_path, write_config, write_summary
-
-
-def _train_lqr(cfg: TrainConfig, run_dir: Path, tracker: Tracker) -> int:
-    stop = {"solved": False}
-    best = {"policy": None}
-
-    def on_update(steps, policy, info):
-        tracker.tb.add_scalar("model/one_step_mse", info["model_mse"], steps)
-        best["policy"] = policy
-        if steps - max(tracker.last_eval_steps, 0) >= (cfg.eval_every or 0) or not cfg.eval_every:
-            stop["solved"] = tracker.evaluate(steps, policy)
-        return cfg.until_solved and stop["solved"]
-
-    with Progress(disable=not cfg.progress, transient=True) as bar:
-        task = bar.add_task(f"lqr on {cfg.env.id}", total=cfg.timesteps)
-        policy, steps = learn_lqr(cfg.env, cfg.lqr, cfg.timesteps, cfg.seed, on_update,
-                                  on_episode=tracker.episode,
-                                  on_steps=lambda s: bar.update(task, completed=s))
-    if policy is None:
-        raise MotorlabError(f"no linear model could be fitted in {steps} steps; raise --timesteps.")
-    if tracker.last_eval_steps < steps:
-        tracker.evaluate(steps, policy)
-    save_controller(run_dir, policy)
-    return steps
 
 
 def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> dict[str, Any]:
@@ -81,7 +55,8 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
     t0 = time.perf_counter()
     model = None
     record = None
-    if cfg.algo != "lqr":  # torch and SB3 are imported here: an LQR run (NumPy, SciPy) starts without them
+    algo = algos.get(cfg.algo)
+    if algo.sb3:  # torch and SB3 are imported here: an LQR run (NumPy, SciPy) starts without them
         import torch
 
         from motorlab.rl.checkpoint import has_checkpoint, load_checkpoint
@@ -99,7 +74,7 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
     tracker = Tracker(cfg, run_dir, solve_return, resume=record)
     try:
         if model is None:
-            steps = _train_lqr(cfg, run_dir, tracker)
+            steps = algo.learn(cfg, run_dir, tracker)  # an algorithm that trains itself (LQR)
         else:
             from motorlab.rl.sb3 import train_sb3
 

@@ -13,6 +13,7 @@ import numpy as np
 from rich.progress import Progress
 
 from motorlab.envs import EnvConfig, early_end_label, make_env, max_return
+from motorlab.envs.catalog import facts
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.rollouts import evaluate, step_success, trained_env_settings
 from motorlab.evaluation.zeroshot import run_label
@@ -163,7 +164,7 @@ def success_measure(env_id: str, cfg: EnvConfig) -> str:
     env = make_env(cfg, shaped=False)
     try:
         env.reset(seed=0)
-        flagged = step_success(env.step(env.action_space.sample())[4]) is not None
+        flagged = step_success(env.step(env.action_space.sample())[4], facts(env_id).success_keys) is not None
     finally:
         env.close()
     if flagged or max_return(env_id) is not None:

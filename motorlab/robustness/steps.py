@@ -13,7 +13,7 @@ from motorlab.envs import ENV_KEYS, EnvConfig, fold_env
 from motorlab.report.results import Metric, Number, show
 from motorlab.robustness.grid import VARIABLES, parse_axes
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Ref, StepKind
+from motorlab.stepkind import Ref, StepKind, warn_faults
 
 
 class RobustnessSettings(Settings):
@@ -71,10 +71,25 @@ class RobustnessSummary(Summary):
 
 
 class RobustnessKind(StepKind[RobustnessSettings, RobustnessSummary]):
-    """How far each policy holds as a disturbance grows: return and success (or falls) against
-    delay, latency, noise, push force or motor noise; table, curves.csv, summary.json and one plot."""
+    """How far each policy holds as a disturbance grows: one curve per policy and disturbance.
+
+    Evaluates every policy at every value of each --vary grid (one disturbance at a time, the
+    others at the policy's own settings, the same reset seeds at every value); prints a table,
+    writes curves.csv, summary.json and plots/robustness.png.
+
+    Every policy meets the same env: the env options given here (e.g. --push-body pole for --vary
+    push-force, --delay-on action for --vary delay; --env for built-in controllers, default the
+    first run's) plus the grid's disturbance. Run folders keep their own env id, arguments, history
+    and synergies, not the noise or delay they trained with.
+    """
 
     name = "robustness"
+    arguments = ("policies",)
+    examples = (
+        "motorlab robustness pid runs/ppo runs/ppo-history --vary delay=0:0.3:7 --episodes 20",
+        "motorlab robustness runs/ppo --vary obs-noise=0:0.05:6 --vary latency=0:4:5",
+        "motorlab robustness pid runs/ppo --vary push-force=0:40:5 --push-body pole --push-direction x",
+    )
     refs = (Ref("policies", ("policy",)),)
     key_figures = ("plots/robustness.png",)
 
@@ -155,6 +170,10 @@ class RobustnessKind(StepKind[RobustnessSettings, RobustnessSummary]):
     def notes(self, settings: RobustnessSettings, h: dict[str, Any]) -> str:
         return (f"{settings.episodes} episodes per point; holds: >= 90% of episodes succeed (or do not fall) "
                 "over a range of grid values (null: at none)")
+
+    def report(self, s: RobustnessSummary, settings: RobustnessSettings, console: Console) -> None:
+        console.print(f"written: {s.run_dir}/summary.json, curves.csv, plots/robustness.png")  # the table: in `run`
+        warn_faults(s)
 
 
 ROBUSTNESS = RobustnessKind()

@@ -31,8 +31,9 @@ from typing import Any
 
 from rich.console import Console
 
-from motorlab import trackers
+from motorlab import jobs, launcher, trackers
 from motorlab.errors import MotorlabError
+from motorlab.launcher import trial
 from motorlab.recipes import FindingSpec, Recipe, Step, refs_in
 from motorlab.report.html import build_report
 from motorlab.report.plots import comparison_bars
@@ -64,8 +65,6 @@ from motorlab.runs import (
 from motorlab.settings import Settings, Summary
 from motorlab.stats import iqm_with_ci
 from motorlab.studies.schedule import Overlaps, run_overlapped
-from motorlab.sweeps import backends
-from motorlab.sweeps.trials import trial
 
 STEP_FILE = "recipe_step.toml"  # what the study asked of a step, for resuming
 COLUMNS = ["step", "what", "results", "setup", "notes"]
@@ -189,7 +188,7 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
         console.print(f"      {f'{d.name}: ' if len(runs) > 1 else ''}settings or inputs changed; its earlier run "
                       "is replaced")
     # an interrupted run of these very settings continues from its checkpoint, as `train --resume` does
-    resuming = {d for d, _ in todo if toml_holds(d / STEP_FILE, asked[d]) and k.resume_argv(d) is not None}
+    resuming = {d for d, _ in todo if toml_holds(d / STEP_FILE, asked[d]) and k.can_resume(d)}
     for d, _ in todo:
         # What the study asks is written first, and any older summary removed: a summary.json
         # from now on is this run's, even when Ctrl-C lands between it and the run's exit.
@@ -221,8 +220,8 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
 def _run_processes(step: Step, todo: list[tuple[Path, Settings]], execution: Execution, console: Console,
                    stop: threading.Event | None = None) -> None:
     """Train several seeds at once (or one seed beside other steps) as sweep trials: each a
-    motorlab process whose settings the study wrote to <step>/logs/seed<k>.toml
-    (<study>/logs/<step>.toml for a step with one seed), beside its log."""
+    motorlab.worker process whose job (kind and settings) is <step>/logs/seed<k>.job.json
+    (<study>/logs/<step>.job.json for a step with one seed), beside its log."""
     k = step.kind
     n_envs = getattr(todo[0][1], "n_envs", 1)
     parallel = execution.max_parallel or max(1, (os.cpu_count() or 1) // n_envs)
@@ -230,11 +229,9 @@ def _run_processes(step: Step, todo: list[tuple[Path, Settings]], execution: Exe
     trials = []
     for run_dir, settings in todo:
         logs = run_dir.parent / "logs"
-        settings_file = logs / f"{run_dir.name}.toml"
-        write_toml(settings_file, settings.config())
-        trials.append(trial(f"{step.name}/{run_dir.name}", step.name, getattr(settings, "seed", 0),
-                            k.process_argv(settings_file.resolve(), run_dir), run_dir, logs / f"{run_dir.name}.log",
-                            {**threads, **trackers.child_env()}, resume_argv=k.resume_argv(run_dir)))
+        job = jobs.tracked(jobs.job(k.name, settings.config(), {"out": run_dir.resolve()}))
+        trials.append(trial(f"{step.name}/{run_dir.name}", step.name, getattr(settings, "seed", 0), job, run_dir,
+                            logs / f"{run_dir.name}.log", threads))
     where = execution.backend + (f" at {execution.address}" if execution.address else "")
     if len(trials) == 1:
         console.print(f"      {step.name}: one process, log {trials[0]['log']}")
@@ -253,14 +250,14 @@ def _run_processes(step: Step, todo: list[tuple[Path, Settings]], execution: Exe
             console.print(f"      {name}: failed (exit {rc}), log {t['log']}")
 
     if execution.backend == "ray":
-        backends.run_ray(trials, execution.address, execution.max_parallel, n_envs,
+        launcher.run_ray(trials, execution.address, execution.max_parallel, n_envs,
                          todo[0][0].parent / "ray", on_done)
     else:
-        backends.run_local(trials, parallel, on_done, stop)
+        launcher.run_local(trials, parallel, on_done, stop)
     failed = [t for t in trials if not is_complete(Path(t["run_dir"]))]
     if failed:
         raise MotorlabError(f"step {step.name}: {', '.join(Path(t['run_dir']).name for t in failed)} failed: "
-                            f"{backends.last_line(failed[0]['log'])}.")
+                            f"{launcher.last_line(failed[0]['log'])}.")
 
 
 def describe(step: Step) -> str:
@@ -281,7 +278,7 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
     """
     console = console or Console(stderr=True)
     execution = execution or Execution()
-    backends.check_execution(execution.backend, execution.address, execution.max_parallel)
+    launcher.check_execution(execution.backend, execution.address, execution.max_parallel)
     if execution.parallel_steps is not None and execution.parallel_steps < 1:
         raise MotorlabError(f"--parallel-steps {execution.parallel_steps}: give at least 1.")
     parallel_steps = execution.parallel_steps or recipe.parallel_steps

@@ -13,6 +13,7 @@ which steps ran beside which.
 
 from __future__ import annotations
 
+import contextvars
 import threading
 import time
 from dataclasses import dataclass, field
@@ -86,7 +87,9 @@ def run_overlapped(steps: list[Step], run: RunStep, limit: int, console: Console
             except BaseException as e:  # handed to the main thread, which raises it
                 job.error = e
 
-        job.thread = threading.Thread(target=target, name=f"step-{step.name}", daemon=True)
+        # the thread runs in a copy of this context: the run-folder mode and the tracking go with it
+        job.thread = threading.Thread(target=contextvars.copy_context().run, args=(target,), name=f"step-{step.name}",
+                                      daemon=True)
         overlaps.start(step.name)
         header(step, " (in the background)")
         job.thread.start()

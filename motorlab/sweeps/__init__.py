@@ -2,8 +2,8 @@
 aggregated with rliable (IQM and stratified-bootstrap confidence intervals).
 
     grid.py      --grid key=v1,v2: the settings to try
-    trials.py    one trial = one motorlab command line writing one run folder; resume markers
-    backends.py  where trials run: local (a pool of processes) or ray (Ray Tune)
+    trials.py    a target read once into settings; one trial = one job writing one run folder
+                 (motorlab/launcher.py starts them: a local pool of processes, or Ray Tune)
     stats.py     IQM, bootstrap CIs, probability of improvement, performance profiles
     sweep.py     motorlab sweep: the above, then summary.json, plots and report.html
 """

@@ -17,13 +17,14 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from motorlab import trackers
+from motorlab import jobs, launcher, trackers
 from motorlab.errors import MotorlabError, mask_url
+from motorlab.launcher import is_finished
 from motorlab.report import sweep_plots
 from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
@@ -38,12 +39,8 @@ from motorlab.runs import (
     write_summary,
 )
 from motorlab.stats import aggregate, trial_scores
-from motorlab.sweeps import backends
 from motorlab.sweeps.grid import parse_grid, settings
-from motorlab.sweeps.trials import command_trials, is_finished, recipe_path, recipe_trials
-
-if TYPE_CHECKING:
-    from typer.core import TyperGroup  # the motorlab command, handed down by the CLI
+from motorlab.sweeps.trials import command_trials, parse_target, recipe_path, recipe_trials
 
 MAX_SEEDS = 10_000  # far beyond any study; a typo such as --seeds 1000000 should fail, not plan for hours
 
@@ -59,7 +56,7 @@ def _seeds(seeds: int | list[int]) -> list[int]:
 
 
 def plan(target: str, seeds: int | list[int], grid: list[str] | None, sweep_dir: Path,
-         threads: dict[str, str] | None = None, commands: TyperGroup | None = None) -> list[dict[str, Any]]:
+         threads: dict[str, str] | None = None) -> list[dict[str, Any]]:
     """The sweep's trials, every command line checked before any runs.
 
     Raises:
@@ -71,14 +68,12 @@ def plan(target: str, seeds: int | list[int], grid: list[str] | None, sweep_dir:
     recipe = recipe_path(target)
     if recipe is not None:
         return recipe_trials(recipe, combos, seed_list, sweep_dir, threads or {})
-    if commands is None:
-        raise ValueError("a command-line target needs the motorlab command group to check it against")
-    return command_trials(commands, target, combos, seed_list, sweep_dir, threads or {})
+    return command_trials(parse_target(target), combos, seed_list, sweep_dir, threads or {})
 
 
 def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = None, backend: str = "local",
               address: str | None = None, max_parallel: int | None = None, out: Path | None = None,
-              console: Console | None = None, commands: TyperGroup | None = None) -> dict[str, Any]:
+              console: Console | None = None) -> dict[str, Any]:
     """Run every seed of every setting of `target` (a motorlab command line or a recipe) and
     aggregate final return, success rate and steps-to-success across seeds with rliable.
 
@@ -90,13 +85,13 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
             others finished and the summary of those that did was written).
     """
     console = console or Console(stderr=True)
-    backends.check_execution(backend, address, max_parallel)
+    launcher.check_execution(backend, address, max_parallel)
     parallel = max_parallel or ((os.cpu_count() or 1) if backend == "local" else None)
     # Several trials per machine: one math thread each, or they fight over the cores.
     threads = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if parallel != 1 else {}
     sweep_dir = run_path(out, "sweep")
     refuse_finished(sweep_dir, resumable=True)  # a finished sweep is continued (--resume) or replaced, never by accident
-    trials = plan(target, seeds, grid, sweep_dir, threads, commands)
+    trials = plan(target, seeds, grid, sweep_dir, threads)
     labels = list(dict.fromkeys(t["setting"] for t in trials))
     config = {"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [], "settings": labels,
               "backend": backend, "address": mask_url(address) if address else None, "max_parallel": max_parallel}
@@ -111,7 +106,7 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
     # --track: the sweep is a parent run; each trial's run (its own process) nests under it
     with trackers.parent("sweep", sweep_dir, config):
         for t in todo:
-            t["env"].update(trackers.child_env())  # Ray workers on other machines get it too
+            t["job"] = jobs.tracked(t["job"]).as_dict()  # Ray workers on other machines get it too
         t0 = time.perf_counter()
         if todo:
             with Progress(TextColumn("[bold]sweep[/bold]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -127,13 +122,13 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
                         console.print(f"  [green]✓[/green] {t['name']}{shown} ({seconds:.0f} s)")
                     else:
                         console.print(f"  [red]✗[/red] {t['name']} failed (exit {rc}): "
-                                      f"{backends.last_line(t['log'])}")
+                                      f"{launcher.last_line(t['log'])}")
 
                 try:
                     if backend == "local":
-                        backends.run_local(todo, parallel, on_done)
+                        launcher.run_local(todo, parallel, on_done)
                     else:
-                        backends.run_ray(todo, address, max_parallel, 1, sweep_dir / "ray", on_done)
+                        launcher.run_ray(todo, address, max_parallel, 1, sweep_dir / "ray", on_done)
                 except KeyboardInterrupt:
                     console.print("sweep interrupted: finished trials are kept; run the same command again to resume.")
                     raise

@@ -22,6 +22,7 @@ import numpy as np
 from rich.progress import Progress
 
 from motorlab.envs import EnvConfig, make_env, max_return
+from motorlab.envs.catalog import facts
 from motorlab.envs.spaces import require_actions
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import EpisodeSuccess, success_mode, trained_env_settings
@@ -151,6 +152,7 @@ def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool, signal: str =
 
     _worker["target"] = max_return(cfg.id)
     _worker["success"] = success_mode(cfg)
+    _worker["success_keys"] = facts(cfg.id).success_keys
 
 
 def _run_episode(seed: int) -> Episode:
@@ -160,7 +162,7 @@ def _run_episode(seed: int) -> Episode:
     torch.manual_seed(seed)  # stochastic actions repeat for the same seed
     obs, _ = env.reset(seed=seed)
     policy.reset(1)
-    outcome = EpisodeSuccess(1, _worker["target"], _worker["success"])
+    outcome = EpisodeSuccess(1, _worker["target"], _worker["success"], keys=_worker["success_keys"])
     signal, bounds = _worker["signal"], _worker["bounds"]
     acts, ret, done = [], 0.0, False
     while not done:

@@ -10,11 +10,12 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 from rich.console import Console
+from rich.table import Table
 
 from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric, Number
 from motorlab.settings import Settings, Summary
-from motorlab.stepkind import Artifact, Ref, StepKind
+from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
 from motorlab.synergy.collect import ACTIVATIONS, collect, load_activations, save_activations
 from motorlab.synergy.sar import fit_sar, save_sar, smallest_n, vaf_curve
 
@@ -58,10 +59,10 @@ class CollectSummary(Summary):
 
 
 class CollectKind(StepKind[CollectSettings, CollectSummary]):
-    """Record muscle activations (MuJoCo data.act), actuator controls (data.ctrl) or actions of a
-    policy's good episodes to activations.npz (--signal; auto picks the first the env has).
+    """Record the muscle activations, actuator controls or actions of a policy's good episodes.
 
-    Preview episodes set a return threshold at the P-th percentile; then episodes run until N
+    What is recorded (--signal; auto picks the first the env has): MuJoCo's muscle activations
+    (data.act), actuator controls (data.ctrl) or the env's actions, to activations.npz. Preview episodes set a return threshold at the P-th percentile; then episodes run until N
     of them reach it. Episodes run in a process pool, each from its own seed, so the result does
     not depend on the number of workers."""
 
@@ -79,6 +80,8 @@ class CollectKind(StepKind[CollectSettings, CollectSummary]):
     command = "synergies collect"
     refs = (Ref("run", ("policy",)),)
     provides = Artifact("activations", ACTIVATIONS)
+    arguments = ("run",)
+    examples = ("motorlab synergies collect runs/play --episodes 1000 --percentile 80 --preview 100",)
 
     def run(self, settings: CollectSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> CollectSummary:
@@ -102,6 +105,12 @@ class CollectKind(StepKind[CollectSettings, CollectSummary]):
 
     def numbers(self, settings: CollectSettings, h: dict[str, Any]) -> list[Number]:
         return [_size_label(n, h.get("signal")) for n in super().numbers(settings, h)]
+
+    def report(self, s: CollectSummary, settings: CollectSettings, console: Console) -> None:
+        what = {"act": "muscle activations", "ctrl": "actuator controls", "action": "action elements"}[s.signal]
+        console.print(f"kept {s.episodes_kept} episodes (return >= {s.threshold:.3g}), {s.samples:,} samples "
+                      f"x {s.n_signals} {what} ({s.signal}) -> {s.run_dir}/activations.npz")
+        warn_faults(s)
 
 
 def _size_label(n: Number, signal: str | None) -> Number:
@@ -145,6 +154,8 @@ class VafKind(StepKind[VafSettings, VafSummary]):
     metrics = (Metric("n_muscles", "muscles", "count"),)
     command = "synergies vaf"
     refs = (Ref("activations", ("activations",)),)
+    arguments = ("activations",)
+    examples = ("motorlab synergies vaf runs/collect/activations.npz --threshold 0.8",)
 
     def run(self, settings: VafSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> VafSummary:
@@ -173,6 +184,17 @@ class VafKind(StepKind[VafSettings, VafSummary]):
 
     def metric(self, key: str) -> Metric:
         return Metric(key, "synergies for the VAF threshold", "count") if key == "n_for_threshold" else super().metric(key)
+
+    def report(self, s: VafSummary, settings: VafSettings, console: Console) -> None:
+        table = Table(title=f"VAF ({s.method}), {s.samples:,} samples x {s.n_muscles} muscles")
+        table.add_column("N", justify="right")
+        table.add_column("VAF", justify="right")
+        for n, v in enumerate(s.vaf, 1):
+            table.add_row(str(n), f"{v:.1%}" + (" <-" if n == s.n_for_threshold else ""))
+        console.print(table)
+        need = s.n_for_threshold
+        console.print(f"smallest N with VAF >= {settings.threshold:.0%}: {need if need is not None else 'none'}; "
+                      f"written: {s.run_dir}/vaf.png")
 
 
 VAF = VafKind()
@@ -213,6 +235,10 @@ class FitKind(StepKind[FitSettings, FitSummary]):
     command = "synergies fit"
     refs = (Ref("activations", ("activations",)),)
     provides = Artifact("sar", SAR_FILE)
+    arguments = ("activations",)
+    flags = {"n_synergies": ("--n-synergies", "--n")}
+    examples = ("motorlab synergies fit activations.npz --vaf 0.8",
+                "motorlab synergies fit activations.npz --n 20 --method nmf")
 
     def run(self, settings: FitSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> FitSummary:
@@ -233,6 +259,9 @@ class FitKind(StepKind[FitSettings, FitSummary]):
     def describe(self, settings: FitSettings, copies: int = 1) -> str:
         return (f"fit {settings.method} to {settings.activations}"
                 + (f", N = {settings.n_synergies}" if settings.n_synergies else f", VAF ≥ {settings.vaf}"))
+
+    def report(self, s: FitSummary, settings: FitSettings, console: Console) -> None:
+        console.print(f"{s.n_synergies} synergies ({s.method}) for {s.n_muscles} muscles, VAF {s.vaf:.1%} -> {s.sar}")
 
 
 FIT = FitKind()

@@ -23,18 +23,25 @@ thread per process starts and ends the tracked runs, sends the buffer every FLUS
 down, a store that cannot be written) prints one warning line and turns that tracker off for
 the rest of the process; the run itself goes on and its folder is complete. The end of a run
 waits for the thread at most CLOSE_SECONDS. What can be checked before a run starts is checked
-by `enable` (the CLI's --track): the package is installed (else the pip line), a tracking server
-answers within seconds (MLflow's own client would retry for minutes), a local store can be
-written. Each is one error line, before anything is written.
+by `tracking` (the CLI's --track, the API's track=): the package is installed (else the pip
+line), a tracking server answers within seconds (MLflow's own client would retry for minutes), a
+local store can be written. Each is one error line, before anything is written.
 
-Processes: `enable` puts the setting, resolved (an absolute store path, W&B's mode), in the
-environment variable MOTORLAB_TRACK, which every process motorlab starts inherits (sweep and tune
-trials, a study's training processes; the sweep and study runners also put it in each trial's
-environment, for Ray workers on other machines). A script can set MOTORLAB_TRACK itself or call
-`enable`. A sweep, study or tune folder is a parent run: `parent` puts its identity in
-MOTORLAB_TRACK_PARENT, and each run started under it, in its process or in a child process,
-nests under it (MLflow: one experiment, `mlflow.parentRunId`; W&B: one group), named by its folder
-inside the parent's ("lr=0.001/seed2", "trials/3/seed0", "ppo") and tagged with its kind and seed.
+Explicit: tracking is on inside a `with tracking(values):` block and nowhere else. The trackers,
+the open parent and the tracked step are context variables, not process state: one
+`motorlab.train(track="mlflow")` in a notebook tracks that call only, and two steps running in
+threads of one study (each in a copy of the context) each have their own tracked run.
+`tracking(None)` changes nothing, so calls inside an outer block (a sweep's trials inside
+`with motorlab.tracking("mlflow"):`) stay tracked.
+
+Processes: nothing travels in the environment. A process that starts others puts `handoff()` in
+each job's settings: the trackers, resolved (an absolute store path, W&B's project), and the
+identity of the open parent, as JSON. The child runs its work inside `adopted(handoff)`, which
+turns those trackers on without checking them again (the parent did). A sweep, study or tune
+folder is a parent run: runs started inside `parent(...)`, in its process or in a child that
+adopted its handoff, nest under it (MLflow: one experiment, `mlflow.parentRunId`; W&B: one
+group), named by their folder inside the parent's ("lr=0.001/seed2", "trials/3/seed0", "ppo")
+and tagged with their kind and seed.
 
 A step kind's run is one tracked run (see StepKind in motorlab/stepkind.py: `step` opens it
 around `run`, `folder_ready` starts it once the run folder exists, so a mistake caught before
@@ -47,10 +54,10 @@ only when a run is tracked (motorlab/trackers/mlflow.py, motorlab/trackers/wandb
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import importlib
 import json
 import math
-import os
 import queue
 import sys
 import threading
@@ -62,8 +69,6 @@ from typing import Any, Iterator
 from motorlab.errors import MotorlabError, mask_url, redact
 from motorlab.extras import require
 
-ENV_VAR = "MOTORLAB_TRACK"  # the trackers, e.g. "mlflow=sqlite:////home/me/mlflow.db wandb"
-PARENT_VAR = "MOTORLAB_TRACK_PARENT"  # JSON: the sweep, study or tune run that runs started now nest under
 BACKENDS = ("mlflow", "wandb")
 FLUSH_SECONDS = 2.0  # buffered scalars go to the trackers this often
 CLOSE_SECONDS = 60.0  # the longest the end of a run (or a parent's start) waits for its trackers
@@ -86,7 +91,7 @@ class Target:
 
 
 def parse(values: list[str] | tuple[str, ...] | str | None) -> list[Target]:
-    """`--track` values (or MOTORLAB_TRACK's, separated by spaces) as targets.
+    """`--track` values (a list, or one text separated by spaces) as targets.
 
     Raises:
         MotorlabError: an unknown tracker, or one named twice.
@@ -111,45 +116,103 @@ def _module(backend: str):
     return importlib.import_module(f"motorlab.trackers.{backend}")
 
 
-def enable(values: list[str] | tuple[str, ...] | str | None) -> list[Target]:
-    """Track the runs this process starts, and those of the processes it starts (the CLI's
-    --track; a script may call it too). Checks each tracker first: its package, a server that
-    answers, a store that can be written. Nothing given: nothing changes.
+# The trackers runs started now go to, resolved, and the parent they nest under (its handoff:
+# backends' run ids, name, root folder, W&B group). Context variables, not os.environ: a setting
+# lasts for its `with` block, and a thread started with a copy of the context has its own.
+_active: contextvars.ContextVar[tuple[Target, ...]] = contextvars.ContextVar("motorlab_trackers", default=())
+_parent: contextvars.ContextVar[dict[str, Any] | None] = contextvars.ContextVar("motorlab_track_parent",
+                                                                                 default=None)
+_uris: set[str] = set()  # every tracker location used in this process: warnings never show its credentials
 
-    Returns:
-        The trackers, resolved (as MOTORLAB_TRACK now holds them).
+
+def check(values: list[str] | tuple[str, ...] | str | None) -> list[Target]:
+    """The trackers `values` name, resolved, once each is usable: its package, a server that answers,
+    a store that can be written (nothing given: none).
 
     Raises:
         MotorlabError: one line: an unknown tracker, a missing package (with the pip command), an
             unreachable server or an unwritable store.
     """
-    targets = parse(values)
-    if not targets:
-        return []
     resolved = []
-    for t in targets:
+    for t in parse(values):
         require(t.backend, t.backend, f"--track {t.backend} needs {_module(t.backend).LABEL}")
         resolved.append(_module(t.backend).check(t))
-    os.environ[ENV_VAR] = " ".join(t.text() for t in resolved)
     return resolved
 
 
-def targets() -> list[Target]:
-    """The trackers runs started now go to (from MOTORLAB_TRACK; an unusable value tracks nothing, with a warning)."""
-    value = os.environ.get(ENV_VAR, "").strip()
-    if not value:
-        return []
+@contextlib.contextmanager
+def _on(found: list[Target], parent: dict[str, Any] | None = None) -> Iterator[None]:
+    """`found` on (and `parent` open, when given) for the block; what was before, after it."""
+    _uris.update(t.where for t in found if t.where)
+    tokens = [(_active, _active.set(tuple(found)))]
+    if parent is not None:
+        tokens.append((_parent, _parent.set(parent)))
     try:
-        return parse(value)
-    except MotorlabError as e:
-        _warn_once("config", f"${ENV_VAR} is not used: {e}")
-        return []
+        yield
+    finally:
+        for var, token in reversed(tokens):
+            var.reset(token)
 
 
-def child_env() -> dict[str, str]:
-    """The variables that make a process started now track its runs under the current parent
-    (for trials whose environment is given explicitly, e.g. on Ray workers)."""
-    return {k: os.environ[k] for k in (ENV_VAR, PARENT_VAR) if os.environ.get(k)}
+@contextlib.contextmanager
+def tracking(values: list[str] | tuple[str, ...] | str | None) -> Iterator[list[Target]]:
+    """Track the runs started inside the block (the CLI's --track, the API's track=; a script's
+    `with motorlab.tracking("mlflow"):`), and nothing after it. Checks each tracker first (see
+    `check`). Nothing given (None, []): nothing changes, an outer block's trackers stay on; given,
+    they replace the outer block's for this block.
+
+    Yields:
+        The trackers in effect, resolved.
+
+    Raises:
+        MotorlabError: one line, before anything is written (see `check`).
+    """
+    found = check(values)
+    if not found:
+        yield targets()
+        return
+    with _on(found):
+        yield found
+
+
+def targets() -> list[Target]:
+    """The trackers runs started now go to (none outside a `tracking` or `adopted` block)."""
+    return list(_active.get())
+
+
+def handoff() -> dict[str, Any] | None:
+    """What a process started now needs to track its runs as this one would, for its job settings
+    (JSON): {"track": the trackers, resolved, "parent": the open parent's identity, when one is
+    open}. None when tracking is off."""
+    found = _active.get()
+    if not found:
+        return None
+    out: dict[str, Any] = {"track": [t.text() for t in found]}
+    if (parent := _parent.get()) is not None:
+        out["parent"] = parent
+    return out
+
+
+@contextlib.contextmanager
+def adopted(handoff: dict[str, Any] | None) -> Iterator[list[Target]]:
+    """Track the runs of the block as the process that wrote `handoff` (see `handoff`) asked: its
+    trackers, nested under its parent. Not checked again: the parent checked them, and a tracker
+    that fails here warns once and the run goes on. None: nothing changes.
+
+    Yields:
+        The trackers in effect.
+    """
+    try:
+        found = parse((handoff or {}).get("track") or [])
+    except MotorlabError as e:  # a child process never fails over its tracking
+        _warn_once("config", f"the tracking handed to this process is not used: {e}")
+        found = []
+    if not found:
+        yield targets()
+        return
+    parent = handoff.get("parent")
+    with _on(found, parent if isinstance(parent, dict) and parent else None):
+        yield found
 
 
 # ---- what the trackers are told ----------------------------------------------------------------
@@ -207,8 +270,8 @@ _lock = threading.Lock()
 
 
 def _warn_once(key: str, message: str) -> None:
-    # a tracker's error may quote its URI: its credentials are not shown
-    message = redact(message, *(value.partition("=")[2] for value in os.environ.get(ENV_VAR, "").split()))
+    # a tracker's error may quote its URI: its credentials are not shown (read here, in any thread)
+    message = redact(message, *sorted(_uris))
     with _lock:
         if key in _warned:
             return
@@ -352,8 +415,8 @@ class _Run:
 def _load(found: list[Target]) -> list[Target]:
     """The trackers resolved, their packages imported here, in the main thread, before a run starts:
     importing is the heavy part (seconds of Python holding the interpreter), and two threads must not
-    import one package at once. Those that cannot be loaded (MOTORLAB_TRACK set by hand where the
-    package is missing) are left out, with a warning."""
+    import one package at once. Those that cannot be loaded (a handoff adopted where the package is
+    missing) are left out, with a warning."""
     loaded = []
     for t in found:
         if t.backend in _broken:
@@ -372,16 +435,8 @@ def _load(found: list[Target]) -> list[Target]:
 # ---- a step kind's run ---------------------------------------------------------------------------
 
 
-def _inherited_parent() -> dict[str, Any]:
-    try:
-        parent = json.loads(os.environ.get(PARENT_VAR) or "{}")
-        return parent if isinstance(parent, dict) else {}
-    except ValueError:
-        return {}
-
-
 def _info(kind: str, run_dir: Path | None, config: dict[str, Any], own_group: bool = False) -> RunInfo:
-    parent = _inherited_parent()
+    parent = _parent.get() or {}
     name = kind if run_dir is None else Path(run_dir).name
     tags = {"motorlab.kind": kind}
     if run_dir is not None:
@@ -444,7 +499,9 @@ class _NoStep:
 
 
 _NO_STEP = _NoStep()
-_current: Step | None = None
+# The tracked step of this context: steps a study runs in threads (each in a copy of the context)
+# are each their own tracked run, and a kind called inside another's run is part of the outer one.
+_current: contextvars.ContextVar[Step | None] = contextvars.ContextVar("motorlab_tracked_step", default=None)
 
 
 def _status(error: BaseException) -> str:
@@ -459,14 +516,14 @@ def step(kind: str, settings: Any) -> Iterator[Step | _NoStep]:
     checks), gets its scalars live, its summary and files at `done`, and ends with the block:
     FINISHED, or FAILED / KILLED when the block raised. A run inside another (a kind calling
     another kind) is part of the outer one."""
-    global _current
-    found = targets() if _current is None else []
+    found = targets() if _current.get() is None else []
     found = _load(found) if found else []  # before `run`, so its clock (wall_seconds) does not count the imports
     if not found:
         yield _NO_STEP
         return
     config = settings.config() if hasattr(settings, "config") else dict(settings)
-    _current = tracked = Step(kind, config, found)
+    tracked = Step(kind, config, found)
+    token = _current.set(tracked)
     try:
         yield tracked
     except BaseException as e:
@@ -477,20 +534,20 @@ def step(kind: str, settings: Any) -> Iterator[Step | _NoStep]:
         if tracked.run is not None:
             tracked.run.end("FINISHED")
     finally:
-        _current = None
+        _current.reset(token)
 
 
 def folder_ready(run_dir: Path) -> None:
     """The current step's run folder exists: its tracked run starts now (called by StepKind.start and train)."""
-    if _current is not None:
-        _current.folder_ready(run_dir)
+    if (current := _current.get()) is not None:
+        current.folder_ready(run_dir)
 
 
 def scalar(tag: str, value: Any, step: int | None) -> None:
     """One scalar of the current run, as TensorBoard would get it."""
-    if _current is not None:
+    if (current := _current.get()) is not None:
         try:
-            _current.scalar(tag, float(value), int(step or 0))
+            current.scalar(tag, float(value), int(step or 0))
         except (TypeError, ValueError):
             pass  # not a number: TensorBoard would have refused it too
 
@@ -505,7 +562,7 @@ def scalars(values: dict[str, Any], step: int) -> None:
 def mirror(writer: Any) -> Any:
     """A TensorBoard SummaryWriter whose scalars also go to the current tracked run (the same
     writer, its add_scalar wrapped; unchanged when no run is tracked)."""
-    if _current is None or getattr(writer, "_motorlab_tracked", False):
+    if _current.get() is None or getattr(writer, "_motorlab_tracked", False):
         return writer
     add_scalar = writer.add_scalar
 
@@ -539,7 +596,7 @@ _parents: dict[str, Parent] = {}  # open parents by folder
 @contextlib.contextmanager
 def parent(kind: str, folder: Path, config: dict[str, Any]) -> Iterator[Parent]:
     """Track a sweep, study or tune in `folder` as a parent run (when tracking is on). Runs started
-    inside the block, here or in processes started here, nest under it; `outputs` (or
+    inside the block, here or in processes given `handoff()` here, nest under it; `outputs` (or
     motorlab.trackers.outputs) logs its summary and files. Ends FINISHED, or FAILED/KILLED."""
     found = targets()
     found = _load(found) if found else []
@@ -550,11 +607,10 @@ def parent(kind: str, folder: Path, config: dict[str, Any]) -> Iterator[Parent]:
     run = _Run(_info(kind, folder, config, own_group=True), found)
     run.start()
     run.wait()  # the children need its identity
-    handoff = {**run.handoff(), "name": run.info.name, "root": _inherited_parent().get("root") or str(folder)}
+    identity = {**run.handoff(), "name": run.info.name, "root": (_parent.get() or {}).get("root") or str(folder)}
     if run.info.group:
-        handoff["group"] = run.info.group
-    before = os.environ.get(PARENT_VAR)
-    os.environ[PARENT_VAR] = json.dumps(handoff)
+        identity["group"] = run.info.group
+    token = _parent.set(identity)
     tracked = _parents[str(folder)] = Parent(run)
     try:
         yield tracked
@@ -565,10 +621,7 @@ def parent(kind: str, folder: Path, config: dict[str, Any]) -> Iterator[Parent]:
         run.end("FINISHED")
     finally:
         _parents.pop(str(folder), None)
-        if before is None:
-            os.environ.pop(PARENT_VAR, None)
-        else:
-            os.environ[PARENT_VAR] = before
+        _parent.reset(token)
 
 
 def outputs(folder: Path, summary: dict[str, Any] | None) -> None:

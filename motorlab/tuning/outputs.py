@@ -83,7 +83,7 @@ def preset_fields(settings: dict[str, str], space: dict[str, Dist], options: set
         if options is None:
             step, dot, name = key.rpartition(".")
             (out.setdefault(step, {}) if dot else out)[name] = value
-        elif dist.is_hyperparam or dist.name.replace("_", "-") not in options:
+        elif dist.is_hyperparam or dist.name.replace("-", "_") not in options:
             out.setdefault("hyperparams", {})[dist.name] = value
         else:
             name = dist.name.replace("-", "_")

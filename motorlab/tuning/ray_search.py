@@ -40,8 +40,8 @@ from typing import TYPE_CHECKING, Any
 
 import optuna
 
+from motorlab import launcher
 from motorlab.errors import MotorlabError, mask_url
-from motorlab.sweeps import backends
 from motorlab.tuning.search import COUNTED, TuneSpec, open_storage, resume_study
 
 if TYPE_CHECKING:
@@ -107,7 +107,7 @@ def run_ray_search(spec: TuneSpec, planner: Planner, console: Console) -> optuna
     study, todo = resume_study(spec, console)
     if not todo:
         return study
-    ray = backends.init_ray(spec.address)
+    ray = launcher.init_ray(spec.address)
     from ray import tune
     from ray.tune.logger import JsonLoggerCallback
 

@@ -1,6 +1,6 @@
 """The driver's side of `motorlab tune --backend ray` (ray_search.py runs it): the searcher that
 keeps the study in the database, its heartbeats, and the scheduler. Ray is imported at module
-level: this module is imported only once Ray is known to be there (backends.init_ray).
+level: this module is imported only once Ray is known to be there (launcher.init_ray).
 
 - StudySearch (Ray's OptunaSearch, on the study's own storage): every Tune trial is an Optuna
   trial of the study from the moment Tune asks for it (RUNNING, with heartbeats, so the trials of

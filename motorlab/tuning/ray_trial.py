@@ -1,7 +1,7 @@
 """The trainable of `motorlab tune --backend ray` (ray_search.py): one trial's seeds on a Ray worker.
 
 Ray is imported at module level: this module is imported only once Ray is known to be there
-(backends.init_ray), and Tune pickles SeedTrial by reference, so every worker imports it (and
+(launcher.init_ray), and Tune pickles SeedTrial by reference, so every worker imports it (and
 only what a trial needs: not Optuna's samplers, nor the study's database).
 
 SeedTrial (a class trainable) plans nothing: it starts the trial's seed processes (planned on the

@@ -16,14 +16,15 @@ from __future__ import annotations
 import fcntl
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import optuna
 from optuna.trial import TrialState
 from rich.console import Console
 
-from motorlab import trackers
+from motorlab import launcher, trackers
 from motorlab.errors import MotorlabError, mask_url
+from motorlab.launcher import is_finished
 from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import (
@@ -37,17 +38,12 @@ from motorlab.runs import (
     write_config,
 )
 from motorlab.stats import iqm_with_ci
-from motorlab.sweeps import backends
 from motorlab.sweeps.sweep import MAX_SEEDS
-from motorlab.sweeps.trials import is_finished
 from motorlab.tuning import outputs
 from motorlab.tuning.objective import Objective, steps_run
 from motorlab.tuning.search import TuneSpec, default_parallel, run_search, study_name
 from motorlab.tuning.space import parse_space
 from motorlab.tuning.trials import Planner, SeedRuns, require_target
-
-if TYPE_CHECKING:
-    from typer.core import TyperGroup
 
 FRESH_SEED = 1000  # the fresh seeds are FRESH_SEED.. (or K.. when K is larger): never a search seed
 
@@ -75,7 +71,7 @@ def make_spec(target: str, space: list[str] | None, trials: int, seeds: int, obj
     if fresh_seeds is not None and fresh_seeds < 0:
         raise MotorlabError(f"--fresh-seeds {fresh_seeds}: give 0 (no re-evaluation) or more.")
     goal = Objective.make(objective, direction)
-    backends.check_execution(backend, address, max_parallel)  # last: it may try to reach the cluster
+    launcher.check_execution(backend, address, max_parallel)  # last: it may try to reach the cluster
     folder = run_path(out, "tune").resolve()
     return TuneSpec(target=target, space=parsed, objective=goal, trials=trials, seeds=seeds, out=folder,
                     storage=storage or f"sqlite:///{folder / 'study.db'}",
@@ -86,7 +82,7 @@ def make_spec(target: str, space: list[str] | None, trials: int, seeds: int, obj
                     backend=backend, address=address, cluster_parallel=max_parallel if backend == "ray" else None)
 
 
-def run_tune(spec: TuneSpec, console: Console | None = None, commands: TyperGroup | None = None) -> dict[str, Any]:
+def run_tune(spec: TuneSpec, console: Console | None = None) -> dict[str, Any]:
     """Search, write the outputs, re-run the best on fresh seeds. Returns the summary (also summary.json).
 
     Raises:
@@ -96,7 +92,7 @@ def run_tune(spec: TuneSpec, console: Console | None = None, commands: TyperGrou
     console = console or Console(stderr=True)
     threads = ({"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if spec.max_parallel != 1 or spec.backend == "ray"
                else {})
-    planner = Planner(spec.target, spec.space, commands, threads)
+    planner = Planner(spec.target, spec.space, threads)
     planner.check()
     refuse_finished(spec.out, resumable=True)  # a finished search goes on with --resume, or is replaced
     if folder_mode() == "overwrite":

@@ -93,7 +93,7 @@ def test_numbers_still_convert_as_before():
                                 hyperparams={"normalize_advantage": False}, env_kwargs={"flag": True})
     assert train.timesteps == 1000 and train.env.delay == 1.0 and train.normalize is True
     assert train.hyperparams == {"normalize_advantage": False} and train.env.kwargs == {"flag": True}
-    assert KINDS["evaluate"].make(policy="pid", episodes="3").episodes == 3
+    assert KINDS["evaluate"].make(policy="pid", env=ENV_ID, episodes="3").episodes == 3
 
 
 RECIPE = """name = "one"
@@ -205,12 +205,11 @@ def test_unknown_or_mistyped_space_key_fails_before_the_study_exists(finished_tu
 
 def test_valid_hyperparameter_keys_pass_the_check():
     """`set.KEY`, and a KEY that is no option, reach PPO as hyperparameters: the check lets them through."""
-    from motorlab.cli import app_commands
     from motorlab.tuning.space import parse_space
     from motorlab.tuning.trials import Planner
 
     space = parse_space(["set.n_steps=int:64,128", "gamma=uniform:0.9,0.99", "lr=loguniform:1e-4,1e-3"])
-    planner = Planner(PPO, space, app_commands(), {})
+    planner = Planner(PPO, space, {})
     planner.check()
     assert [planner.passes_on(d) for d in space.values()] == [True, True, False]
 
@@ -332,7 +331,7 @@ def test_tracker_messages_quoting_the_uri_are_masked(monkeypatch, capsys):
 
     uri = f"http://user:{SECRET}@tracking.example:5000"
     monkeypatch.setattr(trackers, "_warned", set())
-    monkeypatch.setenv(trackers.ENV_VAR, f"mlflow={uri}")
+    monkeypatch.setattr(trackers, "_uris", {uri})
     trackers._warn_once("mlflow", f"tracking to MLflow failed (ConnectionError: {uri}/api/2.0 refused)")
     assert capsys.readouterr().err == ("warning: tracking to MLflow failed (ConnectionError: "
                                        "http://user:***@tracking.example:5000/api/2.0 refused)\n")

@@ -1,5 +1,6 @@
-"""Where trials run. Each trial is a `python -m motorlab ...` process writing its own run
-folder and log, so the two backends differ only in who starts the processes:
+"""The process launcher of sweeps, searches and studies: where their trials run. Each trial is
+a `python -m motorlab.worker JOB` process (motorlab.jobs) writing its own run folder and log, so
+the two backends differ only in who starts the processes:
 
     local  a pool of at most K processes on this machine (K defaults to the cores)
     ray    Ray Tune, on a running cluster (--address) or a Ray instance started here;
@@ -17,17 +18,62 @@ import os
 import signal
 import socket
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Literal
 
-from motorlab import trackers
+from pydantic import Field
+
+from motorlab import jobs
 from motorlab.errors import MotorlabError, mask_url, redact
 from motorlab.extras import missing
-from motorlab.sweeps.trials import launch_argv, mark_finished, mark_started
+from motorlab.kinds import KINDS
+from motorlab.runs import finished_with, is_complete, toml_holds, write_toml
+from motorlab.settings import Settings
 from motorlab.user_modules import ENV_VAR, imported_names
+
+TRIAL_FILE = "sweep_trial.toml"
+STARTED_FILE = "sweep_trial_started.toml"  # the job a trial's folder was started with
+
+def trial(name: str, setting: str, seed: int, job: jobs.Job, run_dir: Path, log: Path,
+          env: dict[str, str] | None = None, fingerprint: str = "") -> dict[str, Any]:
+    """`fingerprint`: a hash of inputs the job only names (a recipe file's text); `env`: the process's
+    variables (e.g. one math thread per process)."""
+    return {"name": name, "setting": setting, "seed": seed, "job": job.as_dict(),
+            "run_dir": str(Path(run_dir).resolve()), "log": str(Path(log).resolve()), "env": env or {},
+            "fingerprint": fingerprint}
+
+
+def _marker(t: dict[str, Any]) -> dict[str, Any]:
+    return {"job": jobs.from_dict(t["job"]).identity(), "fingerprint": t["fingerprint"]}
+
+
+def is_finished(t: dict[str, Any]) -> bool:
+    """The trial's run folder finished with this very job (and recipe text)."""
+    return finished_with(Path(t["run_dir"]), _marker(t), TRIAL_FILE)
+
+
+def mark_finished(t: dict[str, Any]) -> None:
+    write_toml(Path(t["run_dir"]) / TRIAL_FILE, _marker(t))
+
+
+def mark_started(t: dict[str, Any]) -> None:
+    write_toml(Path(t["run_dir"]) / STARTED_FILE, _marker(t))
+
+
+def launch_job(t: dict[str, Any]) -> jobs.Job:
+    """The job that runs `t`: its own, or the same one resumed where an interrupted start of this
+    very job left a checkpoint (then only the rest of the budget is trained; the result is the same
+    run folder)."""
+    job = jobs.from_dict(t["job"])
+    run_dir = Path(t["run_dir"])
+    kind = KINDS.get(job.command)
+    if (kind is not None and not is_complete(run_dir) and toml_holds(run_dir / STARTED_FILE, _marker(t))
+            and kind.can_resume(run_dir)):  # else: another job started it, or nothing to go on from
+        return jobs.Job(**{**job.as_dict(), "resume": True})
+    return job
+
 
 OnDone = Callable[[dict[str, Any], int, float], None]  # (trial, exit status, seconds)
 
@@ -36,10 +82,11 @@ def _start(t: dict[str, Any]) -> subprocess.Popen:
     log = Path(t["log"])
     log.parent.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **t["env"]}
-    argv = launch_argv(t)  # `train --resume` where an interrupted start left a checkpoint
+    job = jobs.tracked(launch_job(t))  # resumed where an interrupted start left a checkpoint
+    path = job.write(log.with_name(log.stem + jobs.JOB_SUFFIX))  # beside the log: on the shared file system
     mark_started(t)
-    with open(log, "ab" if argv != t["argv"] else "wb") as f:  # the child keeps its own handle
-        return subprocess.Popen([sys.executable, "-m", "motorlab", *argv], stdout=f, stderr=subprocess.STDOUT,
+    with open(log, "ab" if job.resume else "wb") as f:  # the child keeps its own handle
+        return subprocess.Popen(jobs.process(path), stdout=f, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, env=env)
 
 
@@ -176,11 +223,11 @@ def init_ray(address: str | None) -> Any:
     except ImportError:
         raise missing("the ray backend needs Ray Tune", "ray") from None
 
-    # the user's env modules (--import, MODULE:ID, a recipe's imports) and the tracking setting (--track)
-    # reach the workers' trial processes, on this machine and on a cluster's other nodes (where the
-    # modules must be installed too)
+    # the user's env modules (--import, MODULE:ID, a recipe's imports) reach the workers' processes, on this
+    # machine and on a cluster's other nodes (where the modules must be installed too); jobs carry them too,
+    # and the tracking, but the env and collection workers those processes start read this variable
     modules = imported_names()
-    env_vars = {**({ENV_VAR: ",".join(modules)} if modules else {}), **trackers.child_env()}
+    env_vars = {ENV_VAR: ",".join(modules)} if modules else {}
     runtime_env = {"env_vars": env_vars} if env_vars else None
     try:
         if address:
@@ -218,3 +265,15 @@ def run_ray(trials: list[dict[str, Any]], address: str | None, max_parallel: int
         tuner.fit()
     finally:
         ray.shutdown()
+
+
+class ExecutionSettings(Settings):
+    """Where a study's, sweep's or search's processes run (the settings they share)."""
+
+    backend: Literal["local", "ray"] = Field("local", description=(
+        "local: a pool of processes on this machine; ray: Ray Tune on a cluster (--address) or a Ray instance "
+        "started here"))
+    address: str | None = Field(None, description=(
+        "Ray cluster address HOST:PORT (from `ray start --head`); every node must see --out at the same path"))
+    max_parallel: int | None = Field(None, ge=1, description=(
+        "Processes at once (default: one per core locally, as many as the cluster's CPUs fit with ray)"))

@@ -1,0 +1,279 @@
+"""The env catalogue: the one place that knows an env family's facts.
+
+What motorlab assumes about an env beyond Gymnasium's interface: whether an early end is a fall,
+which info key flags success and when, the best return, the planner's torch reward, the state
+layout, default PID gains, the video camera, MPC defaults, and the extra that installs it. Every
+module asks `facts(env_id)` instead of testing id prefixes, so a user's env can declare the same
+facts as a bundled one, in either of two ways:
+
+    motorlab.register_env("ArmReach-v0", falls=True, pid_gains={"kp": [...], "kd": [...]})
+
+    class ArmReach(gymnasium.Env):
+        metadata = {"render_modes": [...], "motorlab": {"falls": True, "success_key": "reached"}}
+
+A lookup takes, in order: an exact id given to `register_env` (a bundled id's facts included),
+the env class's `metadata["motorlab"]`, the first family pattern that matches (a user's before
+the bundled ones), the defaults. Ids are matched without their `module:` part.
+
+Domain floor: imports Gymnasium and the ground floor only; the planner's rewards are named by
+dotted path ("motorlab.dynamics.rewards:reacher_v5"), resolved by motorlab.dynamics.rewards.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields, replace
+from fnmatch import fnmatchcase
+from types import MappingProxyType
+from typing import Any, Literal
+
+from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.user_modules import split_env_id, user_env_ids
+
+__all__ = ["EnvFacts", "Planning", "SUCCESS_KEYS", "facts", "register_env", "planned_ids", "METADATA_KEY"]
+
+SUCCESS_KEYS = ("solved", "success", "is_success")  # read in this order where an env declares none
+METADATA_KEY = "motorlab"  # the env class's metadata entry holding its facts
+PID_KEYS = ("kp", "ki", "kd")
+PLANNER_KEYS = ("horizon", "population", "iterations", "elites", "optimizer", "temperature", "propagation", "particles")
+_REWARDS = "motorlab.dynamics.rewards"  # the bundled planner rewards live there (a layer above)
+
+
+@dataclass(frozen=True)
+class Planning:
+    """The planner's task on one state layout: a reward and a termination, each a
+    "module:function" name or a callable (motorlab.dynamics.rewards resolves them).
+    `state_size`: the state size they index into (a model whose state differs is refused)."""
+
+    layout: str
+    reward: str | Callable
+    termination: str | Callable | None = None
+    state_size: int | None = None
+
+
+@dataclass(frozen=True)
+class EnvFacts:
+    """What motorlab knows about an env family; the defaults describe an env it knows nothing of."""
+
+    family: str = ""  # the id or pattern these facts were declared for ("": the defaults)
+    falls: bool = False  # an early end is a fall (reports say "falls", else "ended early")
+    success_key: str | None = None  # the info key of the per-step success flag (None: SUCCESS_KEYS)
+    success_mode: Literal["any", "final"] = "any"  # success at any step, or at the final step (a state)
+    # the best return: a number, "time_limit" (a +1-per-step alive reward: the registered step
+    # limit), or None (the registered reward_threshold, if any)
+    max_return: float | Literal["time_limit"] | None = None
+    planning: tuple[Planning, ...] = ()  # the planner's builtin reward and termination, per state layout
+    state_layout: str = "observation"  # the forward model's state for --state auto (reacher: the arm's 8 numbers)
+    closed_form: str | None = None  # a batched simulator for random-action collection ("reacher")
+    pid_gains: Mapping[str, tuple[float, ...]] | None = None  # default gains of `evaluate pid`
+    camera: str | int | None = None  # video camera (None: the model's first, else the free camera)
+    planner: Mapping[str, Any] = field(default_factory=dict)  # MPC defaults (empty: the planner's own)
+    obs_labels: tuple[str, ...] | None = None  # names (with units) of the observation's entries
+    extra: str | None = None  # the motorlab extra that installs it: myosuite, upkie, robotics
+    broken: bool = False  # known not to build here (an upstream incompatibility)
+
+    @property
+    def success_keys(self) -> tuple[str, ...]:
+        """The info keys read for the success flag, in order."""
+        return (self.success_key,) if self.success_key else SUCCESS_KEYS
+
+    @property
+    def early_end(self) -> str:
+        """What reports call episodes that ended before the time limit."""
+        return "falls" if self.falls else "ended early"
+
+
+DEFAULT = EnvFacts()
+_FIELDS = tuple(f.name for f in fields(EnvFacts) if f.name != "family")
+_EXACT: dict[str, EnvFacts] = {}  # env id -> facts
+_PATTERNS: list[EnvFacts] = []  # checked in order: the user's (inserted first), then the bundled
+
+
+def _is_pattern(key: str) -> bool:
+    return any(c in key for c in "*?[")
+
+
+def _clean(values: Mapping[str, Any], where: str) -> dict[str, Any]:
+    """Declared facts as EnvFacts fields, checked: one line naming a wrong one and the fix."""
+    out = dict(values)
+    if "reward" in out or "termination" in out:  # shorthand: the planner's task on the observation
+        out["planning"] = (Planning("observation", out.pop("reward", None), out.pop("termination", None)),
+                           *out.get("planning", ()))
+    unknown = [k for k in out if k not in _FIELDS]
+    if unknown:
+        raise MotorlabError(f"{where}: unknown env fact {unknown[0]!r}{did_you_mean(unknown[0], _FIELDS)}; "
+                            f"facts: {', '.join(_FIELDS)}, reward, termination.")
+    if out.get("success_mode", "any") not in ("any", "final"):
+        raise MotorlabError(f"{where}: success_mode {out['success_mode']!r}: give any or final.")
+    ret = out.get("max_return")
+    if ret is not None and ret != "time_limit" and not isinstance(ret, int | float):
+        raise MotorlabError(f"{where}: max_return {ret!r}: give a number, 'time_limit' or None.")
+    if out.get("pid_gains") is not None:
+        gains = out["pid_gains"]
+        bad = [k for k in gains if k not in PID_KEYS]
+        if bad:
+            raise MotorlabError(f"{where}: PID gain {bad[0]!r}: give kp, ki and kd, e.g. pid_gains={{'kp': [1, 20]}}.")
+        out["pid_gains"] = MappingProxyType({k: tuple(float(x) for x in g) for k, g in gains.items()})
+    if "planner" in out:
+        bad = [k for k in out["planner"] if k not in PLANNER_KEYS]
+        if bad:
+            raise MotorlabError(f"{where}: planner setting {bad[0]!r}{did_you_mean(bad[0], PLANNER_KEYS)}; "
+                                f"settings: {', '.join(PLANNER_KEYS)}.")
+        out["planner"] = MappingProxyType(dict(out["planner"]))
+    if "planning" in out:
+        out["planning"] = tuple(p if isinstance(p, Planning) else Planning(**p) for p in out["planning"])
+        if any(p.reward is None for p in out["planning"]):
+            raise MotorlabError(f"{where}: a termination needs a reward too: give reward='module:function'.")
+    if "obs_labels" in out and out["obs_labels"] is not None:
+        out["obs_labels"] = tuple(out["obs_labels"])
+    return out
+
+
+def register_env(env_id: str, **facts_: Any) -> EnvFacts:
+    """Declare an env's facts (fields of `EnvFacts`; `reward=` and `termination=` "module:function"
+    are the planner's builtin task on the observation). Call it in the module that registers the env
+    (the module --import names), so every process motorlab starts knows them too.
+
+    Args:
+        env_id: an exact id ("ArmReach-v0"), over whose current facts the given ones go, or a
+            family pattern with * and ? ("ArmReach-*"), over the defaults; checked before the
+            bundled families.
+
+    Returns:
+        The facts now declared for env_id.
+
+    Raises:
+        MotorlabError: an unknown fact or a value of the wrong kind (one line).
+    """
+    key = split_env_id(env_id)[1]
+    declared = _clean(facts_, f"register_env({env_id!r})")
+    if not _is_pattern(key):
+        _EXACT[key] = replace(facts(key), family=key, **declared)
+        return _EXACT[key]
+    old = next((f for f in _PATTERNS if f.family == key), None)
+    new = replace(old or DEFAULT, family=key, **declared)
+    if old is not None:
+        _PATTERNS.remove(old)
+    _PATTERNS.insert(0, new)
+    return new
+
+
+def facts(env_id: str) -> EnvFacts:
+    """The facts of env_id: its exact entry, else its class's metadata["motorlab"] over its
+    family's, else its family's (the first matching pattern), else the defaults."""
+    name = split_env_id(env_id)[1]
+    if name in _EXACT:
+        return _EXACT[name]
+    family = next((f for f in _PATTERNS if fnmatchcase(name, f.family)), DEFAULT)
+    declared = _metadata_facts(name)
+    return replace(family, family=name, **declared) if declared else family
+
+
+def _metadata_facts(name: str) -> dict[str, Any]:
+    """The facts in the metadata of the env class registered as `name`. Read where the class is at
+    hand without importing anything new (its module imported, or a user's module registered it),
+    so a lookup never imports a simulator (MyoSuite) on its own."""
+    import gymnasium as gym
+
+    spec = gym.registry.get(name)
+    if spec is None:
+        return {}
+    entry = spec.entry_point
+    if isinstance(entry, str):
+        module, _, attr = entry.partition(":")
+        if module not in sys.modules and name not in user_env_ids():
+            return {}
+        try:
+            entry = getattr(importlib.import_module(module), attr)
+        except Exception:  # noqa: BLE001  a broken module fails again, in one line, when the env is made
+            return {}
+    metadata = getattr(entry, "metadata", None)
+    declared = metadata.get(METADATA_KEY) if isinstance(metadata, Mapping) else None
+    if not declared:
+        return {}
+    if not isinstance(declared, Mapping):
+        raise MotorlabError(f"{name}: metadata[{METADATA_KEY!r}] is a {type(declared).__name__}; make it a dict "
+                            "of env facts, e.g. {'falls': True}.")
+    return _clean(declared, f"{name}'s metadata[{METADATA_KEY!r}]")
+
+
+def planned_ids(layout: str | None = None) -> list[str]:
+    """Ids and patterns with a builtin planner reward (under `layout`, or any), bundled ones first."""
+    entries = [*_EXACT.values(), *reversed(_PATTERNS)]
+    return [f.family for f in entries if any(layout is None or p.layout == layout for p in f.planning)]
+
+
+# ---- the bundled families ---------------------------------------------------------------------
+# Families first, most specific pattern first; exact ids after, over their family's facts.
+
+def _family(pattern: str, **values: Any) -> None:
+    _PATTERNS.append(EnvFacts(family=pattern, **_clean(values, pattern)))
+
+
+def _exact(env_id: str, **values: Any) -> None:
+    family = next((f for f in _PATTERNS if fnmatchcase(env_id, f.family)), DEFAULT)
+    _EXACT[env_id] = replace(family, family=env_id, **_clean(values, env_id))
+
+
+def _plan(layout: str, reward: str, termination: str | None = None, state_size: int | None = None) -> Planning:
+    return Planning(layout, f"{_REWARDS}:{reward}", termination and f"{_REWARDS}:{termination}", state_size)
+
+
+_PENDULUM_GAINS = {"kp": [1.0, 20.0, 0.0, 0.0], "ki": [0.0] * 4, "kd": [1.0, 3.0, 0.0, 0.0]}
+# Upkie (obs: pitch, ground position, pitch rate, ground velocity; action: ground velocity): drive
+# the wheels under the lean, damp the pitch rate, and pull back to the start position and to rest.
+# Tuned on the PyBullet sim (balances 10 s from pitch up to 0.1 rad).
+_UPKIE_GAINS = {"kp": [10.0, 0.3, 0.3, 0.5], "ki": [0.0] * 4, "kd": [0.0] * 4}
+_UPKIE_LABELS = ("pitch (rad)", "ground position (m)", "pitch rate (rad/s)", "ground velocity (m/s)")
+
+# Balancing tasks: +1 per step alive (the maximum return is the time limit); the pole falls.
+# Gains balance the cart-pole (obs: cart x, pole angle, cart velocity, pole velocity).
+_family("InvertedPendulum-*", falls=True, max_return="time_limit", pid_gains=_PENDULUM_GAINS,
+        obs_labels=("cart position (m)", "pole angle (rad)", "cart velocity (m/s)", "pole angular velocity (rad/s)"))
+_family("InvertedDoublePendulum-*", falls=True)
+# Gymnasium's "unhealthy" states end these early: the body fell
+for _pattern in ("Hopper-*", "Walker2d-*", "Humanoid-*", "Ant-*"):
+    _family(_pattern, falls=True)
+# Reacher: the arm's 8-number state and its closed-form simulator (motorlab.dynamics.reacher_sim)
+_family("Reacher-*", state_layout="reacher", closed_form="reacher")
+# Upkie (the `upkie` extra): its fall detection ends an episode; motorlab's wrapper flags success
+_family("Upkie-PyBullet-Pendulum*", falls=True, success_key="success", pid_gains=_UPKIE_GAINS,
+        obs_labels=_UPKIE_LABELS, extra="upkie")
+_family("Upkie-Spine-Pendulum*", falls=True, success_key="success", pid_gains=_UPKIE_GAINS, extra="upkie")
+_family("Upkie-*", falls=True, success_key="success", extra="upkie")
+_family("Cookie-*", extra="upkie")
+# MyoSuite (the `myosuite` extra), info["solved"]. Its walking tasks' "solved" is "upright and within
+# 0.5 m/s of the commanded speed" at that step, a state a body falling forward also meets for a
+# moment: success is read at the final step. A leg below its height limit has fallen.
+_family("myoLeg*Walk*", falls=True, success_key="solved", success_mode="final", extra="myosuite")
+_family("myoLeg*", falls=True, success_key="solved", extra="myosuite")
+_family("myoHand*", success_key="solved", extra="myosuite")  # an early end: the object dropped
+_family("myo*", success_key="solved", extra="myosuite")
+# Gymnasium-Robotics (the `robotics` extra). Its Fetch, Shadow-hand and Kitchen models fail while
+# they are built, inside Gymnasium-Robotics 1.4.2 under MuJoCo 4 (its set_joint_qpos asserts on
+# their free joints: an upstream incompatibility)
+for _pattern in ("PointMaze_*", "AntMaze_*", "AdroitHand*"):
+    _family(_pattern, extra="robotics")
+for _pattern in ("Fetch*", "HandReach*", "HandManipulate*", "FrankaKitchen*"):
+    _family(_pattern, extra="robotics", broken=True)
+
+# The planner's builtin tasks (tests/test_rewards.py checks them against the envs' transitions):
+# v5 scores the state after the step, v4 the one before. Not InvertedDoublePendulum: the env scores
+# the tip MuJoCo placed during the last RK4 substep (not the observed angles', ~1e-5 m apart) and
+# unclipped velocities (the observation clips them at 10), so a reward from the observation is close
+# but not the env's own.
+_exact("Reacher-v5", planning=(_plan("reacher", "reacher_v5", state_size=8),
+                               _plan("observation", "reacher_obs_v5", state_size=10)))
+_exact("Reacher-v4", planning=(_plan("reacher", "reacher_v4", state_size=8),
+                               _plan("observation", "reacher_obs_v4", state_size=11)))
+_exact("Pusher-v5", planning=(_plan("observation", "pusher_v5", state_size=23),))
+_exact("Pusher-v4", planning=(_plan("observation", "pusher_v4", state_size=23),))
+_exact("InvertedPendulum-v5", planning=(
+    _plan("observation", "inverted_pendulum_v5", "inverted_pendulum_termination", state_size=4),))
+_exact("InvertedPendulum-v4", planning=(
+    _plan("observation", "inverted_pendulum_v4", "inverted_pendulum_termination", state_size=4),))
+_exact("HumanoidStandup-v5", planning=(_plan("observation", "humanoid_standup_v5", state_size=348),))
+_exact("HumanoidStandup-v4", planning=(_plan("observation", "humanoid_standup_v4", state_size=376),))
+del _pattern

@@ -1,0 +1,58 @@
+"""`python -m motorlab.worker JOB.json`: the one entry point of motorlab's child processes.
+
+A study's seeds, a sweep's or search's trials and Ray's workers each run one job (motorlab.jobs):
+the command it names, from its settings, through the same `Command.invoke` the CLI calls, then
+the same printout, into the process's log. Mistakes are one line and status 2, as on the command
+line; Ctrl-C (a stopped trial) is status 130.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+# Ray's workers block SIGINT, and a process they start inherits the blocked mask: a trial would
+# never see the Ctrl-C that stops it early (motorlab.sweeps.launcher.stop), only the kill after it.
+if hasattr(signal, "pthread_sigmask"):
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from pathlib import Path  # noqa: E402
+
+from rich.console import Console  # noqa: E402
+
+from motorlab import jobs, trackers  # noqa: E402
+from motorlab.cli import one_line_errors  # noqa: E402
+from motorlab.commands import BY_NAME  # noqa: E402
+from motorlab.errors import MotorlabError  # noqa: E402
+from motorlab.runs import run_folders  # noqa: E402
+from motorlab.user_modules import import_modules  # noqa: E402
+
+
+def run_job(job: jobs.Job, console: Console) -> None:
+    """Run `job` here (what the child process does; tests call it in-process too)."""
+    if job.command not in BY_NAME:
+        raise MotorlabError(f"the job names no command motorlab knows: {job.command!r}.")
+    import_modules(job.imports, "named by the job")
+    cmd = BY_NAME[job.command]
+    settings = cmd.make(**job.settings)
+    with trackers.adopted(job.tracking):
+        if job.resume:  # the run's own settings, continued where its checkpoint is
+            with run_folders("resume"):
+                result = cmd.run(settings, Path(job.how["out"]), console=console, progress=job.progress, resume=True)
+        else:
+            result = cmd.invoke(settings, cmd.how(**job.how), console=console, progress=job.progress)
+    cmd.report(result, settings, console)
+
+
+def main() -> None:
+    with one_line_errors():
+        if len(sys.argv) != 2:
+            raise MotorlabError("usage: python -m motorlab.worker JOB.json (a job file a study, sweep or search wrote).")
+        run_job(jobs.read(Path(sys.argv[1])), Console(width=150))
+    sys.exit(0)
+
+
+if __name__ == "__main__":
+    main()
