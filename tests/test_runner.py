@@ -128,3 +128,17 @@ source = "@d"
 def test_unregistered_kinds_are_unknown():
     with pytest.raises(MotorlabError, match="unknown kind 'double-for-test'"):
         parse_recipe(RECIPE.format(value=1), "doubling.toml")
+
+
+def test_kinds_that_fit_synergies_import_sklearn_before_a_study_starts_threads():
+    # Two threads importing sklearn at once failed in CI with Python's import _DeadlockError
+    # (sklearn -> narwhals, whose modules import each other): the study's thread imports it first.
+    import subprocess
+    import sys
+
+    code = ("import sys; from motorlab.synergy.steps import FIT, VAF\n"
+            "assert 'sklearn' not in sys.modules\n"
+            "FIT.warm_up(); VAF.warm_up()\n"
+            "assert {'sklearn.decomposition', 'sklearn.preprocessing', 'narwhals'} <= set(sys.modules)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr

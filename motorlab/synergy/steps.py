@@ -17,7 +17,7 @@ from motorlab.report.results import Metric, Number
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
 from motorlab.synergy.collect import ACTIVATIONS, collect, load_activations, save_activations
-from motorlab.synergy.sar import fit_sar, save_sar, smallest_n, vaf_curve
+from motorlab.synergy.sar import fit_sar, require_sklearn, save_sar, smallest_n, vaf_curve
 
 SAR_FILE = "sar.npz"
 
@@ -144,6 +144,16 @@ class VafSummary(Summary):
     signal: str = "act"
 
 
+
+def _import_sklearn() -> None:
+    """scikit-learn, imported whole in the calling thread (StepKind.warm_up): sklearn imports
+    narwhals, whose modules import each other in a circle; a study's background thread importing
+    it beside this one failed once with Python's import _DeadlockError (CI, sar-hand-quick)."""
+    require_sklearn()
+    import sklearn.decomposition  # noqa: F401
+    import sklearn.preprocessing  # noqa: F401
+
+
 class VafKind(StepKind[VafSettings, VafSummary]):
     """Variance accounted for by N = 1..n_muscles synergies: vaf.png and the smallest N reaching the threshold."""
 
@@ -156,6 +166,9 @@ class VafKind(StepKind[VafSettings, VafSummary]):
     refs = (Ref("activations", ("activations",)),)
     arguments = ("activations",)
     examples = ("motorlab synergies vaf runs/collect/activations.npz --threshold 0.8",)
+
+    def warm_up(self) -> None:
+        _import_sklearn()
 
     def run(self, settings: VafSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> VafSummary:
@@ -239,6 +252,9 @@ class FitKind(StepKind[FitSettings, FitSummary]):
     flags = {"n_synergies": ("--n-synergies", "--n")}
     examples = ("motorlab synergies fit activations.npz --vaf 0.8",
                 "motorlab synergies fit activations.npz --n 20 --method nmf")
+
+    def warm_up(self) -> None:
+        _import_sklearn()
 
     def run(self, settings: FitSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> FitSummary:
