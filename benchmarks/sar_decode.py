@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motorlab.synergy.sklearn_import import import_sklearn
+from motorlab.synergies.sklearn_import import import_sklearn
 
 DATA = Path(__file__).resolve().parents[2] / "shared/data/myosuite_sar_pretrained/manipulation"
 TARGET_US_PER_STEP = 5.0
@@ -80,7 +80,7 @@ def main() -> None:
     # The real per-step action mapping: SynergyActionWrapper.action on an env with M muscle actions.
     import gymnasium as gym
 
-    from motorlab.synergy import SynergyActionWrapper
+    from motorlab.synergies import SynergyActionWrapper
 
     class Muscles(gym.Env):
         observation_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)

@@ -21,16 +21,16 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __version__ = "0.1.0"
 
-# The API's names, loaded from motorlab.api when first used. `motorlab.dynamics` is the domain
-# package (forward models); its collect / fit / check are the API's (motorlab/dynamics/__init__.py).
+# The API's names, loaded from motorlab.api when first used. `motorlab.dynamics` and `motorlab.synergies`
+# are the domain packages; their collect / fit / ... are the API's (see their __init__.py).
 __all__ = ["train", "evaluate", "video", "zeroshot", "robustness", "compare", "mpc", "mbrl", "run_recipe", "sweep",
            "tune", "load", "synergies", "Result", "Run", "Study", "Sweep", "Tune", "MotorlabError", "dynamics",
            "tracking", "register_env"]
 
 
 def __getattr__(name: str):
-    if name == "dynamics":
-        return importlib.import_module("motorlab.dynamics")
+    if name in ("dynamics", "synergies"):
+        return importlib.import_module(f"motorlab.{name}")
     if name in __all__:
         return getattr(importlib.import_module("motorlab.api"), name)
     raise AttributeError(f"module 'motorlab' has no attribute {name!r}")

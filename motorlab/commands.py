@@ -11,7 +11,7 @@ from motorlab.recipe_list import RECIPES
 from motorlab.report.commands import PLOT, REPORT
 from motorlab.studies.command import RUN
 from motorlab.sweeps.command import SWEEP
-from motorlab.synergy.commands import EXPORT_SKLEARN, IMPORT_SKLEARN
+from motorlab.synergies.commands import EXPORT_SKLEARN, IMPORT_SKLEARN
 from motorlab.tuning.command import TUNE
 
 OTHERS: tuple[Command, ...] = (EXPORT, REPORT, PLOT, IMPORT_SKLEARN, EXPORT_SKLEARN, RUN, SWEEP, TUNE, RECIPES)

@@ -61,7 +61,7 @@ from motorlab.extras import missing
 from motorlab.policies import BUILTIN_POLICIES, POLICY_JSON, SB3Policy, load_policy_files
 from motorlab.rl.algos.base import StateSpec
 from motorlab.runs import CONFIG, atomic_write_bytes, read_json, require_run_dir, write_json
-from motorlab.synergy.wrapper import SynergyActionWrapper
+from motorlab.synergies.wrapper import SynergyActionWrapper
 
 ONNX_FILE = "policy.onnx"
 SIDECAR = "policy.onnx.json"  # the interface and the export check, for people and for tools

@@ -9,9 +9,9 @@ from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
 from motorlab.report.steps import COMPARE, VIDEO
 from motorlab.rl.steps import TRAIN
-from motorlab.robustness.steps import ROBUSTNESS
+from motorlab.robustness_curves.steps import ROBUSTNESS
 from motorlab.stepkind import StepKind
-from motorlab.synergy.steps import COLLECT, FIT, VAF
+from motorlab.synergies.steps import COLLECT, FIT, VAF
 
 KINDS: dict[str, StepKind] = {k.name: k for k in (
     TRAIN,

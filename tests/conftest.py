@@ -8,48 +8,48 @@ from pathlib import Path
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
-pytest.register_assert_rewrite("helpers")
+pytest.register_assert_rewrite("tests.helpers")
 
-from helpers import ENV_ID, TINY_PPO, assert_ok, run_cli, scaled_recipe  # noqa: E402
+from tests.helpers import ENV_ID, TINY_PPO, assert_ok, run_cli, scaled_recipe  # noqa: E402
 
 # ---- `make test`: pytest -n 2 --dist loadfile, with two changes (pytest_xdist_make_scheduler) ----
 # Each test file is one unit of work for one worker, its tests sharing their module fixtures and
 # folders. 1. Files that share an expensive session fixture are one unit, so that it is made once.
 SHARED = {
     # sar_hand_quick (below): its report in Chromium, and the SAR study's steps
-    "test_bundled_reports.py": "sar-hand-quick", "test_sar_study.py": "sar-hand-quick",
+    "tests/studies/test_bundled_reports.py": "sar-hand-quick", "tests/studies/test_sar_recipes.py": "sar-hand-quick",
     # hand_play_run and hand_activations: SAC on the MyoSuite hand, and activations collected from it
-    "test_collect.py": "hand", "test_sar_cli.py": "hand", "test_determinism.py": "hand",
-    "test_zeroshot_video_compare.py": "hand",
+    "tests/synergies/test_collection.py": "hand", "tests/synergies/test_steps.py": "hand", "tests/rl/test_determinism.py": "hand",
+    "tests/evaluation/test_zeroshot.py": "hand",
     # one local Ray head (ray_address, below), started once for both and stopped with `ray stop --force`,
     # which stops every Ray on the machine: one unit, so never beside another Ray test
-    "test_sweep.py": "ray", "test_tune_ray.py": "ray",
+    "tests/sweeps/test_sweep.py": "ray", "tests/tuning/test_ray_search.py": "ray",
 }
 # ... and the tests of these files are a unit each: they share nothing, and together they would
 # be the longest unit by far (each notebook runs in its own kernel)
-EACH_TEST = {"test_notebooks.py"}
+EACH_TEST = {"tests/test_notebooks.py"}
 # 2. Units start longest first (xdist would start the files with the most tests first), so the
 # last to start are short and both workers finish together. About how many seconds each unit
 # takes alone on an idle 2-core machine (pytest --durations); a file not listed here starts first
 # (it may be long).
 SECONDS = {
     "tests/rl/test_tqc.py": 18, "tests/rl/test_crossq.py": 22, "tests/rl/test_recurrent_ppo.py": 17,
-    "tests/rl/test_algos.py": 3, "tests/envs/test_catalog.py": 3, "tests/test_command_objects.py": 3,
-    "ray": 240, "tests/test_upkie.py": 125, "sar-hand-quick": 110, "hand": 110, "tests/test_mbrl.py": 90,
-    "tests/test_tune.py": 90, "tests/test_user_env.py": 85, "tests/test_parallel_steps.py": 75,
-    "tests/test_synergy_signals.py": 60, "tests/test_train_evaluate.py": 50, "tests/test_tracking.py": 48,
-    "tests/test_fuzz.py": 40, "tests/test_report.py": 31, "tests/test_resume.py": 31, "tests/test_recipes.py": 27,
-    "tests/test_safe_loading.py": 24, "tests/test_dynamics_cli.py": 20, "tests/test_robustness.py": 17,
-    "tests/test_faults_success.py": 15, "tests/test_onnx_export.py": 15, "tests/test_parallel_eval.py": 15,
-    "tests/test_extras.py": 13, "tests/test_dynamics.py": 13, "tests/test_cli_errors.py": 11,
-    "tests/test_reacher_study.py": 11, "tests/test_sar_formats.py": 9, "tests/test_plots.py": 9,
-    "tests/test_steps_to_success.py": 7, "tests/test_myosuite.py": 5.5, "tests/test_synergy_wrapper.py": 4,
-    "tests/test_rewards.py": 1.4, "tests/test_pid.py": 1, "tests/test_sklearn_import.py": 1,
-    "tests/test_disturbances.py": 0.7, "tests/test_results.py": 0.6, "tests/test_layers.py": 0.5,
-    "tests/test_lqr.py": 0.4, "tests/test_dynamics_collect.py": 0.4, "tests/test_schedules.py": 0.2,
-    "tests/test_runner.py": 0.2, "tests/test_sar.py": 0.2, "tests/test_wrappers.py": 0.2, "tests/test_runs.py": 0.05,
-    "tests/test_api.py": 60, "tests/test_docs.py": 35, "tests/test_notebooks.py": 1, "tests/test_sar_legs.py": 65,
-    "tests/test_spaces_train.py": 110, "tests/test_spaces_model.py": 30, "tests/adversarial/test_run_folders.py": 60,
+    "tests/rl/test_algos.py": 3, "tests/envs/test_catalog.py": 3, "tests/test_command.py": 3,
+    "ray": 240, "tests/envs/test_upkie.py": 125, "sar-hand-quick": 110, "hand": 110, "tests/control/test_mbrl.py": 90,
+    "tests/tuning/test_tune.py": 90, "tests/envs/test_user_env.py": 85, "tests/studies/test_schedule.py": 75,
+    "tests/synergies/test_signals.py": 60, "tests/rl/test_train.py": 50, "tests/trackers/test_trackers.py": 48,
+    "tests/adversarial/test_fuzz.py": 40, "tests/report/test_html.py": 31, "tests/rl/test_checkpoint.py": 31, "tests/test_recipes.py": 27,
+    "tests/test_safe_loading.py": 24, "tests/dynamics/test_steps.py": 20, "tests/robustness_curves/test_curves.py": 17,
+    "tests/rl/test_faults_success.py": 15, "tests/test_deploy_onnx.py": 15, "tests/evaluation/test_pool.py": 15,
+    "tests/test_extras.py": 13, "tests/dynamics/test_train.py": 13, "tests/test_cli.py": 11,
+    "tests/studies/test_reacher_recipe.py": 11, "tests/synergies/test_sklearn_export.py": 9, "tests/report/test_plots.py": 9,
+    "tests/rl/test_monitor.py": 7, "tests/envs/test_myosuite.py": 5.5, "tests/synergies/test_wrapper.py": 4,
+    "tests/dynamics/test_rewards.py": 1.4, "tests/control/test_pid.py": 1, "tests/synergies/test_sklearn_import.py": 1,
+    "tests/envs/test_disturbances.py": 0.7, "tests/report/test_results.py": 0.6, "tests/test_layers.py": 0.5,
+    "tests/control/test_lqr.py": 0.4, "tests/dynamics/test_collection.py": 0.4, "tests/rl/test_schedules.py": 0.2,
+    "tests/studies/test_runner.py": 0.2, "tests/synergies/test_sar.py": 0.2, "tests/envs/test_wrappers.py": 0.2, "tests/test_runs.py": 0.05,
+    "tests/api/test_policies.py": 60, "tests/test_docs.py": 35, "tests/test_notebooks.py": 1, "tests/studies/test_sar_legs_recipe.py": 65,
+    "tests/envs/test_spaces.py": 110, "tests/envs/test_spaces_model_based.py": 30, "tests/adversarial/test_run_folders.py": 60,
     "tests/adversarial/test_spaces_and_training.py": 40, "tests/adversarial/test_model_based.py": 12,
     "tests/adversarial/test_settings_and_urls.py": 15,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[sar_synergies]": 85,
@@ -72,8 +72,7 @@ def pytest_collection_modifyitems(config, items):
 def unit(nodeid: str) -> str:
     """The unit of work a test belongs to: its file, or the name of the files it shares a fixture with."""
     path = nodeid.split("::", 1)[0]
-    name = path.rsplit("/", 1)[-1]
-    return nodeid if name in EACH_TEST else SHARED.get(name, path)
+    return nodeid if path in EACH_TEST else SHARED.get(path, path)
 
 
 def pytest_xdist_make_scheduler(config, log):
@@ -101,7 +100,7 @@ def ray_address() -> str:
     """HOST:PORT of a local Ray head (2 CPUs; helpers.ray_head), as `ray start --head` prints it. The
     tests of one unit of work share it (starting a head takes seconds); it is stopped with
     `ray stop --force` when the next test belongs to another unit, or none follows."""
-    from helpers import free_port, ray_head
+    from tests.helpers import free_port, ray_head
 
     if "port" not in _ray_head:
         port = free_port()
@@ -112,7 +111,7 @@ def ray_address() -> str:
 
 def pytest_runtest_teardown(item, nextitem):
     if "port" in _ray_head and (nextitem is None or unit(nextitem.nodeid) != unit(item.nodeid)):
-        from helpers import ray_stop
+        from tests.helpers import ray_stop
 
         del _ray_head["port"]
         ray_stop()
@@ -120,7 +119,7 @@ def pytest_runtest_teardown(item, nextitem):
 
 def pytest_sessionfinish(session):
     if "port" in _ray_head:  # a run stopped early (-x, Ctrl-C) leaves no Ray behind
-        from helpers import ray_stop
+        from tests.helpers import ray_stop
 
         del _ray_head["port"]
         ray_stop()
@@ -161,7 +160,7 @@ def fast_run(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def hand_play_run(tmp_path_factory) -> Path:
     """A finished tiny SAC run on the MyoSuite hand (myoHandReorient8-v0), written by the CLI."""
-    from helpers import HAND_ID, TINY_HAND_SAC
+    from tests.helpers import HAND_ID, TINY_HAND_SAC
 
     out = tmp_path_factory.mktemp("runs") / "play"
     assert_ok(run_cli("train", HAND_ID, *TINY_HAND_SAC, "--seed", "0", "--no-progress", "--out", out))
@@ -172,7 +171,7 @@ def hand_play_run(tmp_path_factory) -> Path:
 def hand_activations(hand_play_run, tmp_path_factory) -> Path:
     """activations.npz collected by `motorlab synergies collect` (1 worker) from the hand play run:
     4 episodes at or above the median of 4 preview episodes."""
-    from helpers import COLLECT_ARGS
+    from tests.helpers import COLLECT_ARGS
 
     out = tmp_path_factory.mktemp("collect") / "w1"
     proc = run_cli("synergies", "collect", hand_play_run, *COLLECT_ARGS, "--workers", "1", "--out", out)
@@ -184,8 +183,8 @@ def hand_activations(hand_play_run, tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def hand_sar(tmp_path_factory) -> Path:
     """The SAR published with MyoSuite for the hand (20 synergies x 39 muscles), imported to sar.npz."""
-    from helpers import PUBLISHED_SAR
-    from motorlab.synergy import import_sklearn
+    from motorlab.synergies import import_sklearn
+    from tests.helpers import PUBLISHED_SAR
 
     out = tmp_path_factory.mktemp("sar") / "hand.npz"
     import_sklearn(PUBLISHED_SAR / "manipulation", trust=True, out=out)
@@ -195,8 +194,8 @@ def hand_sar(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def legs_sar(tmp_path_factory) -> Path:
     """The SAR published with MyoSuite for the legs (20 synergies x 80 muscles), imported to sar.npz."""
-    from helpers import PUBLISHED_SAR
-    from motorlab.synergy import import_sklearn
+    from motorlab.synergies import import_sklearn
+    from tests.helpers import PUBLISHED_SAR
 
     out = tmp_path_factory.mktemp("sar") / "legs.npz"
     import_sklearn(PUBLISHED_SAR / "locomotion", trust=True, out=out)

@@ -22,9 +22,9 @@ import torch
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
-from helpers import ENV_ID, TINY_PPO, assert_ok, read_summary
 from motorlab.errors import MotorlabError
 from motorlab.extras import EXTRAS, install_hint, require
+from tests.helpers import ENV_ID, TINY_PPO, assert_ok, read_summary
 
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
 

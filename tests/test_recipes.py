@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from helpers import assert_ok, assert_png, read_summary, run_cli
 from motorlab.errors import MotorlabError
 from motorlab.recipes import bundled, load_recipe, parse_recipe, set_fields
+from tests.helpers import assert_ok, assert_png, read_summary, run_cli
 
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
 
@@ -431,7 +431,7 @@ def test_a_recipe_input_is_required_and_filled_by_set(tmp_path):
 
 
 def test_run_set_on_the_command_line_is_one_line_on_a_mistake(tmp_path):
-    from helpers import assert_one_line_error
+    from tests.helpers import assert_one_line_error
 
     proc = run_cli("run", "pendulum", "--set", "ppo.timestep=5000", "--check")
     assert_one_line_error(proc, "--set ppo.timestep", "did you mean timesteps")

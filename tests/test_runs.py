@@ -8,7 +8,6 @@ import math
 import numpy as np
 import pytest
 
-from helpers import snapshot
 from motorlab.errors import MotorlabError
 from motorlab.runs import (
     MetricsWriter,
@@ -24,6 +23,7 @@ from motorlab.runs import (
     write_json,
     write_summary,
 )
+from tests.helpers import snapshot
 
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
 

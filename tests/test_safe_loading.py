@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from helpers import assert_ok, assert_one_line_error, read_summary, run_cli, run_here
+from tests.helpers import assert_ok, assert_one_line_error, read_summary, run_cli, run_here
 
 
 def exploit(marker: Path) -> bytes:

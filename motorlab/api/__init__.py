@@ -17,20 +17,14 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # as the CLI: videos render offscreen, in a notebook too
 
-import motorlab as _motorlab  # noqa: E402
 from motorlab.api import dynamics, synergies  # noqa: E402
 from motorlab.api.control import mbrl, mpc  # noqa: E402
 from motorlab.api.policies import Run, compare, evaluate, robustness, train, video, zeroshot  # noqa: E402
-from motorlab.api.results import PolicyFunction, Result, Study, Sweep, Tune, load  # noqa: E402
 from motorlab.api.studies import run_recipe, sweep, tune  # noqa: E402
+from motorlab.api.views import PolicyFunction, Result, Study, Sweep, Tune, load  # noqa: E402
 from motorlab.envs.catalog import register_env  # noqa: E402
 from motorlab.errors import MotorlabError  # noqa: E402
 from motorlab.trackers import tracking  # noqa: E402
-
-# Python makes each loaded subpackage an attribute of motorlab: the domain package motorlab.robustness
-# (loaded above, with the step kinds) would hide this function from `motorlab.robustness(...)`. The API's
-# name wins; `import motorlab.robustness.curves` and `from motorlab.robustness import ...` work as before.
-_motorlab.robustness = robustness
 
 __all__ = [
     "train", "evaluate", "video", "zeroshot", "robustness", "compare", "mpc", "mbrl",

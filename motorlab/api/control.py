@@ -6,8 +6,8 @@ from pathlib import Path
 from typing import Any
 
 from motorlab.api import steps
-from motorlab.api.results import Result
 from motorlab.api.steps import Track
+from motorlab.api.views import Result
 from motorlab.control.steps import MBRL, MPC
 
 

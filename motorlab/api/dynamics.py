@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from motorlab.api import steps
-from motorlab.api.results import Result
 from motorlab.api.steps import Track
+from motorlab.api.views import Result
 from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
 
 __all__ = ["collect", "fit", "check"]

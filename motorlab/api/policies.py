@@ -11,12 +11,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from motorlab.api import steps
-from motorlab.api.results import FOLDER_TYPES, PolicyFunction, Result
 from motorlab.api.steps import Track
+from motorlab.api.views import FOLDER_TYPES, PolicyFunction, Result
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
 from motorlab.report.steps import COMPARE, VIDEO
 from motorlab.rl.steps import TRAIN
-from motorlab.robustness.steps import ROBUSTNESS
+from motorlab.robustness_curves.steps import ROBUSTNESS
 
 if TYPE_CHECKING:
     import gymnasium as gym

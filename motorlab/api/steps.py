@@ -13,7 +13,7 @@ from typing import Any
 from rich.console import Console
 
 from motorlab import trackers
-from motorlab.api.results import Result, as_path, load
+from motorlab.api.views import Result, as_path, load
 from motorlab.errors import MotorlabError
 from motorlab.kinds import KINDS
 from motorlab.runs import run_folders

@@ -6,8 +6,8 @@ from pathlib import Path
 from typing import Any
 
 from motorlab import trackers
-from motorlab.api.results import Study, Sweep, Tune
 from motorlab.api.steps import Track, console, folders
+from motorlab.api.views import Study, Sweep, Tune
 
 
 def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: str = "local",

@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import Any
 
 from motorlab.api import steps
-from motorlab.api.results import Result
-from motorlab.synergy.steps import COLLECT, FIT, VAF
+from motorlab.api.views import Result
+from motorlab.synergies.steps import COLLECT, FIT, VAF
 
 __all__ = ["collect", "vaf", "fit", "import_sklearn", "export_sklearn", "load_sar"]
 
@@ -78,7 +78,7 @@ def import_sklearn(folder: str | Path, out: str | Path, *, trust: bool = False) 
     Raises:
         MotorlabError: without `trust`, or files that are not a SAR.
     """
-    from motorlab.synergy.sklearn_import import import_sklearn as convert
+    from motorlab.synergies.sklearn_import import import_sklearn as convert
 
     convert(Path(folder), trust=trust, out=Path(out))
     return Path(out)
@@ -86,7 +86,7 @@ def import_sklearn(folder: str | Path, out: str | Path, *, trust: bool = False) 
 
 def export_sklearn(sar: str | Path | Result, out: str | Path) -> Path:
     """Write a SAR as a MyoSuite 3.0 SynergyModel folder (`motorlab synergies export-sklearn`)."""
-    from motorlab.synergy.sklearn_export import export_sklearn as write
+    from motorlab.synergies.sklearn_export import export_sklearn as write
 
     write(Path(steps.path_of(sar)), Path(out))
     return Path(out)
@@ -94,6 +94,6 @@ def export_sklearn(sar: str | Path | Result, out: str | Path) -> Path:
 
 def load_sar(sar: str | Path | Result):
     """The SAR of a sar.npz or a `fit` result: `.decode(z)` maps synergies to muscle activations."""
-    from motorlab.synergy import load_sar as read
+    from motorlab.synergies.sar import load_sar as read
 
     return read(Path(steps.path_of(sar)))

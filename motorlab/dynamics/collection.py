@@ -6,7 +6,7 @@ Two collectors, one result format (transitions.py):
   tens of times Gymnasium's Python stepping), or MuJoCo's own step in C on every core
   (`mujoco`). Their transitions are the ones Gymnasium's env gives for the same initial state
   and actions: `mujoco` joint entries bit for bit, `closed-form` to MuJoCo's solver tolerance
-  (tests/test_dynamics_collect.py).
+  (tests/dynamics/test_collection.py).
 - Any other env or policy (a trained run folder) steps Gymnasium envs in a process
   pool, one episode per seed, so the result does not depend on the number of workers.
 """

@@ -9,7 +9,7 @@ give Gymnasium's observations and rewards for the same initial states and action
   the elbow's soft limit exactly, where MuJoCo's Newton solver stops at its tolerance
   (1e-8 on the scaled cost): the two agree to ~1e-14 away from the limit and to MuJoCo's
   convergence (a few 1e-7 rad/s) while the elbow presses on it; with MuJoCo's tolerance set
-  to 0 they agree to ~1e-14 everywhere (tests/test_dynamics_collect.py). Its RK4 stages give
+  to 0 they agree to ~1e-14 everywhere (tests/dynamics/test_collection.py). Its RK4 stages give
   Gymnasium's fingertip (below) directly.
 - `simulator="mujoco"`: MuJoCo's own C step through `mujoco.rollout` on all cores, bit for
   bit Gymnasium's joint angles and velocities, ~90k transitions/s per core.

@@ -6,7 +6,7 @@ planner scores predicted paths with them; `resolve_task` picks them from one of 
 
 - `builtin`: the env's catalogue entry's task (motorlab.envs.catalog, `EnvFacts.planning`): for the
   bundled envs the rewards below, the Gymnasium envs' own (same weights, scored on the observation
-  before or after the step as the env does; tests/test_rewards.py checks them against the envs'
+  before or after the step as the env does; tests/dynamics/test_rewards.py checks them against the envs'
   transitions). Add one with `register(env_id, layout, reward, termination)`, or declare a user
   function for your env: `motorlab.register_env(ENV_ID, reward="module:function")`.
 - `MODULE:FUNCTION`: the user's torch function (obs, action, next_obs) -> reward (or -> bool for a

@@ -337,7 +337,7 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
     if cfg.obs_noise is not None or cfg.action_noise is not None:
         env = GaussianNoise(env, cfg.obs_noise, cfg.action_noise)
     if cfg.sar:
-        from motorlab.synergy.wrapper import SynergyActionWrapper
+        from motorlab.synergies.wrapper import SynergyActionWrapper
 
         env = SynergyActionWrapper(env, cfg.sar, cfg.phi)  # outside the delay: muscles are what lags
     if cfg.history > 1:

@@ -259,7 +259,7 @@ for _pattern in ("PointMaze_*", "AntMaze_*", "AdroitHand*"):
 for _pattern in ("Fetch*", "HandReach*", "HandManipulate*", "FrankaKitchen*"):
     _family(_pattern, extra="robotics", broken=True)
 
-# The planner's builtin tasks (tests/test_rewards.py checks them against the envs' transitions):
+# The planner's builtin tasks (tests/dynamics/test_rewards.py checks them against the envs' transitions):
 # v5 scores the state after the step, v4 the one before. Not InvertedDoublePendulum: the env scores
 # the tip MuJoCo placed during the last RK4 substep (not the observed angles', ~1e-5 m apart) and
 # unclipped velocities (the observation clips them at 10), so a reward from the observation is close

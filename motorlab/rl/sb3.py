@@ -33,36 +33,36 @@ from motorlab.policies import SB3Policy, flat_statistics, normalization, save_sb
 from motorlab.rl import algos
 from motorlab.rl.algos import OnPolicy, SB3Algorithm
 from motorlab.rl.config import TrainConfig
+from motorlab.rl.monitor import TrainingMonitor
 from motorlab.rl.schedules import parse_schedule
-from motorlab.rl.tracking import Tracker
 from motorlab.runs import atomic_write_bytes
 
 # The SB3 algorithms (those that take hyperparameters), by name: `algo in ALGORITHMS` asks that.
 ALGORITHMS: dict[str, SB3Algorithm] = {name: a for name, a in algos.registry().items() if isinstance(a, SB3Algorithm)}
 
 
-class TrackingCallback(BaseCallback):
-    """Feeds episodes and evaluations to the Tracker; stops when solved.
+class MonitorCallback(BaseCallback):
+    """Feeds episodes and evaluations to the TrainingMonitor; stops when solved.
 
     On-policy algorithms change their policy only between rollouts, so they are
     evaluated at the start of each rollout (right after the update); off-policy
     ones every `eval_every` steps.
     """
 
-    def __init__(self, tracker: Tracker, eval_every: int, on_policy: bool, until_solved: bool,
+    def __init__(self, monitor: TrainingMonitor, eval_every: int, on_policy: bool, until_solved: bool,
                  run_dir: Path | None = None, checkpoint_every: int = 0, start: int = 0):
         super().__init__()
-        self.tracker, self.eval_every, self.on_policy, self.until_solved = tracker, eval_every, on_policy, until_solved
+        self.monitor, self.eval_every, self.on_policy, self.until_solved = monitor, eval_every, on_policy, until_solved
         self.next_eval = (start // eval_every + 1) * eval_every if start else eval_every
         self.run_dir, self.checkpoint_every = run_dir, checkpoint_every
         self.next_checkpoint = (start // checkpoint_every + 1) * checkpoint_every if checkpoint_every else None
         self.solved = False
-        self.algorithm = ALGORITHMS[tracker.cfg.algo]
+        self.algorithm = ALGORITHMS[monitor.cfg.algo]
 
     def _on_training_start(self) -> None:
         # training success only where the env says what success is (its flag): without one, a
         # return target would judge stochastic exploration episodes (0% beside a solved policy)
-        self.outcome = EpisodeSuccess(self.training_env.num_envs, None, success_mode(self.tracker.cfg.env))
+        self.outcome = EpisodeSuccess(self.training_env.num_envs, None, success_mode(self.monitor.cfg.env))
         for output in self.logger.output_formats:  # SB3's TensorBoard scalars also go to the tracked run, if any
             if isinstance(output, TensorBoardOutputFormat):
                 trackers.mirror(output.writer)
@@ -79,13 +79,13 @@ class TrackingCallback(BaseCallback):
     def _maybe_evaluate(self) -> None:
         if self.num_timesteps >= self.next_eval:
             self.next_eval = (self.num_timesteps // self.eval_every + 1) * self.eval_every
-            self.solved = self.tracker.evaluate(self.num_timesteps, self.policy_now()) or self.solved
+            self.solved = self.monitor.evaluate(self.num_timesteps, self.policy_now()) or self.solved
 
     def _maybe_checkpoint(self) -> None:
         if self.next_checkpoint is not None and self.num_timesteps >= self.next_checkpoint:
             from motorlab.rl.checkpoint import save_checkpoint
 
-            save_checkpoint(self.run_dir, self.model, self.tracker.state())
+            save_checkpoint(self.run_dir, self.model, self.monitor.state())
             self.next_checkpoint = (self.num_timesteps // self.checkpoint_every + 1) * self.checkpoint_every
 
     def _on_rollout_start(self) -> None:
@@ -98,7 +98,7 @@ class TrackingCallback(BaseCallback):
             self.outcome.step(i, info)
             if "episode" in info:
                 ret = float(info["episode"]["r"])
-                self.tracker.episode(self.num_timesteps, ret, int(info["episode"]["l"]),
+                self.monitor.episode(self.num_timesteps, ret, int(info["episode"]["l"]),
                                      success=self.outcome.end(i, ret), fault=fault_of(info))
         if not self.on_policy:
             self._maybe_evaluate()
@@ -203,7 +203,7 @@ def check_hyperparams(algo: str, params: dict) -> dict:
     return checked
 
 
-def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, tracker: Tracker) -> int:
+def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, monitor: TrainingMonitor) -> int:
     """Train `model` (from build_model; restored from a checkpoint when resuming) to the
     budget, checkpointing as it goes; save model.zip (for continuing with SB3) and the
     pickle-free policy. Returns env steps used."""
@@ -212,22 +212,22 @@ def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, tracker: Tr
     eval_every = cfg.eval_every or algo.eval_every(model, cfg.n_envs)
     every = cfg.checkpoint_every if cfg.checkpoint_every is not None else max(1, cfg.timesteps // 10)
     start = int(model.num_timesteps)
-    callback = TrackingCallback(tracker, eval_every, on_policy, cfg.until_solved, run_dir, every, start)
-    if start < cfg.timesteps and not (cfg.until_solved and tracker.steps_to_success is not None):
+    callback = MonitorCallback(monitor, eval_every, on_policy, cfg.until_solved, run_dir, every, start)
+    if start < cfg.timesteps and not (cfg.until_solved and monitor.steps_to_success is not None):
         # resumed: SB3 counts on from num_timesteps; the schedules see the same total budget
         model.learn(total_timesteps=cfg.timesteps - start, callback=callback, progress_bar=cfg.progress,
                     tb_log_name=algo.title, reset_num_timesteps=start == 0)
     steps = int(model.num_timesteps)
     # stopped once solved: the saved policy is the one the solving evaluation judged
-    stopped = cfg.until_solved and tracker.steps_to_success is not None
-    if tracker.last_eval_steps < steps and not stopped:
+    stopped = cfg.until_solved and monitor.steps_to_success is not None
+    if monitor.last_eval_steps < steps and not stopped:
         # The last update used every step so far and has not been evaluated yet.
-        tracker.evaluate(steps, callback.policy_now())
+        monitor.evaluate(steps, callback.policy_now())
     if stopped and on_policy:
         # the next rollout was cut after its first step, which no update used: the policy saved
         # learned from steps_to_success steps. Without --until-solved training goes on to the
         # budget whatever an evaluation solved, and the steps trained are all of them.
-        steps = tracker.steps_to_success
+        steps = monitor.steps_to_success
     _save_model(model, run_dir)
     venv = model.get_env()
     save_sb3_policy(run_dir, model, cfg.algo, venv if isinstance(venv, VecNormalize) else None)

@@ -26,7 +26,7 @@ from motorlab.report.run import plot_learning_curve
 from motorlab.rl import algos
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.envcheck import check_train_env
-from motorlab.rl.tracking import EVAL_SEED_OFFSET, Tracker
+from motorlab.rl.monitor import EVAL_SEED_OFFSET, TrainingMonitor
 from motorlab.runs import prepare_run_dir, run_path, write_config, write_summary
 
 
@@ -71,20 +71,20 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
     if record is None:
         shutil.rmtree(run_dir / "checkpoint", ignore_errors=True)  # another run's, not to be resumed into this one
     write_config(run_dir, cfg.model_dump())
-    tracker = Tracker(cfg, run_dir, solve_return, resume=record)
+    monitor = TrainingMonitor(cfg, run_dir, solve_return, resume=record)
     try:
         if model is None:
-            steps = algo.learn(cfg, run_dir, tracker)  # an algorithm that trains itself (LQR)
+            steps = algo.learn(cfg, run_dir, monitor)  # an algorithm that trains itself (LQR)
         else:
             from motorlab.rl.sb3 import train_sb3
 
-            steps = train_sb3(cfg, model, run_dir, tracker)
-        wall = time.perf_counter() - t0 + (record["tracker"]["wall"] if record else 0.0)
+            steps = train_sb3(cfg, model, run_dir, monitor)
+        wall = time.perf_counter() - t0 + (record["monitor"]["wall"] if record else 0.0)
         # Reload from disk, so the reported numbers are those of the saved files.
-        rollouts = tracker.evaluator.run(load_policy_files(run_dir))
+        rollouts = monitor.evaluator.run(load_policy_files(run_dir))
         final = rollouts.summary()
     finally:
-        tracker.close()
+        monitor.close()
     summary = {
         "env_id": cfg.env.id,
         "algo": cfg.algo,
@@ -96,15 +96,15 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
         "budget": cfg.timesteps,
         "until_solved": cfg.until_solved,
         "solve_return": solve_return,
-        "steps_to_success": tracker.steps_to_success,
-        "solved": tracker.steps_to_success is not None,
+        "steps_to_success": monitor.steps_to_success,
+        "solved": monitor.steps_to_success is not None,
         "wall_seconds": round(wall, 3),
-        "evaluations": tracker.evaluations,
-        "train_episodes": tracker.episodes,
-        "train_success_rate_last100": tracker.success_rate(),
+        "evaluations": monitor.evaluations,
+        "train_episodes": monitor.episodes,
+        "train_success_rate_last100": monitor.success_rate(),
         "success_mode": success_mode(cfg.env),
         "success_by": success_by(cfg.env, rollouts.success_key),
-        "numerical_faults": tracker.faults,
+        "numerical_faults": monitor.faults,
         "resumed_from": record["steps"] if record else None,
         "eval_seed": cfg.seed + EVAL_SEED_OFFSET,
         **{f"eval_{k}": v for k, v in final.items() if k != "episode_lengths"},

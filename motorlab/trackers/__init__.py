@@ -10,7 +10,7 @@ weights, checkpoint/, tensorboard/ or data such as transitions.npz).
 Live, and where TensorBoard writes. Training scalars reach the tracker as they are written, so a
 researcher can watch MLflow's UI while a run trains. They are caught at the one place that
 defines them: `mirror(writer)` wraps a TensorBoard writer's add_scalar (motorlab's own
-writers in rl/tracking.py and dynamics/train.py, and the writer of SB3's TensorBoard output
+writers in rl/monitor.py and dynamics/train.py, and the writer of SB3's TensorBoard output
 format, wrapped by the training callback), so the tracker gets exactly the tags, values and steps
 TensorBoard got, and no list of tags is kept twice. Tailing the event files after training
 (tensorboard's EventAccumulator) would be simpler, but nothing would show until the end. Kinds

@@ -15,8 +15,8 @@ import textwrap
 import numpy as np
 import pytest
 
-from helpers import assert_ok, assert_one_line_error, read_summary, run_here, snapshot
 from motorlab.envs.spaces import encode_space
+from tests.helpers import assert_ok, assert_one_line_error, read_summary, run_here, snapshot
 
 with contextlib.redirect_stderr(io.StringIO()):  # its import prints a notice about other envs, once
     import gymnasium as gym

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli, run_here, snapshot
+from tests.helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli, run_here, snapshot
 
 LQR = ["--algo", "lqr", "--timesteps", "300", "--no-progress"]
 UNWRITABLE = "/sys/motorlab-adversarial-out"  # a read-only file system, even for root (CI runs as root)

@@ -19,9 +19,9 @@ import pytest
 from pydantic import BaseModel, TypeAdapter, ValidationError
 from pydantic.errors import PydanticSchemaGenerationError
 
-from helpers import ENV_ID, assert_ok, assert_one_line_error, run_here, snapshot
 from motorlab.errors import MotorlabError, mask_url, redact
 from motorlab.kinds import KINDS
+from tests.helpers import ENV_ID, assert_ok, assert_one_line_error, run_here, snapshot
 
 SECRET = "s3cr3t-pw"
 

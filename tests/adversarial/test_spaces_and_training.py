@@ -19,7 +19,9 @@ from pathlib import Path
 
 import pytest
 
-from helpers import (
+from motorlab.errors import MotorlabError
+from motorlab.runs import read_config
+from tests.helpers import (
     ENV_ID,
     assert_ok,
     assert_one_line_error,
@@ -29,8 +31,6 @@ from helpers import (
     run_kind,
     snapshot,
 )
-from motorlab.errors import MotorlabError
-from motorlab.runs import read_config
 
 MAZE = "PointMaze_UMaze-v3"  # Gymnasium-Robotics: a Dict observation (achieved_goal, desired_goal, observation)
 CARTPOLE = "CartPole-v1"  # Discrete(2) actions, no MuJoCo

@@ -13,10 +13,10 @@ import gymnasium as gym
 import pytest
 
 import motorlab
-from helpers import assert_ok, read_summary, run_here
 from motorlab.envs import EnvConfig, catalog, early_end_label, max_return
 from motorlab.envs.catalog import SUCCESS_KEYS, facts, register_env
 from motorlab.errors import MotorlabError
+from tests.helpers import assert_ok, read_summary, run_here
 
 pytestmark = pytest.mark.fast
 

@@ -3,8 +3,9 @@ and tune; its batch-renormalization statistics travel with the weights."""
 
 from __future__ import annotations
 
-import algo_checks as checks
 import pytest
+
+from tests.rl import algo_checks as checks
 
 ALGO = "crossq"
 HYPER = {"learning_starts": 100, "batch_size": 32, "policy_kwargs": {"net_arch": [32, 32]}}

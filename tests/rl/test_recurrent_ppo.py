@@ -4,9 +4,10 @@ episode starts, and an explicit input/output pair of the ONNX graph."""
 
 from __future__ import annotations
 
-import algo_checks as checks
 import numpy as np
 import pytest
+
+from tests.rl import algo_checks as checks
 
 ALGO = "recurrentppo"
 HYPER = {"n_steps": 64, "batch_size": 32, "n_epochs": 1,

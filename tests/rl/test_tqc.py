@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-import algo_checks as checks
 import pytest
+
+from tests.rl import algo_checks as checks
 
 ALGO = "tqc"
 HYPER = {"learning_starts": 100, "batch_size": 32, "policy_kwargs": {"net_arch": [32, 32], "n_critics": 2}}

@@ -1,5 +1,5 @@
 """The user's torch reward and termination for ArmReach-v0 (userpkg/arm.py), for `--reward
-userpkg.arm_reward:reward`, and a few broken ones for the error tests (tests/test_rewards.py).
+userpkg.arm_reward:reward`, and a few broken ones for the error tests (tests/dynamics/test_rewards.py).
 
 The planner's state is ArmReach's observation: joint angles (3), velocities (3), fingertip - target (2).
 """

@@ -87,7 +87,7 @@ class Algorithm:
             raise MotorlabError(f"--her relabels the goals in a replay buffer of Dict observations, which {self.title} "
                                 f"does not keep; use {takes}, or drop --her.")
 
-    def learn(self, cfg: Any, run_dir: Any, tracker: Any) -> int:
+    def learn(self, cfg: Any, run_dir: Any, monitor: Any) -> int:
         """Train to the budget and write the policy; returns env steps used. Only an algorithm that
         trains itself (LQR) has this: SB3 algorithms train in rl/sb3.py."""
         raise NotImplementedError(f"{self.name} trains in motorlab.rl.sb3")

@@ -16,14 +16,14 @@ from motorlab.errors import MotorlabError
 from motorlab.rl.algos.base import Algorithm, Preset
 
 if TYPE_CHECKING:
-    from motorlab.rl.tracking import Tracker
+    from motorlab.rl.monitor import TrainingMonitor
 
 
 @dataclass(frozen=True)
 class LQR(Algorithm):
     """Trains itself (train.py calls `learn`): no SB3 model, no checkpoint."""
 
-    def learn(self, cfg: Any, run_dir: Path, tracker: Tracker) -> int:
+    def learn(self, cfg: Any, run_dir: Path, monitor: TrainingMonitor) -> int:
         """Fit, control and evaluate to the budget; write policy.json. Returns env steps used."""
         from rich.progress import Progress
 
@@ -33,19 +33,19 @@ class LQR(Algorithm):
         stop = {"solved": False}
 
         def on_update(steps, policy, info):
-            tracker.tb.add_scalar("model/one_step_mse", info["model_mse"], steps)
-            if steps - max(tracker.last_eval_steps, 0) >= (cfg.eval_every or 0) or not cfg.eval_every:
-                stop["solved"] = tracker.evaluate(steps, policy)
+            monitor.tb.add_scalar("model/one_step_mse", info["model_mse"], steps)
+            if steps - max(monitor.last_eval_steps, 0) >= (cfg.eval_every or 0) or not cfg.eval_every:
+                stop["solved"] = monitor.evaluate(steps, policy)
             return cfg.until_solved and stop["solved"]
 
         with Progress(disable=not cfg.progress, transient=True) as bar:
             task = bar.add_task(f"lqr on {cfg.env.id}", total=cfg.timesteps)
             policy, steps = learn_lqr(cfg.env, cfg.lqr, cfg.timesteps, cfg.seed, on_update,
-                                      on_episode=tracker.episode, on_steps=lambda s: bar.update(task, completed=s))
+                                      on_episode=monitor.episode, on_steps=lambda s: bar.update(task, completed=s))
         if policy is None:
             raise MotorlabError(f"no linear model could be fitted in {steps} steps; raise --timesteps.")
-        if tracker.last_eval_steps < steps:
-            tracker.evaluate(steps, policy)
+        if monitor.last_eval_steps < steps:
+            monitor.evaluate(steps, policy)
         save_controller(run_dir, policy)
         return steps
 

@@ -1,0 +1,149 @@
+"""What every training loop shares: periodic deterministic evaluation, the
+steps-to-success rule, metrics.csv rows and TensorBoard scalars.
+
+Steps-to-success: the env steps used to produce the first policy for which
+`solve_episodes` deterministic evaluation episodes all reach `solve_return`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+from tensorboard.compat.proto.event_pb2 import Event
+from tensorboard.compat.proto.summary_pb2 import Summary
+from tensorboard.summary.writer.event_file_writer import EventFileWriter
+
+from motorlab import trackers
+from motorlab.evaluation import Evaluator
+from motorlab.faults import FAULT_KEY, FAULTS_LOG
+from motorlab.policies import Policy
+from motorlab.rl.config import TrainConfig
+from motorlab.runs import METRICS, MetricsWriter
+
+METRIC_FIELDS = ["timesteps", "wall_seconds", "episode_return", "episode_length", "episode_success",
+                 "success_rate_100", "eval_return_mean", "eval_return_min", "eval_success_rate", FAULT_KEY]
+
+EVAL_SEED_OFFSET = 10_000  # evaluation episodes never share seeds with training episodes
+
+
+class ScalarWriter:
+    """TensorBoard scalars as torch's SummaryWriter writes them (tensorboard's own event file writer,
+    the same records: one Summary simple_value per scalar, wall time and step), without torch: an
+    LQR run does not import it, and starts a second sooner (every tune or sweep trial does)."""
+
+    def __init__(self, log_dir: Path | str):
+        self._events = EventFileWriter(str(log_dir), 10, 120, "")  # SummaryWriter's queue and flush interval
+
+    def add_scalar(self, tag: str, scalar_value: float, global_step: int | None = None,
+                   walltime: float | None = None) -> None:
+        value = float(np.asarray(scalar_value).squeeze())
+        event = Event(summary=Summary(value=[Summary.Value(tag=tag, simple_value=value)]))
+        event.wall_time = time.time() if walltime is None else walltime
+        if global_step is not None:
+            event.step = int(global_step)
+        self._events.add_event(event)
+
+    def flush(self) -> None:
+        self._events.flush()
+
+    def close(self) -> None:
+        self._events.flush()
+        self._events.close()
+
+
+class TrainingMonitor:
+    """Evaluates, logs and decides when a run is solved.
+
+    Args:
+        cfg: the training settings.
+        run_dir: where metrics.csv and tensorboard/ go.
+        solve_return: return every evaluation episode must reach (None: no target).
+    """
+
+    def __init__(self, cfg: TrainConfig, run_dir: Path, solve_return: float | None, resume: dict | None = None):
+        self.cfg = cfg
+        self.solve_return = solve_return
+        self.evaluator = Evaluator(cfg.env, cfg.solve_episodes, cfg.seed + EVAL_SEED_OFFSET)
+        steps = resume["steps"] if resume else None
+        self.metrics = MetricsWriter(Path(run_dir) / METRICS, METRIC_FIELDS, keep_until=steps)
+        self.faults_log = Path(run_dir) / FAULTS_LOG
+        if resume is None:
+            self.faults_log.unlink(missing_ok=True)
+        # its scalars also go to the tracked run, if any (--track; motorlab.trackers)
+        self.tb = trackers.mirror(ScalarWriter(Path(run_dir) / "tensorboard" / "motorlab"))
+        self.t0 = time.perf_counter()
+        self.recent = deque(maxlen=100)
+        self.recent_success: deque[bool] = deque(maxlen=100)
+        self.episodes = 0
+        self.faults = 0
+        self.steps_to_success: int | None = None
+        self.last_eval_steps = -1
+        self.evaluations = 0
+        if resume is not None:
+            self.restore(resume["monitor"])
+
+    def state(self) -> dict:
+        """What a checkpoint keeps of the monitor (JSON)."""
+        return {"wall": self.wall(), "recent": list(self.recent), "recent_success": list(self.recent_success),
+                "episodes": self.episodes, "faults": self.faults, "steps_to_success": self.steps_to_success,
+                "last_eval_steps": self.last_eval_steps, "evaluations": self.evaluations}
+
+    def restore(self, state: dict) -> None:
+        self.t0 = time.perf_counter() - state["wall"]
+        self.recent.extend(state["recent"])
+        self.recent_success.extend(state["recent_success"])
+        for key in ("episodes", "faults", "steps_to_success", "last_eval_steps", "evaluations"):
+            setattr(self, key, state[key])
+
+    def wall(self) -> float:
+        return time.perf_counter() - self.t0
+
+    def episode(self, steps: int, ret: float, length: int, success: bool | None = None, fault: str | None = None) -> None:
+        """A finished training episode; `success` is "solved at any step" where the env says."""
+        self.episodes += 1
+        self.recent.append(ret)
+        row = {"timesteps": steps, "wall_seconds": self.wall(), "episode_return": ret, "episode_length": length}
+        self.tb.add_scalar("train/episode_return", ret, steps)
+        self.tb.add_scalar("train/episode_return_mean100", float(np.mean(self.recent)), steps)
+        if success is not None:
+            self.recent_success.append(bool(success))
+            row["episode_success"] = int(success)
+            row["success_rate_100"] = self.success_rate()
+            self.tb.add_scalar("train/success_rate_100", row["success_rate_100"], steps)
+        if fault:
+            self.faults += 1
+            row[FAULT_KEY] = 1
+            self.tb.add_scalar("train/numerical_faults", self.faults, steps)
+            with open(self.faults_log, "a") as f:  # the reason, one line per faulted episode
+                f.write(f"timesteps={steps} episode_return={ret:.6g} length={length}: {fault}\n")
+        self.metrics.write(row)
+
+    def success_rate(self) -> float | None:
+        """Success rate over the last 100 training episodes (None if the env reports none)."""
+        return float(np.mean(self.recent_success)) if self.recent_success else None
+
+    def evaluate(self, steps: int, policy: Policy) -> bool:
+        """Evaluate `policy` (trained on `steps` env steps); True when solved."""
+        stop_below = self.solve_return if self.cfg.until_solved else None
+        result = self.evaluator.run(policy, stop_below=stop_below)
+        self.last_eval_steps = steps
+        self.evaluations += 1
+        solved = (not result.aborted and self.solve_return is not None
+                  and bool(np.all(result.returns >= self.solve_return)))
+        s = result.summary()
+        self.metrics.write({"timesteps": steps, "wall_seconds": self.wall(), "eval_return_mean": s["return_mean"],
+                            "eval_return_min": s["return_min"], "eval_success_rate": 1.0 if solved else s["success_rate"]})
+        self.tb.add_scalar("eval/return_mean", s["return_mean"], steps)
+        self.tb.add_scalar("eval/return_min", s["return_min"], steps)
+        self.tb.add_scalar("eval/solved", float(solved), steps)
+        if solved and self.steps_to_success is None:
+            self.steps_to_success = int(steps)
+        return solved
+
+    def close(self) -> None:
+        self.metrics.close()
+        self.tb.close()
+        self.evaluator.close()

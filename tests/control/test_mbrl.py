@@ -1,0 +1,306 @@
+"""Model-based control on any body: rewards from three sources, probabilistic ensembles, TS-inf,
+MPPI, the collect -> refit -> evaluate loop and its resume, `dynamics check` beyond Reacher."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from motorlab.control.steps import MPC
+from motorlab.dynamics.collection import collect_transitions
+from motorlab.dynamics.model import ForwardModel, device_for
+from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_FIT
+from motorlab.dynamics.train import fit_model
+from motorlab.dynamics.transitions import Transitions
+from motorlab.errors import MotorlabError
+from tests.helpers import USER_PACKAGES, assert_ok, assert_one_line_error, read_summary, run_cli, run_kind
+
+IP = "InvertedPendulum-v5"
+ARM = "userpkg.arm:ArmReach-v0"
+USER_ENV = {"PYTHONPATH": os.pathsep.join([USER_PACKAGES, os.environ.get("PYTHONPATH", "")])}
+TINY_PLAN = dict(horizon=8, population=60, iterations=2, elites=6)
+# the loop on the pendulum, small enough for a test: 3 rounds of 4 episodes, 2 evaluation episodes
+LOOP_ARGS = ["--rounds", "3", "--episodes-per-round", "4", "--eval-episodes", "2", "--ensemble", "3",
+             "--epochs", "20", "--horizon", "8", "--population", "60", "--iterations", "2", "--elites", "6",
+             "--seed", "1"]
+
+
+@pytest.fixture(scope="module")
+def ip_data(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ip-data")
+    data = collect_transitions(IP, 150, workers=1, seed=0, progress=False)
+    data.save(out / "transitions.npz")
+    return out
+
+
+@pytest.fixture(scope="module")
+def ip_model(ip_data, tmp_path_factory):
+    """A probabilistic 3-member ensemble with reward and termination heads, fit on random episodes."""
+    out = tmp_path_factory.mktemp("ip-model")
+    s = run_kind(DYNAMICS_FIT, out, transitions=str(ip_data), ensemble=3, probabilistic=True, learn_reward=True,
+                 learn_termination=True, epochs=40, batch_size=256)
+    return out, s
+
+
+def cli(*args) -> subprocess.CompletedProcess:
+    """The CLI with tests/ on PYTHONPATH: an earlier test of this process imported the user's arm
+    module, and motorlab passes the modules it imported on to the processes it starts."""
+    return run_cli(*args, env=USER_ENV)
+
+
+def random_return(env_id: str, episodes: int, seed: int = 0) -> float:
+    data = collect_transitions(env_id, episodes, workers=1, seed=seed, progress=False)
+    return float(np.bincount(data.episode, weights=data.rewards).mean())
+
+
+# ---- the model --------------------------------------------------------------------------------
+
+
+def test_nll_ensemble_variance_grows_off_the_data():
+    """Trained by Gaussian NLL on states in [-1, 1] with noise std 0.05, each member's predicted variance
+    matches the noise on the data and is larger far from it; so is the members' disagreement."""
+    rng = np.random.default_rng(0)
+    n = 2000
+    s = rng.uniform(-1, 1, (n, 1))
+    a = rng.uniform(-1, 1, (n, 1))
+    s2 = s + 0.3 * np.sin(3 * s) + 0.2 * a + rng.normal(0, 0.05, (n, 1))
+    data = Transitions(states=s, actions=a, next_states=s2, rewards=np.zeros(n), dones=np.zeros(n, bool),
+                       terminated=np.zeros(n, bool), episode=np.arange(n) // 50, goals=np.zeros((n, 0)),
+                       meta={"env_id": "Toy-v0", "state_layout": "observation", "state_labels": ["x"]}).check()
+    model, result = fit_model(data, epochs=50, hidden=(32, 32), ensemble=4, lr=5e-3, batch_size=250,
+                              probabilistic=True, progress=False, threads=1)
+    assert result["valid_nll"] is not None
+
+    def variance(x: float) -> tuple[float, float]:
+        states, actions = torch.full((64, 1), x), torch.linspace(-1, 1, 64)[:, None]
+        with torch.no_grad():
+            _, logvar, _ = model.split(model(states, actions))
+        real = logvar.exp() * model.delta_norm.std ** 2  # back to state units
+        return float(real.mean()), float(model.disagreement(states, actions).mean())
+
+    on_var, on_spread = variance(0.0)
+    off_var, off_spread = variance(4.0)
+    assert 0.5 * 0.05 ** 2 < on_var < 2 * 0.05 ** 2  # the noise it was trained on
+    assert off_var > 3 * on_var
+    assert off_spread > 3 * on_spread
+
+
+def test_trajectory_sampling_keeps_each_particle_on_its_member():
+    """TS-inf: row i always steps with member i % K (deterministic members: exactly that member's mean)."""
+    torch.manual_seed(0)
+    model = ForwardModel(4, 1, (16,), members=3).eval()
+    states, actions = torch.randn(6, 4), torch.randn(6, 1)
+    step = model.step_fn("ts")
+    next_states, reward, end = step(states, actions)
+    assert reward is None and end is None
+    with torch.no_grad():
+        each = model(states, actions)  # (K, 6, S): every member on every row
+    for i in range(6):
+        expected = states[i] + model.delta_norm.inverse(each[i % 3, i])
+        torch.testing.assert_close(next_states[i], expected)
+    mean_next, _, _ = model.step_fn("mean")(states, actions)
+    torch.testing.assert_close(mean_next, model.predict(states, actions))
+
+
+def test_a_model_without_heads_loads_as_before_and_heads_round_trip(ip_model, tmp_path):
+    from motorlab.dynamics.model import load_model
+
+    folder, summary = ip_model
+    model = load_model(folder)
+    assert model.probabilistic and model.heads == ("reward", "termination")
+    assert summary["heads"] == ["reward", "termination"] and summary["valid_termination_accuracy"] > 0.9
+    plain = ForwardModel(4, 1, members=2, meta={"env_id": IP, "state_layout": "observation"})
+    plain.save(tmp_path)
+    arch = json.loads((tmp_path / "model.json").read_text())
+    del arch["architecture"]["probabilistic"], arch["architecture"]["heads"]  # as models were written before
+    (tmp_path / "model.json").write_text(json.dumps(arch))
+    old = load_model(tmp_path)
+    assert not old.probabilistic and old.heads == () and old.plain
+
+
+def test_device_auto_is_the_cpu_without_a_gpu_and_a_missing_gpu_is_one_line():
+    if torch.cuda.is_available():
+        assert device_for("auto").type == "cuda"
+    else:
+        assert device_for("auto").type == "cpu"
+        with pytest.raises(MotorlabError, match="torch sees no CUDA GPU here"):
+            device_for("cuda")
+    with pytest.raises(MotorlabError, match="not a torch device"):
+        device_for("gpu0")
+
+
+# ---- rewards from three sources ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("reward, termination", [("builtin", "auto"), ("learned", "learned")])
+def test_mpc_with_a_builtin_or_learned_reward_balances_longer_than_random(ip_model, tmp_path, reward, termination):
+    folder, _ = ip_model
+    s = run_kind(MPC, tmp_path, env=IP, model=str(folder), episodes=3, reward=reward, termination=termination,
+                 **TINY_PLAN)
+    assert s["reward_source"] == reward
+    assert s["termination_source"] == ("builtin" if reward == "builtin" else "learned")
+    assert s["disagreement_mean"] > 0  # three members: their disagreement is reported, step by step
+    steps, returns = (np.load(tmp_path / "episodes.npz")[k] for k in ("disagreement", "returns"))
+    # the pendulum pays 1 a step, but 0 for the step it falls on
+    assert returns.sum() <= len(steps) <= returns.sum() + len(returns)
+    assert np.isclose(steps.mean(), s["disagreement_mean"])
+    assert s["final_distance_mean"] is None  # no fingertip in the pendulum's state
+    assert s["return_mean"] > 3 * random_return(IP, 20)
+
+
+def test_ts_propagation_with_particles_and_mppi_plan_the_pendulum(ip_model, tmp_path):
+    folder, _ = ip_model
+    s = run_kind(MPC, tmp_path, env=IP, model=str(folder), episodes=2, reward="builtin", propagation="ts",
+                 particles=3, optimizer="mppi", horizon=8, population=60, iterations=2)
+    assert s["propagation"] == "ts" and s["particles"] == 3 and s["temperature"] == 0.5 and s["elites"] is None
+    assert s["return_mean"] > 3 * random_return(IP, 20)
+
+
+@pytest.fixture(scope="module")
+def arm_model(tmp_path_factory):
+    """A model of the user's arm (tests/userpkg/arm.py) with a learned reward head."""
+    from motorlab import user_modules
+
+    out = tmp_path_factory.mktemp("arm")
+    user_modules.import_modules(["userpkg.arm"])
+    data = collect_transitions(ARM, 60, workers=1, seed=0, progress=False)
+    data.save(out / "data" / "transitions.npz")
+    run_kind(DYNAMICS_FIT, out / "model", transitions=str(out / "data"), ensemble=2, learn_reward=True, epochs=40)
+    return out / "model"
+
+
+def test_a_user_reward_function_and_a_learned_reward_plan_the_users_arm(arm_model, tmp_path):
+    random = random_return(ARM, 10)
+    user = run_kind(MPC, tmp_path / "user", env=ARM, model=str(arm_model), episodes=2,
+                    reward="userpkg.arm_reward:reward", **TINY_PLAN)
+    learned = run_kind(MPC, tmp_path / "learned", env=ARM, model=str(arm_model), episodes=2, reward="auto",
+                       **TINY_PLAN)
+    assert user["reward_source"] == "userpkg.arm_reward:reward" and learned["reward_source"] == "learned"
+    assert user["termination_source"] == "none"
+    # ArmReach pays minus the distance to the target every step: planning gets closer than flailing
+    assert user["return_mean"] > random + 5
+    assert learned["return_mean"] > random + 5
+
+
+def test_bad_rewards_and_an_env_without_one_are_one_line_errors(arm_model, tmp_path):
+    done = tmp_path / "done"
+    assert_ok(cli("mpc", ARM, "--model", arm_model, "--episodes", "1", "--horizon", "3", "--population", "20",
+                  "--iterations", "1", "--elites", "2", "--reward", "userpkg.arm_reward:reward", "--out", done))
+    before = (done / "summary.json").read_bytes()
+    wrong_shape = cli("mpc", ARM, "--model", arm_model, "--reward", "userpkg.arm_reward:keepdim_reward",
+                      "--out", done)
+    assert_one_line_error(wrong_shape, "userpkg.arm_reward:keepdim_reward")
+    wrong_signature = cli("mpc", ARM, "--model", arm_model, "--reward", "userpkg.arm_reward:two_arguments",
+                              "--out", done)
+    assert_one_line_error(wrong_signature, "(obs, action, next_obs)")
+    assert (done / "summary.json").read_bytes() == before  # the finished run is untouched
+
+    # a model without a reward head, on an env motorlab has no reward for: the three ways, in one line
+    plain = tmp_path / "plain"
+    assert_ok(cli("dynamics", "fit", arm_model.parent / "data", "--epochs", "2", "--out", plain))
+    missing = cli("mpc", ARM, "--model", plain, "--out", tmp_path / "x")
+    assert_one_line_error(missing, "--reward builtin", "--reward MODULE:FUNCTION", "--reward learned")
+    ts = cli("mpc", ARM, "--model", arm_model, "--reward", "learned", "--propagation", "ts", "--particles", "3",
+                 "--out", tmp_path / "y")
+    assert_one_line_error(ts, "--particles 3", "multiple of 2")
+
+
+# ---- dynamics check on any env -----------------------------------------------------------------------
+
+
+def test_dynamics_check_reports_each_observation_entry_of_an_env_that_terminates(ip_model, tmp_path):
+    folder, _ = ip_model
+    s = run_kind(DYNAMICS_CHECK, tmp_path, model=str(folder), episodes=4)
+    assert s["worst_dimension"] in ("cart position (m)", "pole angle (rad)", "cart velocity (m/s)",
+                                    "pole angular velocity (rad/s)")
+    assert np.isfinite(s["state_nrmse_h1"]) and s["state_nrmse_h1"] < s["state_nrmse_final"] + 1e-9
+    rows = list(csv.reader((tmp_path / "error_by_dimension.csv").open()))
+    assert rows[0][1:] == ["cart position (m)", "pole angle (rad)", "cart velocity (m/s)",
+                           "pole angular velocity (rad/s)"]
+    assert float(rows[1][1]) < 1e-6  # step 0: the true initial state
+    rollouts = np.load(tmp_path / "rollouts.npz")
+    assert (~rollouts["live"]).any()  # random actions topple the pendulum: episodes end at their own step
+    assert (tmp_path / "plots" / "error_by_dimension.png").is_file()
+
+
+# ---- the loop --------------------------------------------------------------------------------------
+
+
+def curve(run_dir: Path) -> list[dict]:
+    return list(csv.DictReader((Path(run_dir) / "curve.csv").open()))
+
+
+DETERMINISTIC = ("round", "env_steps", "episodes", "collect_return_mean", "eval_return_mean", "valid_mse",
+                 "valid_mse_first", "disagreement_mean")
+
+
+@pytest.fixture(scope="module")
+def loop_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("loop") / "run"
+    proc = cli("mbrl", IP, *LOOP_ARGS, "--out", out)
+    assert_ok(proc)
+    return out
+
+
+def test_the_loop_learns_the_pendulum_and_its_model_improves(loop_run):
+    rows = curve(loop_run)
+    assert [int(r["round"]) for r in rows] == [1, 2, 3]
+    steps = [int(r["env_steps"]) for r in rows]
+    assert steps == sorted(steps) and len(set(steps)) == 3
+    first = [float(r["valid_mse_first"]) for r in rows]
+    assert first[1] < first[0]  # the refit model predicts round 1's held-out episodes better
+    evals = [float(r["eval_return_mean"]) for r in rows]
+    assert evals[-1] > evals[0] and evals[-1] > 3 * float(rows[0]["collect_return_mean"])
+    s = read_summary(loop_run)
+    assert s["rounds"] == 3 and s["env_steps"] == steps[-1] and s["reward_source"] == "builtin"
+    for r in range(3):
+        folder = loop_run / "rounds" / f"{r:02d}"
+        record = json.loads((folder / "round.json").read_text())
+        assert record["record"]["env_steps"] == steps[r]
+        assert (folder / "transitions.npz").is_file() and (folder / "model" / "model.json").is_file()
+        assert record["collected_with"] == "random actions" if r == 0 else record["collected_with"]["horizon"] == 8
+    assert (loop_run / "model" / "model.json").is_file() and (loop_run / "plots" / "learning_curve.png").is_file()
+
+
+def test_resume_after_sigkill_mid_round_loses_nothing(loop_run, tmp_path):
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "motorlab", "mbrl", IP, *LOOP_ARGS, "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                            env={**os.environ, **USER_ENV})
+    cut = out / "rounds" / "01" / "transitions.npz"  # round 2 collected, not yet refit or evaluated
+    deadline = time.monotonic() + 120
+    while not cut.is_file() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not (out / "summary.json").exists() and not (out / "rounds" / "02").exists()
+
+    again = cli("mbrl", IP, *LOOP_ARGS, "--out", out)  # without --resume: refused, nothing touched
+    assert_one_line_error(again, "--resume")
+    changed = cli("mbrl", IP, *LOOP_ARGS, "--horizon", "9", "--out", out, "--resume")
+    assert_one_line_error(changed, "horizon")
+    assert_ok(cli("mbrl", IP, *LOOP_ARGS, "--out", out, "--resume"))
+    assert read_summary(out)["resumed_rounds"] >= 1
+    resumed, whole = curve(out), curve(loop_run)
+    assert [{k: r[k] for k in DETERMINISTIC} for r in resumed] == [{k: r[k] for k in DETERMINISTIC} for r in whole]
+
+
+def test_the_loop_runs_on_a_users_env_with_a_users_reward(tmp_path):
+    out = tmp_path / "arm"
+    proc = cli("mbrl", ARM, "--reward", "userpkg.arm_reward:reward", "--rounds", "2", "--episodes-per-round", "3",
+               "--eval-episodes", "1", "--ensemble", "2", "--epochs", "10", "--horizon", "5", "--population", "30",
+               "--iterations", "1", "--elites", "4", "--out", out)
+    assert_ok(proc)
+    s = read_summary(out)
+    assert s["reward_source"] == "userpkg.arm_reward:reward" and s["env_steps"] == 2 * 3 * 100
+    assert "userpkg.arm" in json.loads((out / "environment.json").read_text())["imports"]

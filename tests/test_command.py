@@ -1,0 +1,310 @@
+"""Every command as an object (motorlab.command): what each prints of a result (`report`, on
+summaries built by hand), the settings quirks the command line relied on (evaluate's env from
+the run folder, zeroshot's env ids among the runs, compare's --group, train's --config and
+--resume), the export command's checks, and the recipes listing (every bundled recipe, those
+that need --set too). No training, no env stepping: fast."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import pytest
+from rich.console import Console
+
+from motorlab.command import Command, NoFolder
+from motorlab.control.steps import MBRL, MPC, MbrlSummary, MpcSummary
+from motorlab.dynamics.steps import (
+    DYNAMICS_CHECK,
+    DYNAMICS_COLLECT,
+    DYNAMICS_FIT,
+    DynamicsCheckSummary,
+    DynamicsCollectSummary,
+    DynamicsFitSummary,
+)
+from motorlab.errors import MotorlabError
+from motorlab.evaluation.steps import EVALUATE, ZEROSHOT, EvaluateSummary, ZeroshotSummary
+from motorlab.export_command import EXPORT, Exported
+from motorlab.kinds import KINDS
+from motorlab.recipe_list import RECIPES
+from motorlab.recipes import bundled
+from motorlab.report.commands import PLOT, REPORT
+from motorlab.report.steps import COMPARE, VIDEO, VideoSummary
+from motorlab.rl.steps import RESUMED, TRAIN, TrainInvocation, TrainSummary
+from motorlab.robustness_curves.steps import ROBUSTNESS, RobustnessSummary
+from motorlab.settings import Summary
+from motorlab.synergies.commands import EXPORT_SKLEARN, IMPORT_SKLEARN
+from motorlab.synergies.steps import COLLECT, FIT, VAF, CollectSummary, FitSummary, VafSummary
+
+pytestmark = pytest.mark.fast
+
+RUN = Path("runs/x")
+COMMANDS: list[Command] = [*KINDS.values(), EXPORT, REPORT, PLOT, IMPORT_SKLEARN, EXPORT_SKLEARN, RECIPES]
+
+
+def printed(cmd: Command, result, settings) -> str:
+    console = Console(file=io.StringIO(), width=300)
+    cmd.report(result, settings, console)
+    return console.file.getvalue()
+
+
+def run_folder(path: Path, env: dict) -> Path:
+    """A finished run folder as far as reading its settings goes: config.toml and summary.json."""
+    import tomli_w
+
+    path.mkdir(parents=True)
+    (path / "config.toml").write_text(tomli_w.dumps({"algo": "ppo", "env": env}))
+    (path / "summary.json").write_text("{}")
+    return path
+
+
+# ---- every command's shape ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("cmd", COMMANDS, ids=lambda c: c.name)
+def test_every_command_describes_itself(cmd):
+    first = cmd.help().splitlines()[0]
+    assert first.endswith("."), first  # the short help in the command list: one whole sentence
+    assert cmd.examples and all(e.startswith(("motorlab ", "MUJOCO_GL=egl motorlab ")) for e in cmd.examples)
+    for name in cmd.arguments:  # positional arguments are settings fields, or the flat env id
+        assert name in cmd.settings.model_fields or name in getattr(cmd.settings, "aliases", ()), name
+    for name in cmd.flags:
+        assert name in cmd.settings.model_fields, name
+
+
+def test_command_words():
+    assert [c.command for c in (IMPORT_SKLEARN, EXPORT_SKLEARN, FIT, DYNAMICS_FIT, EXPORT, RECIPES)] == [
+        "synergies import-sklearn", "synergies export-sklearn", "synergies fit", "dynamics fit", "export", "recipes"]
+    assert EXPORT.out_required and REPORT.invocation is NoFolder and VIDEO.out_help.startswith("Folder for the videos")
+    assert TRAIN.invocation is TrainInvocation and TRAIN.flags["hyperparams"] == ("--set",)
+    assert FIT.flags["n_synergies"] == ("--n-synergies", "--n")
+
+
+# ---- what each kind prints --------------------------------------------------------------------
+
+TRAINED = dict(run_dir=RUN, eval_return_mean=1000.0, eval_return_min=1000.0, eval_episodes=10, timesteps=12_345,
+               wall_seconds=3.25, steps_to_success=4_000, until_solved=True, resumed_from=None, numerical_faults=0)
+
+
+def test_train_prints_its_run():
+    s = TrainSummary.model_construct(**TRAINED)
+    out = printed(TRAIN, s, TRAIN.make(env="InvertedPendulum-v5"))
+    assert "done runs/x: return 1000.0 (min 1000) over 10 episodes, 12,345 steps, 3.2 s, steps_to_success 4,000" in out
+    unsolved = TrainSummary.model_construct(**{**TRAINED, "steps_to_success": None})
+    assert out.replace(", steps_to_success 4,000", ", not solved") == printed(TRAIN, unsolved, TRAIN.make())
+    budget = TrainSummary.model_construct(**{**TRAINED, "steps_to_success": None, "until_solved": False})
+    assert printed(TRAIN, budget, TRAIN.make()).rstrip().endswith("3.2 s")
+
+
+def test_train_prints_a_resumed_run():
+    s = TrainSummary.model_construct(**{**TRAINED, "resumed_from": 6_000})
+    object.__setattr__(s, RESUMED, True)
+    assert "done runs/x: resumed at 6,000 steps; return 1000.0 over 10 episodes, 12,345 steps" in printed(
+        TRAIN, s, TRAIN.make())
+    worker = TrainSummary.model_construct(**{**TRAINED, "resumed_from": 6_000})  # resumed without TRAIN.execute
+    assert "resumed at 6,000 steps" in printed(TRAIN, worker, TRAIN.make())
+    fresh = TrainSummary.model_construct(**TRAINED)
+    object.__setattr__(fresh, RESUMED, True)
+    assert "no checkpoint yet, started over; return 1000.0" in printed(TRAIN, fresh, TRAIN.make())
+
+
+def test_faults_are_warned_on_stderr(capsys):
+    s = TrainSummary.model_construct(**{**TRAINED, "numerical_faults": 2})
+    printed(TRAIN, s, TRAIN.make())
+    assert "warning: 2 episodes ended on a numerical fault" in capsys.readouterr().err
+
+
+def test_evaluate_prints_a_table():
+    s = EvaluateSummary.model_construct(run_dir=RUN, episodes=10, return_mean=950.5, return_std=3.0, return_min=940.0,
+                                        return_max=1000.0, success_rate=0.9, episode_length_mean=950, falls=1)
+    out = printed(EVALUATE, s, EVALUATE.make(policy="pid", env="InvertedPendulum-v5", delay=0.2))
+    assert "pid on InvertedPendulum-v5" in out and "950.5 ± 3.0" in out and "90%" in out and "falls" in out
+    assert "written: runs/x/summary.json" in out
+
+
+@pytest.mark.parametrize("cmd, summary, settings, expected", [
+    (ZEROSHOT, ZeroshotSummary.model_construct(run_dir=RUN), {"runs": ["a"], "envs": ["b"]},
+     ["written: runs/x/summary.json, runs/x/plots/zeroshot.png"]),
+    (ROBUSTNESS, RobustnessSummary.model_construct(run_dir=RUN), {"policies": ["pid"], "vary": ["delay=0:0.2:3"]},
+     ["written: runs/x/summary.json, curves.csv, plots/robustness.png"]),
+    (VIDEO, VideoSummary.model_construct(run_dir=RUN, videos=["v/episode_0.mp4", "v/episode_1.mp4"],
+                                         returns=[12.0, 13.5]), {"run": "r"},
+     ["written: v/episode_0.mp4  (return 12.0)", "written: v/episode_1.mp4  (return 13.5)"]),
+    (COMPARE, Summary(run_dir=RUN), {"groups": {"A": ["a"]}}, ["written: runs/x/plots/learning_curves.png"]),
+    (COLLECT, CollectSummary.model_construct(run_dir=RUN, episodes_kept=4, threshold=12.345, samples=2000,
+                                             n_signals=39, signal="act"), {"run": "r"},
+     ["kept 4 episodes (return >= 12.3), 2,000 samples x 39 muscle activations (act) -> runs/x/activations.npz"]),
+    (VAF, VafSummary.model_construct(run_dir=RUN, method="pca", samples=2000, n_muscles=3, vaf=[0.5, 0.85, 1.0],
+                                     n_for_threshold=2), {"activations": "a.npz"},
+     ["VAF (pca), 2,000", "85.0% <-", "smallest N with VAF >= 80%: 2; written: runs/x/vaf.png"]),
+    (FIT, FitSummary.model_construct(run_dir=RUN, n_synergies=5, method="pca-ica", n_muscles=39, vaf=0.8123,
+                                     sar="runs/x/sar.npz"), {"activations": "a.npz", "n_synergies": 5},
+     ["5 synergies (pca-ica) for 39 muscles, VAF 81.2% -> runs/x/sar.npz"]),
+    (DYNAMICS_COLLECT, DynamicsCollectSummary.model_construct(
+        run_dir=RUN, transitions=50_000, state_size=8, action_size=2, transitions_per_second=123456.7,
+        simulator="closed-form", numerical_faults=0), {"env": "Reacher-v5"},
+     ["50,000 transitions (8 state, 2 action entries) at 123,457/s via closed-form -> runs/x/transitions.npz"]),
+    (DYNAMICS_FIT, DynamicsFitSummary.model_construct(run_dir=RUN, valid_mse=0.00123, epochs_run=7,
+                                                      wall_seconds=1.25), {"transitions": "t.npz"},
+     ["valid_mse 1.23e-03 (normalized) after 7 epochs, 1.2 s -> runs/x/model.json, plots/loss.png"]),
+    (DYNAMICS_CHECK, DynamicsCheckSummary.model_construct(
+        run_dir=RUN, tip_error_mean_h1=0.0012, tip_error_mean_h5=0.004, state_nrmse_h1=0.1, worst_dimension="qvel0",
+        worst_dimension_nrmse=0.25, worst_dimension_horizon=10), {"model": "m"},
+     ["open-loop error: h1 1.2 mm, h5 4.0 mm", "worst entry: qvel0 (0.250 after 10 steps); written: "
+      "runs/x/error_by_dimension.csv"]),
+    (MPC, MpcSummary.model_construct(run_dir=RUN, return_mean=-3.61, return_std=0.5, final_distance_mean=0.0123,
+                                     disagreement_mean=None, plan_ms_median=4.2, episodes=5, reward_source="builtin"),
+     {"env": "Reacher-v5", "model": "m"},
+     ["return -3.61 ± 0.50, final distance 12.3 mm (mean), planning 4.20 ms/step (median) over 5 episodes "
+      "(builtin reward) -> runs/x"]),
+    (MBRL, MbrlSummary.model_construct(run_dir=RUN, final_return_mean=250.0, resumed_rounds=2, rounds=5,
+                                       env_steps=5000, plan_ms_median=2.5), {"env": "InvertedPendulum-v5"},
+     ["return 250.00 after 5 rounds, 5,000 env steps (2 rounds were done before); planning 2.5 ms/step -> "
+      "runs/x/curve.csv, plots/learning_curve.png"]),
+], ids=lambda x: x.name if isinstance(x, Command) else None)
+def test_each_kind_prints_what_it_wrote(cmd, summary, settings, expected):
+    out = printed(cmd, summary, cmd.settings.model_construct(**settings))
+    for line in expected:
+        assert line in out, out
+
+
+def test_the_other_commands_print_what_they_wrote():
+    onnx = {"algo": "ppo", "history": 1, "max_abs_error": 2e-7, "checked_observations": 100, "onnx": "d/policy.onnx",
+            "sidecar": "d/policy.onnx.json"}
+    assert "exported PPO policy to ONNX (history 1, max |onnxruntime - torch| 2e-07 on 100 observations) -> " \
+           "d/policy.onnx, d/policy.onnx.json" in printed(EXPORT, Exported("onnx", onnx), None)
+    run = printed(EXPORT, Exported("run", {"exported_files": ["a", "b"], "run_dir": "share/ppo"}), None)
+    assert "exported 2 files (no pickle) -> share/ppo" in run
+    zipped = {"algo": "sac", "num_timesteps": 20000, "observation_normalized": True, "run_dir": "runs/sac"}
+    no_env = EXPORT.settings.model_construct(env=None)
+    assert "SAC policy (20,000 steps, normalized observations) -> runs/sac/policy.json, policy.safetensors; " \
+           "evaluate it with --env ENV_ID" in printed(EXPORT, Exported("zip", zipped), no_env)
+    assert printed(REPORT, Path("r/report.html"), None).strip() == "written: r/report.html"
+    assert printed(PLOT, [Path("p/a.png"), Path("p/b.png")], None).split() == ["written:", "p/a.png", "written:",
+                                                                                "p/b.png"]
+
+    class Sar:
+        n_synergies, n_muscles, metadata = 4, 12, {"import_check_max_abs_error": 3e-9}
+
+    out = printed(IMPORT_SKLEARN, Sar(), IMPORT_SKLEARN.make(folder="f", out="sar.npz"))
+    assert "4 synergies x 12 muscles -> sar.npz (decode matches scikit-learn, max abs error 3.0e-09)" in out
+
+    class Result:
+        n_synergies, n_muscles, max_abs_error = 5, 12, 1e-8
+
+    out = printed(EXPORT_SKLEARN, Result(), EXPORT_SKLEARN.make(sar="s.npz", out="folder"))
+    assert "5 synergies x 12 muscles -> folder (MyoSuite's chain matches motorlab's decode" in out
+
+
+# ---- settings the command line gave by hand before -------------------------------------------
+
+def test_evaluate_acts_in_the_run_folders_env(tmp_path):
+    run = run_folder(tmp_path / "ppo", {"id": "Hopper-v5", "delay": 0.1, "history": 3, "reward": "alive",
+                                        "kwargs": {"a": 1}})
+    s = EVALUATE.make(policy=str(run), delay=0.2, env_kwargs={"b": 2})
+    assert (s.env.id, s.env.delay, s.env.history, s.env.reward, s.env.kwargs) == ("Hopper-v5", 0.2, 3, None,
+                                                                                  {"a": 1, "b": 2})
+    assert EVALUATE.make(policy=str(run), env="Walker2d-v5").env.id == "Walker2d-v5"
+    assert EVALUATE.make(policy="pid", env="Reacher-v5").env.id == "Reacher-v5"
+    with pytest.raises(MotorlabError, match=r"no env for 'pid': give --env ENV_ID"):
+        EVALUATE.make(policy="pid")
+    with pytest.raises(MotorlabError, match="neither a run folder nor a built-in controller"):
+        EVALUATE.make(policy=str(tmp_path / "nothing"), env="Hopper-v5")
+    # a recipe's "@step" is the study's to resolve
+    assert EVALUATE.validate({"policy": "@ppo", "env": "Hopper-v5"}).policy == "@ppo"
+
+
+def test_zeroshot_takes_env_ids_given_among_the_runs(tmp_path):
+    run = run_folder(tmp_path / "ppo", {"id": "InvertedPendulum-v5"})
+    s = ZEROSHOT.make(runs=[str(run), "InvertedDoublePendulum-v5"], envs=["Hopper-v5,Walker2d-v5"])
+    assert s.runs == [str(run)] and s.envs == ["Hopper-v5", "Walker2d-v5", "InvertedDoublePendulum-v5"]
+    with pytest.raises(MotorlabError, match=r"give at least one run folder and one env \(--envs ID ...\)\."):
+        ZEROSHOT.make(runs=["Hopper-v5"], envs=["Walker2d-v5"])
+    with pytest.raises(MotorlabError, match="give at least one run folder and one env"):
+        ZEROSHOT.make(runs=[str(run)])
+
+
+def test_compare_reads_groups_as_the_command_line_writes_them():
+    expected = {"SAR-RL": ["runs/a", "runs/b"], "RL-E2E": ["runs/c"]}
+    assert COMPARE.make(groups=["SAR-RL=runs/a,runs/b", "RL-E2E=runs/c"]).groups == expected
+    assert COMPARE.make(groups={"SAR-RL": "runs/a,runs/b", "RL-E2E": ["runs/c"]}).groups == expected
+    for bad in (["SAR-RL"], ["=runs/a"], ["SAR-RL="], {"SAR-RL": ""}):
+        with pytest.raises(MotorlabError, match=r"write LABEL=RUN_DIR\[,RUN_DIR\.\.\.\], e\.g\. --group "
+                                                r"SAR-RL=runs/a,runs/b\."):
+            COMPARE.make(groups=bad)
+
+
+def test_robustness_takes_env_settings_flat():
+    s = ROBUSTNESS.make(policies=["pid"], vary=["push-force=0:40:5"], env="InvertedPendulum-v5", push_body="pole",
+                        env_kwargs={"reset_noise_scale": 0.1})
+    assert s.env == {"id": "InvertedPendulum-v5", "push_body": "pole", "kwargs": {"reset_noise_scale": 0.1}}
+
+
+# ---- train: --config, --resume, the env id ------------------------------------------------------
+
+def test_train_needs_an_env_id_or_a_config(tmp_path):
+    with pytest.raises(MotorlabError, match=r"give an env id \(motorlab train InvertedPendulum-v5\) or --config"):
+        TRAIN.execute(TRAIN.make(timesteps=100), TRAIN.how(out=tmp_path / "run"), None, False)
+    assert not (tmp_path / "run").exists()
+
+
+def test_train_config_merges_the_given_fields(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "best.toml").write_text("lr = \"1e-3\"\n")
+    s = TRAIN.make(delay=0.3, seed=7, preset_file="best.toml", hyperparams={"n_steps": 64})
+    assert s.preset_file == str(tmp_path / "best.toml") and s.lr == "1e-3"  # resolved where it was given
+    config = run_folder(tmp_path / "old", {"id": "Hopper-v5", "delay": 0.1, "history": 4})
+    merged = TRAIN.validate(TRAIN.with_config(config / "config.toml", TRAIN.given(s)))
+    assert (merged.env.id, merged.env.delay, merged.env.history, merged.seed) == ("Hopper-v5", 0.3, 4, 7)
+    assert merged.hyperparams == {"n_steps": 64} and merged.lr == "1e-3"
+    with pytest.raises(MotorlabError, match="is missing; give the config.toml of a motorlab train run"):
+        TRAIN.with_config(tmp_path / "none.toml", {})
+
+
+def test_train_resume_refuses_what_it_cannot_do(tmp_path):
+    unfinished = tmp_path / "unfinished"
+    unfinished.mkdir()
+    with pytest.raises(MotorlabError, match="--overwrite replaces it; give one of them"):
+        TRAIN.how(resume=unfinished, overwrite=True).mode()
+    with pytest.raises(MotorlabError, match="drop the other settings"):
+        TRAIN.execute(TRAIN.make(seed=3), TRAIN.how(resume=unfinished), None, False)
+    with pytest.raises(MotorlabError, match="drop the other settings"):
+        TRAIN.execute(TRAIN.make(), TRAIN.how(resume=unfinished, out=tmp_path / "x"), None, False)
+    with pytest.raises(MotorlabError, match="is not a training run folder"):
+        TRAIN.execute(TRAIN.make(progress=False), TRAIN.how(resume=unfinished), None, False)
+    finished = run_folder(tmp_path / "finished", {"id": "InvertedPendulum-v5"})
+    with pytest.raises(MotorlabError, match="finished already"):
+        TRAIN.execute(TRAIN.make(), TRAIN.how(resume=finished), None, False)
+
+
+# ---- export's checks, and the recipes listing ---------------------------------------------------
+
+def test_export_refuses_zip_options_where_they_do_not_apply(tmp_path):
+    with pytest.raises(MotorlabError, match=r"^--onnx exports a run folder's policy; --trust, --env"):
+        EXPORT.make(source=tmp_path, onnx=True, trust=True)
+    with pytest.raises(MotorlabError, match="is a run folder: it is exported as it is, without --trust"):
+        EXPORT.make(source=tmp_path, env="Hopper-v5")
+    assert EXPORT.make(source=tmp_path / "model.zip", trust=True, env="Hopper-v5").trust
+    with pytest.raises(MotorlabError, match="give --out"):
+        EXPORT.execute(EXPORT.make(source=tmp_path), EXPORT.how(), None, False)
+
+
+def test_recipes_lists_every_bundled_recipe_even_those_needing_inputs():
+    console = Console(file=io.StringIO(), width=400)
+    settings = RECIPES.make()
+    RECIPES.report(RECIPES.invoke(settings, RECIPES.how(), console), settings, console)
+    lines = console.file.getvalue().splitlines()
+    assert [line.split(":")[0] for line in lines] == sorted(bundled())
+    assert any(line.startswith("sar-hand-published: ") and line.endswith(" steps)") for line in lines)
+
+
+def test_recipes_lists_kinds_and_the_schema():
+    console = Console(file=io.StringIO(), width=400)
+    settings = RECIPES.make(kinds=True)
+    RECIPES.report(RECIPES.execute(settings, RECIPES.how(), console, False), settings, console)
+    out = console.file.getvalue()
+    assert all(f"{name}: " in out for name in KINDS) and "timesteps = 100000" in out
+    console = Console(file=io.StringIO(), width=40)
+    settings = RECIPES.make(json_schema=True)
+    RECIPES.report(RECIPES.execute(settings, RECIPES.how(), console, False), settings, console)
+    assert "discriminator" in json.loads(console.file.getvalue())
