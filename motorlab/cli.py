@@ -41,9 +41,9 @@ stdout = Console(width=None if sys.stdout.isatty() else 150)
 
 
 def run_command(cmd: Command, given: Given) -> None:
-    """What every command does: settings and invocation from what was given, run, print."""
-    settings = cmd.make(**given.fields)
+    """What every command does: the invocation, the settings under what it brings (--config), run, print."""
     how = cmd.how(**given.how)
+    settings = cmd.make(how, **given.fields)
     result = cmd.invoke(settings, how, console=stdout)
     cmd.report(result, settings, stdout)
 

@@ -114,16 +114,30 @@ class Command(Generic[S]):
         """Settings from recipe fields, flags or keyword arguments (pydantic.ValidationError when wrong)."""
         return self.settings.model_validate(fields)
 
-    def make(self, **fields: Any) -> S:
+    def make(self, how: Any = None, /, **fields: Any) -> S:
         """Settings from keyword arguments (None: the default), as the CLI and the Python API give them.
+
+        `how`, the invocation they run under (`how(...)`), where there is one: what it brings
+        (train's --config, --resume) is laid under the given fields before the model judges them
+        (`fields_for`), so a flag is judged with the settings it joins, once.
 
         Raises:
             MotorlabError: one line naming the option and what is wrong with it.
         """
+        given = {k: v for k, v in fields.items() if v is not None}
         try:
-            return self.validate({k: v for k, v in fields.items() if v is not None})
+            return self.validate(given if how is None else self.fields_for(how, given))
         except ValidationError as e:
             raise MotorlabError(option_error(e)) from None
+
+    def fields_for(self, how: Any, given: dict[str, Any]) -> dict[str, Any]:
+        """The fields `make` validates: `given` (flat, as given), over what the invocation `how`
+        brings (a step kind's --config: a run's config.toml). Nothing is validated yet.
+
+        Raises:
+            MotorlabError: what the invocation names cannot be read, or does not go with `given`.
+        """
+        return given
 
     def how(self, **options: Any) -> Any:
         """The invocation options from keyword arguments (None: the default)."""

@@ -5,9 +5,9 @@ Every field of a command's settings model is an option named after it (`n_synerg
 names in `arguments` are positional. The flat env settings of a model that builds an env
 (`EnvSettings.aliases`: env, delay, history, --env-arg, the disturbances) are options too, with
 EnvConfig's help. The invocation model (command.Invocation: --out, --overwrite, --track, ...)
-adds its fields the same way. The values given become keyword arguments of `Command.make` (the
-settings) and `Command.how` (the invocation): the model checks them, so a sweep's target, a
-script and the command line are judged alike.
+adds its fields the same way. The values given become keyword arguments of `Command.how` (the
+invocation) and `Command.make` (the settings, under what the invocation brings: train's --config):
+the model checks them, so a sweep's target, a script and the command line are judged alike.
 
 Plain Click rather than Typer: a command is built from data here, not from a function's signature,
 and Click's help never cuts an option's name (at 80 columns a long one moves its help to the next
@@ -115,6 +115,8 @@ def parameters(cmd: Command) -> list[click.Parameter]:
     for name, info in fields:
         if name == "env" and env:
             for alias, (env_info, text) in env.items():
+                if alias == "env" and info.is_required():  # a kind that needs the env id: no default id
+                    env_info = FieldInfo(annotation=str)
                 params.append(_parameter(cmd, alias, env_info, text))
             continue
         params.append(_parameter(cmd, name, info, help_text(model, name)))

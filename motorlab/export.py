@@ -21,7 +21,7 @@ from typing import Any
 
 import gymnasium as gym
 
-from motorlab.envs import EnvConfig, make_env
+from motorlab.envs import EnvConfig, describe_env, env_record, make_env
 from motorlab.envs.spaces import describe_space, flat_space, is_dict, obs_layout
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.policies import (
@@ -65,7 +65,7 @@ def export_run(source: Path, out: Path) -> dict[str, Any]:
     return {**summary, "run_dir": str(run)}
 
 
-def export_sb3_zip(zip_path: Path, out: Path, trust: bool, env_id: str | None = None,
+def export_sb3_zip(zip_path: Path, out: Path, trust: bool, env: str | EnvConfig | None = None,
                    vecnormalize: Path | None = None, algo: str | None = None) -> dict[str, Any]:
     """Convert an SB3 model zip (and its VecNormalize pickle) into a pickle-free policy folder.
 
@@ -73,8 +73,9 @@ def export_sb3_zip(zip_path: Path, out: Path, trust: bool, env_id: str | None = 
         zip_path: a file written by SB3's `model.save`.
         out: the folder to write (policy.json, policy.safetensors, config.toml, summary.json).
         trust: must be True: loading the zip unpickles it, which runs code from the file.
-        env_id: the env the policy acts in; recorded so `motorlab evaluate OUT` needs no --env,
-            and checked against the policy's observation and action spaces.
+        env: the env the policy acts in (an id, or an EnvConfig: its id, arguments, history and
+            synergies); recorded in config.toml so `motorlab evaluate OUT` needs no --env, and
+            checked against the policy's observation and action spaces.
         vecnormalize: the pickle `VecNormalize.save` wrote, if the policy was trained on
             normalized observations (its statistics go into policy.safetensors).
         algo: an SB3 algorithm of motorlab.rl.algos, e.g. ppo (also for A2C), sac, tqc (default: read from
@@ -85,6 +86,7 @@ def export_sb3_zip(zip_path: Path, out: Path, trust: bool, env_id: str | None = 
             an env whose spaces do not match.
     """
     zip_path = Path(zip_path)
+    cfg = EnvConfig(id=env) if isinstance(env, str) else env
     algo = algo or _algo_in_zip(zip_path)
     if vecnormalize is not None and not Path(vecnormalize).is_file():
         raise MotorlabError(f"--vecnormalize {vecnormalize} does not exist; give the file VecNormalize.save wrote.")
@@ -95,15 +97,15 @@ def export_sb3_zip(zip_path: Path, out: Path, trust: bool, env_id: str | None = 
     _check_distinct(zip_path.parent, out)
     model = _load_zip(zip_path, algo)  # reached only with trust
     vecnorm = _load_vecnormalize(Path(vecnormalize)) if vecnormalize is not None else None
-    _check_exportable(model, env_id, vecnorm)
+    _check_exportable(model, cfg, vecnorm)
 
     run = prepare_run_dir(out, "export")
     save_sb3_policy(run, model, algo, vecnorm)
-    if env_id:
-        write_config(run, {"env": {"id": env_id}})
-    summary = {"exported_from": str(zip_path.resolve()), "algo": algo, "env_id": env_id,
+    if cfg is not None:
+        write_config(run, {"env": env_record(cfg)})
+    summary = {"exported_from": str(zip_path.resolve()), "algo": algo, "env_id": cfg.id if cfg else None,
                "num_timesteps": int(model.num_timesteps), "observation_normalized": vecnorm is not None,
-               "exported_files": ["policy.json", "policy.safetensors"] + ([CONFIG] if env_id else [])}
+               "exported_files": ["policy.json", "policy.safetensors"] + ([CONFIG] if cfg else [])}
     write_summary(run, summary)
     return {**summary, "run_dir": str(run)}
 
@@ -162,7 +164,7 @@ def _load_vecnormalize(path: Path):
     return vecnorm
 
 
-def _check_exportable(model, env_id: str | None, vecnorm) -> None:
+def _check_exportable(model, cfg: EnvConfig | None, vecnorm) -> None:
     if policy_class_name(model.policy) is None:
         raise MotorlabError(f"the policy is a {type(model.policy).__name__}; motorlab exports MLP policies "
                             f"({', '.join(policy_classes())}).")
@@ -185,15 +187,15 @@ def _check_exportable(model, env_id: str | None, vecnorm) -> None:
         raise MotorlabError("the VecNormalize statistics are of one array, the policy's observations a Dict; give the "
                             "file saved with this model.")
     normalization(vecnorm, obs)  # every key normalized, or one line
-    if env_id:
-        env = make_env(EnvConfig(id=env_id), shaped=False)  # its observations flat, as the policy will be given them
+    if cfg is not None:
+        env = make_env(cfg, shaped=False)  # its observations flat (and stacked, --history), as the policy is given them
         try:
             for name, have, want in (("observation", env.observation_space, flat_space(obs)),
                                      ("action", env.action_space, act)):
                 if have.shape != want.shape or describe_space(have) != describe_space(want):
                     what = ((f"of shape {have.shape}", want.shape) if isinstance(have, gym.spaces.Box)
                             and isinstance(want, gym.spaces.Box) else (describe_space(have), describe_space(want)))
-                    raise MotorlabError(f"{env_id} has {name}s {what[0]}, the policy {what[1]}; give the env it "
-                                        "was trained on.")
+                    raise MotorlabError(f"{describe_env(cfg)} has {name}s {what[0]}, the policy {what[1]}; give "
+                                        "the env it was trained on (its --history and --sar too).")
         finally:
             env.close()

@@ -6,14 +6,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 from pydantic import Field, model_validator
 from rich.console import Console
 
 from motorlab.command import Command, Invocation
+from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, option_name
 from motorlab.errors import MotorlabError
-from motorlab.settings import Settings
 
 
 def _algo_help() -> str:
@@ -24,14 +24,25 @@ def _algo_help() -> str:
     return f"The SB3 algorithm of the zip: {', '.join(names)} (default: read from the zip)"
 
 
-class ExportSettings(Settings):
+# What an SB3 zip's policy needs of its env to act (the robustness curves' STRUCTURE): its id, arguments,
+# observation history and synergy space; delays and disturbances are how it is tested, `evaluate`'s.
+ZIP_ENV_KEYS = frozenset({"env", "history", "sar", "phi", "env_kwargs"})
+
+
+class ExportSettings(EnvSettings):
     """What `motorlab export` writes, and from what."""
 
+    aliases: ClassVar[frozenset[str]] = ZIP_ENV_KEYS
+    env_refused: ClassVar[dict[str, str]] = {
+        field: "an exported zip records the env its policy acts in (its id, arguments, history and synergies); "
+               "give delays and disturbances to `motorlab evaluate` instead."
+        for key, field in ENV_KEYS.items() if key not in ZIP_ENV_KEYS}
     source: Path = Field(description="A run folder, or an SB3 zip written by model.save")
     trust: bool = Field(False, description="Allow unpickling an SB3 zip / VecNormalize file (they can run code); "
                         "needed for a zip only")
-    env: str | None = Field(None, description="Env id an SB3 zip's policy acts in (checked, and recorded so that "
-                            "evaluate needs no --env)")
+    env: EnvConfig | None = Field(None, description="The env an SB3 zip's policy acts in: its id, arguments, "
+                                  "history and synergies (checked against the policy, and recorded so that "
+                                  "evaluate needs no --env)")
     vecnormalize: Path | None = Field(None, description="VecNormalize.save's file, if the zip's policy saw "
                                       "normalized observations")
     algo: str | None = Field(None, description=_algo_help())
@@ -41,13 +52,19 @@ class ExportSettings(Settings):
 
     @model_validator(mode="after")
     def _zip_options_for_zips(self) -> ExportSettings:
+        if self.env is not None and "id" not in self.env.model_fields_set:
+            given = ", ".join(option_name(field) for field in ENV_KEYS.values() if field in self.env.model_fields_set)
+            raise MotorlabError(f"{given} describe{'s' * (',' not in given)} the env of an SB3 zip's policy: give its "
+                                "id too, with --env ENV_ID.")
         zip_options = self.env or self.vecnormalize or self.algo or self.trust
         if self.onnx and zip_options:
-            raise MotorlabError("--onnx exports a run folder's policy; --trust, --env, --vecnormalize and --algo are "
-                                "for SB3 zips (export the zip to a folder first, then that folder with --onnx).")
+            raise MotorlabError("--onnx exports a run folder's policy; --trust, --env (and its --history, --sar, "
+                                "--phi, --env-arg), --vecnormalize and --algo are for SB3 zips (export the zip to a "
+                                "folder first, then that folder with --onnx).")
         if not self.onnx and zip_options and self.source.is_dir():
-            raise MotorlabError(f"{self.source} is a run folder: it is exported as it is, without --trust, --env, "
-                                "--vecnormalize or --algo (those are for SB3 zips).")
+            raise MotorlabError(f"{self.source} is a run folder: it is exported as it is, without --trust, --env (and "
+                                "its --history, --sar, --phi, --env-arg), --vecnormalize or --algo (those are for SB3 "
+                                "zips).")
         return self
 
 
@@ -77,6 +94,7 @@ class ExportCommand(Command[ExportSettings]):
     examples = (
         "motorlab export runs/ppo --out share/ppo   # only the files safe to send",
         "motorlab export ppo_pendulum.zip --trust --env InvertedPendulum-v5 --out runs/imported",
+        "motorlab export ppo_history.zip --trust --env InvertedPendulum-v5 --history 4 --out runs/imported",
         "motorlab export sac.zip --vecnormalize vec_normalize.pkl --trust --env Hopper-v5 --out runs/sac",
         "motorlab export runs/ppo --onnx --out deploy/ppo   # policy.onnx for a robot (docs/deployment.md)",
     )

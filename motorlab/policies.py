@@ -26,8 +26,8 @@ from typing import Any, Protocol
 import gymnasium as gym
 import numpy as np
 
-from motorlab.control.lqr import LQRPolicy
-from motorlab.control.pid import pid_for_env
+from motorlab.controllers.lqr import LQRPolicy
+from motorlab.controllers.pid import pid_for_env
 from motorlab.envs.spaces import (
     KeySlice,
     decode_space,
@@ -40,7 +40,7 @@ from motorlab.envs.spaces import (
     unflatten_batch,
 )
 from motorlab.errors import MotorlabError
-from motorlab.runs import atomic_write_bytes, read_json, require_run_dir, write_json
+from motorlab.runs import POLICY_JSON, atomic_write_bytes, read_json, require_run_dir, write_json
 
 
 class Policy(Protocol):
@@ -54,7 +54,6 @@ class Policy(Protocol):
     # row's state); evaluation then starts each env's next episode as soon as the last one ends.
 
 
-POLICY_JSON = "policy.json"
 POLICY_WEIGHTS = "policy.safetensors"
 
 
@@ -317,11 +316,6 @@ def _load_sb3(run_dir: Path, meta: dict) -> SB3Policy:
 
 # ---- saving / loading -------------------------------------------------------
 
-def save_controller(run_dir: Path, controller) -> None:
-    """Write policy.json for a PID or LQR controller (all numbers inline)."""
-    write_json(Path(run_dir) / POLICY_JSON, controller.to_dict())
-
-
 def load_run_policy(run_dir: Path) -> Policy:
     """The policy saved in a finished run folder, pickle-free."""
     return load_policy_files(require_run_dir(Path(run_dir)))
@@ -338,7 +332,7 @@ def load_policy_files(run_dir: Path) -> Policy:
         if kind == "lqr":
             return LQRPolicy.from_dict(meta)
         if kind == "pid":
-            from motorlab.control.pid import PIDController
+            from motorlab.controllers.pid import PIDController
 
             return PIDController(meta["kp"], meta["ki"], meta["kd"], dt=meta["dt"],
                                  low=np.asarray(meta["low"]), high=np.asarray(meta["high"]))

@@ -41,6 +41,7 @@ SUMMARY = "summary.json"
 CONFIG = "config.toml"
 ENVIRONMENT = "environment.json"
 METRICS = "metrics.csv"
+POLICY_JSON = "policy.json"  # a run's policy: its type, spaces and numbers (motorlab.policies reads it)
 
 
 def default_out(step: str) -> Path:

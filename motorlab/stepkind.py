@@ -206,6 +206,13 @@ class StepKind(Command[S], Generic[S, R]):
         """(done, total) of a run going on in another process, for progress bars."""
         return 0, 1
 
+    def fields_for(self, how: Any, given: dict[str, Any]) -> dict[str, Any]:
+        """`given` over the config.toml its invocation's --config names (a kind whose invocation
+        has one, as train's does), merged before anything is validated: `train --config SAC_RUN
+        --her` is judged as SAC with HER."""
+        config = getattr(how, "config", None)
+        return given if config is None else self.with_config(Path(config), given)
+
     def with_config(self, config: Path, fields: dict[str, Any]) -> dict[str, Any]:
         """A run's config.toml (`--config`: repeat a run, or run one a study planned) with `fields` on
         top; env settings, flat or in [env], merged key by key.
@@ -214,10 +221,11 @@ class StepKind(Command[S], Generic[S, R]):
             MotorlabError: the file cannot be read as TOML.
         """
         base = read_text_file(Path(config), tomllib.loads, "TOML", f"give the config.toml of a motorlab {self.name} run.")
-        given = fold_env(fields) if "env" in self.settings.model_fields else dict(fields)
+        own = frozenset(self.settings.model_fields) - {"env"}  # a kind's own field (mpc's planner --reward) stays its own
+        given = fold_env(fields, own) if "env" in self.settings.model_fields else dict(fields)
         merged = {**base, **{k: v for k, v in given.items() if k != "env"}}
         if "env" in given or "env" in base:
-            merged["env"] = {**fold_env(base).get("env", {}), **given.get("env", {})}
+            merged["env"] = {**fold_env(base, own).get("env", {}), **given.get("env", {})}
         return merged
 
     def can_resume(self, run_dir: Path) -> bool:

@@ -36,13 +36,14 @@ def run_job(job: jobs.Job, console: Console) -> None:
         raise MotorlabError(f"the job names no command motorlab knows: {job.command!r}.")
     import_modules(job.imports, "named by the job")
     cmd = BY_NAME[job.command]
-    settings = cmd.make(**job.settings)
+    how = cmd.how(**job.how)
+    settings = cmd.make(how, **job.settings)  # as the command line makes them: under what `how` brings
     with trackers.adopted(job.tracking):
         if job.resume:  # the run's own settings, continued where its checkpoint is
             with run_folders("resume"):
                 result = cmd.run(settings, Path(job.how["out"]), console=console, progress=job.progress, resume=True)
         else:
-            result = cmd.invoke(settings, cmd.how(**job.how), console=console, progress=job.progress)
+            result = cmd.invoke(settings, how, console=console, progress=job.progress)
     cmd.report(result, settings, console)
 
 

@@ -31,7 +31,7 @@ from motorlab.recipe_list import RECIPES
 from motorlab.recipes import bundled
 from motorlab.report.commands import PLOT, REPORT
 from motorlab.report.steps import COMPARE, VIDEO, VideoSummary
-from motorlab.rl.steps import RESUMED, TRAIN, TrainInvocation, TrainSummary
+from motorlab.rl.steps import TRAIN, TrainInvocation, TrainSummary
 from motorlab.robustness_curves.steps import ROBUSTNESS, RobustnessSummary
 from motorlab.settings import Summary
 from motorlab.synergies.commands import EXPORT_SKLEARN, IMPORT_SKLEARN
@@ -98,13 +98,13 @@ def test_train_prints_its_run():
 
 def test_train_prints_a_resumed_run():
     s = TrainSummary.model_construct(**{**TRAINED, "resumed_from": 6_000})
-    object.__setattr__(s, RESUMED, True)
+    s._resumed = True
     assert "done runs/x: resumed at 6,000 steps; return 1000.0 over 10 episodes, 12,345 steps" in printed(
         TRAIN, s, TRAIN.make())
     worker = TrainSummary.model_construct(**{**TRAINED, "resumed_from": 6_000})  # resumed without TRAIN.execute
     assert "resumed at 6,000 steps" in printed(TRAIN, worker, TRAIN.make())
     fresh = TrainSummary.model_construct(**TRAINED)
-    object.__setattr__(fresh, RESUMED, True)
+    fresh._resumed = True
     assert "no checkpoint yet, started over; return 1000.0" in printed(TRAIN, fresh, TRAIN.make())
 
 
@@ -237,28 +237,72 @@ def test_compare_reads_groups_as_the_command_line_writes_them():
 def test_robustness_takes_env_settings_flat():
     s = ROBUSTNESS.make(policies=["pid"], vary=["push-force=0:40:5"], env="InvertedPendulum-v5", push_body="pole",
                         env_kwargs={"reset_noise_scale": 0.1})
-    assert s.env == {"id": "InvertedPendulum-v5", "push_body": "pole", "kwargs": {"reset_noise_scale": 0.1}}
+    assert s.config()["env"] == {"id": "InvertedPendulum-v5", "push_body": "pole", "kwargs": {"reset_noise_scale": 0.1}}
+    assert s.env.push_body == "pole"  # an EnvConfig, as every env-building kind's
 
 
 # ---- train: --config, --resume, the env id ------------------------------------------------------
 
 def test_train_needs_an_env_id_or_a_config(tmp_path):
     with pytest.raises(MotorlabError, match=r"give an env id \(motorlab train InvertedPendulum-v5\) or --config"):
-        TRAIN.execute(TRAIN.make(timesteps=100), TRAIN.how(out=tmp_path / "run"), None, False)
+        TRAIN.make(TRAIN.how(out=tmp_path / "run"), timesteps=100)
     assert not (tmp_path / "run").exists()
+    assert TRAIN.make(timesteps=100).env.id == "InvertedPendulum-v5"  # without a command line: the model's default
+
+
+def sac_run(path: Path, **fields) -> Path:
+    """The config.toml of a SAC run on a goal-conditioned env, every field written out (her = false too)."""
+    from motorlab.runs import write_config
+
+    path.mkdir(parents=True)
+    write_config(path, TRAIN.make(env="PointMaze_UMaze-v3", algo="sac", timesteps=500, **fields).config())
+    return path / "config.toml"
 
 
 def test_train_config_merges_the_given_fields(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "best.toml").write_text("lr = \"1e-3\"\n")
-    s = TRAIN.make(delay=0.3, seed=7, preset_file="best.toml", hyperparams={"n_steps": 64})
-    assert s.preset_file == str(tmp_path / "best.toml") and s.lr == "1e-3"  # resolved where it was given
-    config = run_folder(tmp_path / "old", {"id": "Hopper-v5", "delay": 0.1, "history": 4})
-    merged = TRAIN.validate(TRAIN.with_config(config / "config.toml", TRAIN.given(s)))
+    config = run_folder(tmp_path / "old", {"id": "Hopper-v5", "delay": 0.1, "history": 4}) / "config.toml"
+    merged = TRAIN.make(TRAIN.how(config=config), delay=0.3, seed=7, preset_file="best.toml",
+                        hyperparams={"n_steps": 64})
+    assert merged.preset_file == str(tmp_path / "best.toml") and merged.lr == "1e-3"  # resolved where it was given
     assert (merged.env.id, merged.env.delay, merged.env.history, merged.seed) == ("Hopper-v5", 0.3, 4, 7)
-    assert merged.hyperparams == {"n_steps": 64} and merged.lr == "1e-3"
+    assert merged.hyperparams == {"n_steps": 64}
     with pytest.raises(MotorlabError, match="is missing; give the config.toml of a motorlab train run"):
-        TRAIN.with_config(tmp_path / "none.toml", {})
+        TRAIN.make(TRAIN.how(config=tmp_path / "none.toml"), seed=1)
+    (tmp_path / "bad.toml").write_text("algo = [")
+    with pytest.raises(MotorlabError, match="bad.toml is not valid TOML"):
+        TRAIN.make(TRAIN.how(config=tmp_path / "bad.toml"))
+
+
+def test_train_config_is_judged_with_the_flags_laid_over_it(tmp_path):
+    """`train --config SAC_RUN --her`: --her is judged with the config's SAC, not the default PPO."""
+    config = sac_run(tmp_path / "sac")
+    with pytest.raises(MotorlabError, match="--her"):  # alone, --her meets the default algorithm
+        TRAIN.make(TRAIN.how(), env="PointMaze_UMaze-v3", her=True)
+    s = TRAIN.make(TRAIN.how(config=config), her=True)
+    assert (s.algo, s.her, s.env.id, s.timesteps) == ("sac", True, "PointMaze_UMaze-v3", 500)
+    with pytest.raises(MotorlabError, match="--her"):  # a flag that does not go with the config is still refused
+        TRAIN.make(TRAIN.how(config=config), her=True, algo="ppo")
+
+
+def test_train_config_flags_win_and_a_bad_one_is_named(tmp_path):
+    config = sac_run(tmp_path / "sac", seed=0, delay=0.1)
+    s = TRAIN.make(TRAIN.how(config=config), seed=3, history=2)
+    assert (s.seed, s.env.history, s.env.delay, s.algo) == (3, 2, 0.1, "sac")  # the flags over the config
+    with pytest.raises(MotorlabError, match=r"^--seed -1: Input should be greater than or equal to 0$"):
+        TRAIN.make(TRAIN.how(config=config), seed=-1)
+    with pytest.raises(MotorlabError, match=r"^--timesteps 0: "):
+        TRAIN.make(TRAIN.how(config=config), timesteps=0)
+
+
+def test_train_config_alone_is_the_run_again(tmp_path):
+    config = sac_run(tmp_path / "sac", seed=5, delay=0.1, hyperparams={"learning_starts": 100}, progress=False)
+    again = TRAIN.make(TRAIN.how(config=config))
+    original = TRAIN.make(env="PointMaze_UMaze-v3", algo="sac", timesteps=500, seed=5, delay=0.1,
+                          hyperparams={"learning_starts": 100})
+    assert again.config() == original.config() and again.progress  # the progress bar is the flags', never the config's
+    assert not TRAIN.make(TRAIN.how(config=config), progress=False).progress
 
 
 def test_train_resume_refuses_what_it_cannot_do(tmp_path):
@@ -267,14 +311,25 @@ def test_train_resume_refuses_what_it_cannot_do(tmp_path):
     with pytest.raises(MotorlabError, match="--overwrite replaces it; give one of them"):
         TRAIN.how(resume=unfinished, overwrite=True).mode()
     with pytest.raises(MotorlabError, match="drop the other settings"):
-        TRAIN.execute(TRAIN.make(seed=3), TRAIN.how(resume=unfinished), None, False)
+        TRAIN.make(TRAIN.how(resume=unfinished), seed=3)
     with pytest.raises(MotorlabError, match="drop the other settings"):
-        TRAIN.execute(TRAIN.make(), TRAIN.how(resume=unfinished, out=tmp_path / "x"), None, False)
+        TRAIN.make(TRAIN.how(resume=unfinished, out=tmp_path / "x"))
+    with pytest.raises(MotorlabError, match="drop the other settings"):
+        TRAIN.make(TRAIN.how(resume=unfinished, config=tmp_path / "x.toml"))
     with pytest.raises(MotorlabError, match="is not a training run folder"):
-        TRAIN.execute(TRAIN.make(progress=False), TRAIN.how(resume=unfinished), None, False)
+        TRAIN.make(TRAIN.how(resume=unfinished), progress=False)
     finished = run_folder(tmp_path / "finished", {"id": "InvertedPendulum-v5"})
     with pytest.raises(MotorlabError, match="finished already"):
-        TRAIN.execute(TRAIN.make(), TRAIN.how(resume=finished), None, False)
+        TRAIN.make(TRAIN.how(resume=finished))
+
+
+def test_train_resume_takes_the_runs_own_settings(tmp_path):
+    run_dir = sac_run(tmp_path / "interrupted", seed=4).parent  # config.toml, no summary.json
+    how = TRAIN.how(resume=run_dir)
+    s = TRAIN.make(how, progress=False)
+    assert (s.algo, s.seed, s.progress) == ("sac", 4, False) and TRAIN.make(how).progress
+    with pytest.raises(MotorlabError, match="drop the other settings"):  # settings not made with --resume
+        TRAIN.execute(TRAIN.make(env="PointMaze_UMaze-v3", algo="sac", seed=5), how, None, False)
 
 
 # ---- export's checks, and the recipes listing ---------------------------------------------------

@@ -27,10 +27,11 @@ import numpy as np
 import pytest
 
 from motorlab import deploy_onnx
+from motorlab.controllers import save_controller
 from motorlab.deploy_onnx import ONNX_FILE, SIDECAR, TOLERANCE, export_onnx
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.policies import load_run_policy, save_controller, save_sb3_policy
+from motorlab.policies import load_run_policy, save_sb3_policy
 from motorlab.runs import write_config, write_summary
 from tests.helpers import ENV_ID, TINY_PPO, assert_ok, run_cli
 
@@ -206,7 +207,7 @@ def test_other_policies_export_within_tolerance(case, tmp_path):
 # ---- what cannot be exported ------------------------------------------------------------
 
 def pid_run(folder: Path) -> Path:
-    from motorlab.control.pid import make_pid
+    from motorlab.controllers.pid import make_pid
 
     save_controller(folder, make_pid("pid", ENV_ID, 4, 0.04, np.array([-3.0]), np.array([3.0])))
     write_summary(folder, {"algo": "pid"})

@@ -5,6 +5,7 @@ graph (grimp, import-linter's graph library) and the source, not by running anyt
 from __future__ import annotations
 
 import ast
+import tomllib
 from pathlib import Path
 
 import grimp
@@ -16,9 +17,17 @@ from motorlab.kinds import KINDS
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
 
 PACKAGE = Path(motorlab.__file__).parent
-API, WORKER, CLI, COMMANDS, STUDIES, KIND_REGISTRY, STEP_KINDS, DOMAIN, GROUND = 8, 7, 6, 5, 4, 3, 2, 1, 0
+# The layers of the import contract (pyproject.toml), top first: a higher number is a higher layer.
+(API, WORKER, CLI, COMMANDS, STUDIES, KIND_REGISTRY, STEP_KINDS, STEPKIND, FEATURES, DOMAIN, ROLLOUTS_AND_MODELS,
+ POLICIES, ALGORITHMS, CONTROLLERS, REPORT, ENVS, SYNERGY_SPACE, GROUND) = range(17, -1, -1)
 GROUND_FLOOR = {"motorlab.runs", "motorlab.errors", "motorlab.faults", "motorlab.environment", "motorlab.extras",
                 "motorlab.settings", "motorlab.user_modules", "motorlab", "motorlab.command", "motorlab.jobs"}
+# Packages by prefix, below the step kinds (a step-kind module in one of them is a step kind)
+PACKAGES = {"motorlab.evaluation.figures": FEATURES, "motorlab.evaluation.videos": FEATURES,
+            "motorlab.evaluation.activations": DOMAIN, "motorlab.evaluation": ROLLOUTS_AND_MODELS,
+            "motorlab.dynamics": ROLLOUTS_AND_MODELS, "motorlab.rl.algos": ALGORITHMS,
+            "motorlab.controllers": CONTROLLERS, "motorlab.report": REPORT, "motorlab.envs": ENVS,
+            "motorlab.synergies": SYNERGY_SPACE, "motorlab.trackers": GROUND}
 
 
 def layer(module: str) -> int:
@@ -35,11 +44,20 @@ def layer(module: str) -> int:
         return STUDIES
     if module in ("motorlab.kinds", "motorlab.commandline"):
         return KIND_REGISTRY
-    if module in ("motorlab.stepkind", "motorlab.export_command") or module.endswith((".steps", ".commands")):
+    if module == "motorlab.export_command" or module.endswith((".steps", ".commands")):
         return STEP_KINDS
-    if module in GROUND_FLOOR or module.startswith("motorlab.trackers"):  # trackers: motorlab.trackers.*
+    if module == "motorlab.stepkind":
+        return STEPKIND
+    if module in GROUND_FLOOR:
         return GROUND
-    return DOMAIN
+    if module == "motorlab.policies":
+        return POLICIES
+    if module == "motorlab.stats":
+        return REPORT
+    for prefix, level in PACKAGES.items():  # the first that fits: modules before their packages
+        if module == prefix or module.startswith(prefix + "."):
+            return level
+    return DOMAIN  # rl's training, control's planners, robustness curves, export
 
 
 @pytest.fixture(scope="module")
@@ -69,6 +87,35 @@ def test_no_module_imports_another_in_a_circle(graph):
             if chain is not None:
                 cycles.append(" -> ".join((a, *chain)))
     assert not cycles, "\n".join(sorted(cycles))
+
+
+def contract_layers() -> list[list[str]]:
+    """The layers of the import contract in pyproject.toml, top first, each a list of module names."""
+    pyproject = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())
+    (contract,) = pyproject["tool"]["importlinter"]["contracts"]
+    return [[name.strip() for name in entry.replace("|", ":").split(":")] for entry in contract["layers"]]
+
+
+def in_contract(module: str, layers: list[list[str]]) -> int | None:
+    """The index of the contract's layer that holds `module` (None: no layer names it)."""
+    return next((i for i, names in enumerate(layers)
+                 if any(module == name or module.startswith(name + ".") for name in names)), None)
+
+
+def test_the_contract_names_every_module_and_agrees_with_this_file(graph):
+    """Every module is in a layer of the contract, a package whose modules sit in several layers
+    (rl/, evaluation/, report/, ...) excepted: a new module cannot slip past lint-imports. And the
+    contract's layers are in the order of layer() above: lint-imports and this file check the same
+    layers."""
+    layers = contract_layers()
+    unnamed = sorted(m for m in graph.modules if in_contract(m, layers) is None
+                     and not (PACKAGE.parent / m.replace(".", "/") / "__init__.py").is_file())
+    assert not unnamed, f"modules no layer of the import contract (pyproject.toml) names: {unnamed}"
+    here = [{layer(m) for m in graph.modules if in_contract(m, layers) == i} for i in range(len(layers))]
+    assert all(here), [layers[i] for i, found in enumerate(here) if not found]  # each names a module
+    for i in range(len(layers) - 1):
+        below = set().union(*here[i + 1:])
+        assert min(here[i]) >= max(below), f"{layers[i]} is in a lower layer here than a layer below it there"
 
 
 def test_the_layer_check_catches_an_upward_import(tmp_path):

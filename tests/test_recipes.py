@@ -36,7 +36,7 @@ def test_pendulum_recipe_parses():
     by_name = {s.name: s for s in recipe.steps}
     for r, step in zip(raw["steps"], recipe.steps):
         if step.kind.name == "robustness":  # its env is what it sets on top of each policy's own
-            assert step.settings.env == {"id": raw["defaults"]["env"], **({"delay": r["delay"]} if "delay" in r else {})}
+            assert step.settings.config()["env"] == {"id": raw["defaults"]["env"], **({"delay": r["delay"]} if "delay" in r else {})}
             assert step.settings.episodes == r["episodes"]
             assert {"ppo-delay-history", "fast-delay"} <= set(step.inputs())
             continue

@@ -90,6 +90,19 @@ def test_sb3_zip_export_acts_like_the_sb3_model(notebook_sac, tmp_path):
     assert read_summary(tmp_path / "eval")["env_id"] == "Pendulum-v1"
 
 
+def test_sb3_zip_export_records_its_env_as_an_env_config(notebook_sac, tmp_path):
+    """--env and what the policy needs of it (--env-arg, --history, --sar) are recorded as EnvConfig's
+    settings in config.toml, which evaluate reads back."""
+    import tomllib
+
+    folder, _, _ = notebook_sac
+    out = tmp_path / "imported"
+    assert_ok(run_here("export", folder / "sac.zip", "--trust", "--env", "Pendulum-v1", "--env-arg", "g=9.81",
+                       "--out", out))
+    assert tomllib.loads((out / "config.toml").read_text())["env"] == {"id": "Pendulum-v1", "kwargs": {"g": 9.81}}
+    assert read_summary(out)["env_id"] == "Pendulum-v1"
+
+
 def test_sb3_zip_export_refuses_without_trust_and_runs_nothing(notebook_sac, tmp_path):
     """Without --trust: one line explaining why, nothing written, and a booby-trapped zip never runs."""
     folder, _, _ = notebook_sac
@@ -111,6 +124,8 @@ def test_sb3_zip_export_refuses_without_trust_and_runs_nothing(notebook_sac, tmp
     ("unknown_env", ("NoSuchEnv-v0",)),
     ("bad_vecnormalize", ("holds a", "not SB3's VecNormalize")),
     ("run_with_trust", ("is a run folder",)),
+    ("history_without_env", ("--history describes the env", "--env ENV_ID")),
+    ("stacked_env", ("Pendulum-v1, history 2 has observations of shape (6,), the policy (3,)", "--history")),
 ])
 def test_export_mistakes_give_one_line(notebook_sac, ppo_run, tmp_path, case, fragments):
     folder, _, _ = notebook_sac
@@ -124,6 +139,8 @@ def test_export_mistakes_give_one_line(notebook_sac, ppo_run, tmp_path, case, fr
         "unknown_env": [*zip_args, "--env", "NoSuchEnv-v0"],
         "bad_vecnormalize": [*zip_args, "--vecnormalize", tmp_path / "vn.pkl"],
         "run_with_trust": [ppo_run, "--trust"],
+        "history_without_env": [*zip_args, "--history", "2"],
+        "stacked_env": [*zip_args, "--env", "Pendulum-v1", "--history", "2"],
     }[case]
     proc = run_here("export", *args, "--out", tmp_path / "out")
     assert_one_line_error(proc, *fragments)

@@ -20,7 +20,8 @@ def mpc(env: str, model: str | Path | Result, *, episodes: int | None = None, ou
         model: a `motorlab.dynamics.fit` result or a model folder.
         episodes: control episodes (default 50).
         **settings: optimizer ("cem", "mppi", "evotorch"), horizon, population, iterations, elites,
-            reward ("auto", a builtin, MODULE:FUNCTION or "learned"), parallel, video, ...
+            reward ("auto", a builtin, MODULE:FUNCTION or "learned"), parallel, video, ...; and the
+            env's settings (the ones the model was fit under): history, delay, obs_noise, sar, env_kwargs, ...
 
     Returns:
         Its numbers (`["return_mean"]`, `["success_rate"]`, `["plan_ms_median"]`) and plots.
@@ -36,7 +37,8 @@ def mbrl(env: str, rounds: int | None = None, *, out: str | Path | None = None, 
         env: any Box-action env (InvertedPendulum-v5, MODULE:ID).
         rounds: collect-fit-evaluate rounds (default 10).
         **settings: ensemble, probabilistic, propagation, horizon, population, episodes_per_round,
-            eval_episodes, until_return, ...
+            eval_episodes, until_return, ...; and the env's settings: delay, history, obs_noise,
+            push_body, sar, env_kwargs, ... (the loop collects from, and plans in, the env they make).
 
     Returns:
         Its folder: curve.csv, plots/learning_curve.png, the final model in model/.

@@ -28,8 +28,9 @@ def collect(env: str, episodes: int | None = None, *, out: str | Path | None = N
     Args:
         env: the env id (Reacher-v5, or MODULE:ID).
         episodes: episodes to record (default 1,000).
-        **settings: policy ("random", or a run), simulator ("auto", "closed-form", "mujoco", "gym"),
-            state, workers, seed.
+        **settings: policy ("random", or a run), simulator ("auto", "closed-form", "mujoco", "gymnasium"),
+            state, workers, seed; and the env's settings, as every env-building command takes them:
+            delay, history, obs_noise, latency, push_body, sar, env_kwargs={...}, reward, ...
     """
     return steps.run_kind(DYNAMICS_COLLECT, out, progress, env=env, episodes=episodes, **settings)
 

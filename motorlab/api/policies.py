@@ -187,7 +187,7 @@ class Run(Result):
 
     def plot(self) -> list[Path]:
         """Draw plots/learning_curve.png and plots/observation_trace.png (`motorlab plot RUN`)."""
-        from motorlab.report.run import plot_run
+        from motorlab.evaluation.figures import plot_run
 
         return plot_run(self.path)
 

@@ -1,1 +1,1 @@
-"""Classical and model-based controllers: PID, linear system identification + LQR."""
+"""Model-based control: MPC on a learned forward model (mpc.py, mpc_episodes.py) and the MBRL loop (mbrl.py)."""

@@ -109,6 +109,7 @@ class LoopPlan:
     """What the loop runs: the env, the rounds, and the fit and planner settings it passes on."""
 
     env_id: str
+    env: dict[str, Any]  # the env's settings besides its id (EnvConfig's, where not their defaults)
     rounds: int
     episodes_per_round: int
     eval_episodes: int
@@ -137,10 +138,15 @@ def _round_dir(run_dir: Path, r: int) -> Path:
     return Path(run_dir) / "rounds" / f"{r:02d}"
 
 
+def env_config(plan: LoopPlan) -> EnvConfig:
+    """The env the loop collects from and plans in: its id and settings (wrappers, arguments)."""
+    return EnvConfig.model_validate({"id": plan.env_id, **plan.env})
+
+
 def _planner(plan: LoopPlan, model: ForwardModel, r: int):
-    env = make_env(EnvConfig(id=plan.env_id), shaped=False)
+    env = make_env(env_config(plan), shaped=False)
     try:
-        return build_policy(env, plan.env_id, model, plan.optimizer, plan.seed * 1000 + r, **plan.scoring,
+        return build_policy(env, env_config(plan), model, plan.optimizer, plan.seed * 1000 + r, **plan.scoring,
                             **plan.plan)
     finally:
         env.close()
@@ -155,12 +161,13 @@ def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | N
     base = plan.seed * SEED_STRIDE + first_episode
     n = plan.episodes_per_round
     if model is None:
-        data = collect_transitions(plan.env_id, n, "random", workers=1, seed=base, state=plan.state, progress=False)
+        data = collect_transitions(env_config(plan), n, "random", workers=1, seed=base, state=plan.state,
+                                   progress=False)
         data.episode = data.episode + first_episode
         return data, PhaseFaults([f"round {r + 1} collect: {line}" for line in data.meta["fault_log"]],
                                  data.meta["numerical_faults"])
     policy = _planner(plan, model, r)
-    result = run_episodes(plan.env_id, policy, n, base, min(plan.parallel, n), progress=progress,
+    result = run_episodes(env_config(plan), policy, n, base, min(plan.parallel, n), progress=progress,
                           seeds=[base + i for i in range(n)], record=True)
     faults = PhaseFaults.of(result, f"round {r + 1} collect", policy.task.reward_source, f"rounds/{r - 1:02d}/model")
     # an episode whose simulation diverged is no transition of the dynamics: it is left out
@@ -181,7 +188,7 @@ def _evaluate(plan: LoopPlan, model: ForwardModel, r: int, progress: bool) -> tu
                 "disagreement_mean": None}, PhaseFaults()
     policy = _planner(plan, model, r)
     base = plan.seed * SEED_STRIDE + EVAL_OFFSET
-    result = run_episodes(plan.env_id, policy, plan.eval_episodes, base, min(plan.parallel, plan.eval_episodes),
+    result = run_episodes(env_config(plan), policy, plan.eval_episodes, base, min(plan.parallel, plan.eval_episodes),
                           progress=progress)
     return ({"eval_return_mean": float(result.returns.mean()), "eval_return_std": float(result.returns.std()),
              "plan_ms_median": float(np.median(result.per_env_ms)), "disagreement_mean": policy.disagreement_mean()},
@@ -334,10 +341,13 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
     return LoopResult(records, model, concatenate(parts, meta), _planner(plan, model, len(records)).task, faults)
 
 
-def layout_name(env_id: str, state: str) -> str:
-    """The state layout the loop's transitions use (checked against the env), after refusing an env
-    the planner cannot act on (one line, before any folder is touched)."""
-    env = make_env(EnvConfig(id=env_id), shaped=False)
+def layout_name(env: str | EnvConfig, state: str) -> str:
+    """The state layout the loop's transitions use (checked against the env: an id, or an EnvConfig
+    with its wrappers), after refusing an env the planner cannot act on (one line, before any folder
+    is touched)."""
+    cfg = env if isinstance(env, EnvConfig) else EnvConfig(id=env)
+    env_id = cfg.id
+    env = make_env(cfg, shaped=False)
     try:
         require_plannable(env, env_id, "mbrl (MPC on a learned model)")
         return env_layout(env, env_id, state).name

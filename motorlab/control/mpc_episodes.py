@@ -21,32 +21,45 @@ from motorlab.control.mpc import FaultCounts, MPCPolicy, PlannerFaults, make_pla
 from motorlab.dynamics.model import ForwardModel, device_for, load_model
 from motorlab.dynamics.rewards import resolve_task
 from motorlab.dynamics.state import env_layout, xy_columns
-from motorlab.envs import EnvConfig, make_env
+from motorlab.envs import EnvConfig, describe_env, env_record, make_env
 from motorlab.envs.spaces import require_actions
 from motorlab.errors import MotorlabError
 from motorlab.faults import fault_line, fault_of
 from motorlab.report.video import filming, record_episode, write_mp4
 
 
-def build_policy(env, env_id: str, model: Path | ForwardModel, optimizer: str = "cem", seed: int = 0,
+def build_policy(env, env_id: str | EnvConfig, model: Path | ForwardModel, optimizer: str = "cem", seed: int = 0,
                  threads: int | None = 1, reward: str = "auto", termination: str = "auto", propagation: str = "mean",
                  particles: int | None = None, device: str = "cpu", **settings) -> MPCPolicy:
     """An MPC policy for `env` on a forward model (or the model folder holding one), checked against the
-    env and its layout. `reward` and `termination` say what it scores (motorlab.dynamics.rewards.resolve_task);
-    `settings` are the optimizer's (horizon, population, iterations, elites or temperature)."""
+    env and its layout. `env_id`: the env's id, or the EnvConfig it was made from (its --sar makes the
+    planner's actions synergies). `reward` and `termination` say what it scores
+    (motorlab.dynamics.rewards.resolve_task); `settings` are the optimizer's (horizon, population,
+    iterations, elites or temperature)."""
+    cfg = env_config(env_id)
+    env_id = cfg.id
     require_plannable(env, env_id)
     where = model if isinstance(model, ForwardModel) else Path(model)
     if not isinstance(model, ForwardModel):
         model = load_model(model, env_id=env_id)
-    layout = env_layout(env, env_id, model.meta.get("state_layout", "observation"))
+    fitted = _fitted_env(model, cfg)
+    try:
+        layout = env_layout(env, env_id, model.meta.get("state_layout", "observation"))
+    except MotorlabError:
+        if fitted is None:
+            raise
+        raise MotorlabError(f"{where} was fit on {fitted}, not {describe_env(cfg)}: plan on the env it was fit on, "
+                            "or refit it.") from None
     if model.state_size != layout.size or model.action_size != env.action_space.shape[0]:
+        fix = f"plan on the env it was fit on ({fitted}) or refit it" if fitted else "refit the model"
         raise MotorlabError(f"{where} predicts {model.state_size} state entries from {model.action_size} "
-                            f"actions; {env_id} has {layout.size} and {env.action_space.shape[0]}. Refit the model.")
+                            f"actions; {describe_env(cfg)} has {layout.size} and {env.action_space.shape[0]}: {fix}.")
     if model.meta.get("obs_layout") != layout.keys_json():
         raise MotorlabError(f"{where} was fit on observations whose Dict keys lie at {_keys(model.meta.get('obs_layout'))}, "
                             f"{env_id}'s at {_keys(layout.keys_json())}; refit the model on {env_id}'s transitions.")
     task = resolve_task(env_id, layout.name, layout.size, model.action_size, len(layout.goal_labels), reward,
-                        termination, frozenset(model.heads), achieved=layout.achieved)
+                        termination, frozenset(model.heads), achieved=layout.achieved, frames=layout.frames,
+                        synergies=bool(cfg.sar))
     dev = device_for(device)
     if threads and dev.type == "cpu":
         torch.set_num_threads(threads)  # small batches: more threads cost more than they give
@@ -60,6 +73,23 @@ def build_policy(env, env_id: str, model: Path | ForwardModel, optimizer: str = 
     policy = MPCPolicy(planner, layout, model, dev)
     policy.task = task
     return policy
+
+
+def _fitted_env(model: ForwardModel, cfg: EnvConfig) -> str | None:
+    """The env settings the model's transitions were collected under, in a few words, where the model
+    records them (model.json's "env") and they differ from `cfg`'s; else None."""
+    fitted = model.meta.get("env")
+    if not isinstance(fitted, dict) or fitted == env_record(cfg):
+        return None
+    try:
+        return describe_env(EnvConfig.model_validate(fitted))
+    except (ValueError, MotorlabError):  # a damaged record: the sizes speak for themselves
+        return None
+
+
+def env_config(env: str | EnvConfig) -> EnvConfig:
+    """An env id as the EnvConfig of the bare env; an EnvConfig as it is."""
+    return env if isinstance(env, EnvConfig) else EnvConfig(id=env)
 
 
 def require_plannable(env, env_id: str, user: str = "MPC") -> None:
@@ -124,12 +154,15 @@ def planner_fault_line(counts: FaultCounts, reward: str, model: str, first: str 
             f"NaN/Inf predicted states (model {model}), all rejected{fallbacks}{where}")
 
 
-def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, parallel: int,
+def run_episodes(env: str | EnvConfig, policy: MPCPolicy, episodes: int, seed: int, parallel: int,
                  progress: bool = True, seeds: list[int] | None = None, record: bool = False) -> MPCEpisodes:
-    """Episodes of `policy`, `parallel` at a time: returns, per-step distances, planning times, and
-    with `record` each episode's transitions. Episode i resets with `seeds[i]` (default seed + i)."""
+    """Episodes of `policy` in `env` (an id, or an EnvConfig with its wrappers), `parallel` at a time:
+    returns, per-step distances, planning times, and with `record` each episode's transitions.
+    Episode i resets with `seeds[i]` (default seed + i)."""
+    cfg = env_config(env)
+    env_id = cfg.id
     seeds = list(seeds) if seeds is not None else [seed + i for i in range(episodes)]
-    envs = [make_env(EnvConfig(id=env_id), shaped=False) for _ in range(parallel)]
+    envs = [make_env(cfg, shaped=False) for _ in range(parallel)]
     returns, distances, call_ms, per_env_ms, fault_log, paths = [], [], [], [], [], []
     before, first_fault = policy.faults.counts(), None
     with Progress(disable=not progress) as bar:
@@ -181,9 +214,9 @@ def run_episodes(env_id: str, policy: MPCPolicy, episodes: int, seed: int, paral
                        paths if record else None, planner, first_fault)
 
 
-def record_video(env_id: str, policy: MPCPolicy, path: Path, seed: int) -> Path:
-    """One episode of `policy` rendered to an MP4 at `path`."""
-    with filming(make_env(EnvConfig(id=env_id), shaped=False), 480, 480, None) as (env, cam, every, fps):
+def record_video(env: str | EnvConfig, policy: MPCPolicy, path: Path, seed: int) -> Path:
+    """One episode of `policy` in `env` (an id, or an EnvConfig) rendered to an MP4 at `path`."""
+    with filming(make_env(env_config(env), shaped=False), 480, 480, None) as (env, cam, every, fps):
         frames, _ = record_episode(env, policy, cam, seed, every)
         write_mp4(path, frames, fps)
     return path

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -12,8 +12,8 @@ from rich.console import Console
 from rich.markup import escape
 
 from motorlab import trackers
-from motorlab.dynamics.steps import ModelSettings
-from motorlab.envs import EnvConfig, check_env_id, facts, make_env
+from motorlab.dynamics.steps import ModelSettings, with_env
+from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, check_env_id, env_record, facts, make_env
 from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric
 from motorlab.runs import MetricsWriter, atomic_write_npz
@@ -62,8 +62,9 @@ class PlannerSettings(Settings):
     def _env_defaults(cls, data: Any) -> Any:
         """The planner settings the env's catalogue entry gives (EnvFacts.planner: a user's env may
         declare them), where these are not set; no bundled env gives any, so the defaults hold."""
-        if isinstance(data, dict) and isinstance(data.get("env"), str):
-            given = {k: v for k, v in facts(data["env"]).planner.items() if k in cls.model_fields and k not in data}
+        env_id = _env_id(data.get("env")) if isinstance(data, dict) else None
+        if env_id is not None:
+            given = {k: v for k, v in facts(env_id).planner.items() if k in cls.model_fields and k not in data}
             if given:
                 data = {**data, **given}
         return data
@@ -78,6 +79,26 @@ class PlannerSettings(Settings):
         """How candidates are scored (build_policy's keyword arguments besides the optimizer's)."""
         return dict(reward=self.reward, termination=self.termination, propagation=self.propagation,
                     particles=self.particles, device=self.device)
+
+
+def _env_id(env: Any) -> str | None:
+    """The env id in an env setting as given: an id, a dict (folded env settings) or an EnvConfig."""
+    if isinstance(env, str):
+        return env
+    if isinstance(env, dict):
+        return env.get("id") if isinstance(env.get("id"), str) else None
+    return env.id if isinstance(env, EnvConfig) else None
+
+
+# The env settings of the kinds that plan (mpc, mbrl): every EnvConfig setting acts through the env's
+# wrappers (the model learns, and the planner acts in, the env they make: delays, noise, pushes, a
+# history of observations, synergy actions), except these two. `--reward` is the planner's own.
+PLANNED_ENV_KEYS = frozenset(ENV_KEYS) - {"reward", "success"}
+PLANNED_ENV_REFUSED = {
+    "reward": "{kind} reports the env's own return and plans with --reward (the planner's reward); env reward "
+              "shaping does not apply: drop it from the env settings.",
+    "success": "{kind} reports returns, not successes; drop it.",
+}
 
 
 class PlannerFaultsSummary(Summary):
@@ -108,8 +129,11 @@ def warn_planner_faults(console: Console | None, line: str | None, run_dir: Path
                                                 f"{escape(str(run_dir))}/faults.log", soft_wrap=True)
 
 
-class MpcSettings(PlannerSettings):
-    env: str = Field(description="Env id the model was fit on, e.g. Reacher-v5, or MODULE:EnvId")
+class MpcSettings(PlannerSettings, EnvSettings):
+    aliases: ClassVar[frozenset[str]] = PLANNED_ENV_KEYS
+    env_refused: ClassVar[dict[str, str]] = {k: v.format(kind="mpc") for k, v in PLANNED_ENV_REFUSED.items()}
+    env: EnvConfig = Field(description="The env the model was fit on: its id (e.g. Reacher-v5, or MODULE:EnvId) "
+                           "and motorlab's wrappers, given flat (--delay, --history, ...)")
     model: str = Field(description="A model folder from `motorlab dynamics fit`")
     episodes: int = Field(50, gt=0, description="Episodes to control")
     parallel: int = Field(1, gt=0, description="Episodes run side by side, planned in one batched call")
@@ -160,7 +184,7 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
     what = "MPC ({optimizer}) on {model} · {env}"
     headline_keys = ("return_mean", "return_std", "return_min", "final_distance_mean", "plan_ms_median", "episodes",
                      "wall_seconds")
-    refs = (Ref("model", ("model",)),)
+    refs = (Ref("model", ("model",)), Ref("sar", ("sar",)))
     metrics = (Metric("return_mean", "return", spread="return_std"),
                Metric("return_min", "min return"),
                Metric("final_distance_mean", "final distance", "mm", scale=1000),
@@ -171,7 +195,10 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
     key_figures = ("plots/distance.png",)
 
     def check(self, settings: MpcSettings) -> None:
-        check_env_id(settings.env)
+        check_env_id(settings.env.id)
+
+    def describe(self, settings: MpcSettings, copies: int = 1) -> str:
+        return with_env(self.what, settings)
 
     def run(self, settings: MpcSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> MpcSummary:
@@ -179,8 +206,12 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
         from motorlab.report.dynamics_plots import distance_over_time
 
         s = settings
-        env = make_env(EnvConfig(id=s.env), shaped=False)
-        policy = build_policy(env, s.env, Path(s.model), s.optimizer, s.seed, **s.scoring(), **s.plan())
+        env = make_env(s.env, shaped=False)
+        try:
+            policy = build_policy(env, s.env, Path(s.model), s.optimizer, s.seed, **s.scoring(), **s.plan())
+        except MotorlabError:
+            env.close()
+            raise
         dt = float(getattr(env.unwrapped, "dt", 0.0)) or None
         env.close()
         parallel = min(s.parallel, s.episodes)
@@ -204,12 +235,12 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
                          disagreement=spread)
         if np.isfinite(distances).all():
             distance_over_time(distances, run_dir / "plots" / "distance.png",
-                               f"{s.env}: MPC ({s.optimizer}, horizon {s.horizon}, {s.population} x {s.iterations})",
+                               f"{s.env.id}: MPC ({s.optimizer}, horizon {s.horizon}, {s.population} x {s.iterations})",
                                dt=dt)
         video = {"video": str(record_video(s.env, policy, run_dir / "videos" / "episode_0.mp4", s.seed))
                  } if s.video else {}
         has_distance = bool(np.isfinite(final).all())
-        summary = MpcSummary(env_id=s.env, episodes=s.episodes, return_mean=float(returns.mean()),
+        summary = MpcSummary(env_id=s.env.id, episodes=s.episodes, return_mean=float(returns.mean()),
                              return_std=float(returns.std()), return_min=float(returns.min()),
                              final_distance_mean=float(final.mean()) if has_distance else None,
                              final_distance_median=float(np.median(final)) if has_distance else None,
@@ -237,8 +268,11 @@ MPC = MpcKind()
 # ---- mbrl ---------------------------------------------------------------------------------------
 
 
-class MbrlSettings(PlannerSettings, ModelSettings):
-    env: str = Field(description="Gymnasium env id, e.g. Pusher-v5, or MODULE:EnvId for your own")
+class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
+    aliases: ClassVar[frozenset[str]] = PLANNED_ENV_KEYS
+    env_refused: ClassVar[dict[str, str]] = {k: v.format(kind="mbrl") for k, v in PLANNED_ENV_REFUSED.items()}
+    env: EnvConfig = Field(description="The env to learn: its id (e.g. Pusher-v5, or MODULE:EnvId for your own) "
+                           "and motorlab's wrappers, given flat (--delay, --history, ...)")
     rounds: int = Field(10, gt=0, description="Rounds of collect -> refit -> evaluate (round 1 collects with random "
                         "actions)")
     episodes_per_round: int = Field(1, gt=0, description="Episodes collected each round")
@@ -275,8 +309,9 @@ class MbrlSettings(PlannerSettings, ModelSettings):
 
         fit = self.fit_args()
         holdout_every = round(1 / self.valid_fraction) if self.valid_fraction > 0 else 0
-        return LoopPlan(env_id=self.env, rounds=self.rounds, episodes_per_round=self.episodes_per_round,
-                        eval_episodes=self.eval_episodes, seed=self.seed, parallel=self.parallel,
+        wrapped = {k: v for k, v in env_record(self.env).items() if k != "id"}  # its settings besides the id
+        return LoopPlan(env_id=self.env.id, env=wrapped, rounds=self.rounds,
+                        episodes_per_round=self.episodes_per_round, eval_episodes=self.eval_episodes, seed=self.seed, parallel=self.parallel,
                         holdout_every=holdout_every, until_return=self.until_return,
                         state=layout_name(self.env, self.state), fit=fit,
                         optimizer=self.optimizer, plan=self.plan(), scoring=self.scoring())
@@ -333,10 +368,14 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
                Metric("wall_seconds", "wall time", "s", setup=True))
     findings = ("final_return_mean", "env_steps", "plan_ms_median")
     key_figures = ("plots/learning_curve.png",)
+    refs = (Ref("sar", ("sar",)),)
     provides = Artifact("model", "model")
 
     def check(self, settings: MbrlSettings) -> None:
-        check_env_id(settings.env)
+        check_env_id(settings.env.id)
+
+    def describe(self, settings: MbrlSettings, copies: int = 1) -> str:
+        return with_env(self.what, settings)
 
     def run(self, settings: MbrlSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> MbrlSummary:
@@ -365,14 +404,14 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
         staging.rename(final)
         rows = [r.__dict__ for r in records]
         mbrl_curve(rows, run_dir / "plots" / "learning_curve.png",
-                   f"{s.env}: model-based loop ({s.ensemble} members, {s.optimizer})")
+                   f"{s.env.id}: model-based loop ({s.ensemble} members, {s.optimizer})")
         evals = [r.eval_return_mean for r in records if r.eval_return_mean is not None]
         plan_ms = [r.plan_ms_median for r in records if r.plan_ms_median is not None]
         last = records[-1]
         faults = result.faults
         summary = MbrlSummary(
             **fault_keys(faults.episodes, faults.planner),
-            env_id=s.env, rounds=len(records), env_steps=last.env_steps, episodes=last.episodes,
+            env_id=s.env.id, rounds=len(records), env_steps=last.env_steps, episodes=last.episodes,
             final_return_mean=last.eval_return_mean, final_return_std=last.eval_return_std,
             best_return_mean=max(evals) if evals else None, valid_mse=last.valid_mse,
             valid_mse_first=last.valid_mse_first, plan_ms_median=float(np.median(plan_ms)) if plan_ms else None,

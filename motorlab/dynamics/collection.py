@@ -27,7 +27,7 @@ from rich.progress import Progress
 from motorlab.dynamics.reacher_sim import arm_models, closed_form_arm, rollout_reacher, sample_initial_states
 from motorlab.dynamics.state import StateLayout, env_layout
 from motorlab.dynamics.transitions import Transitions
-from motorlab.envs import EnvConfig, facts, make_env
+from motorlab.envs import EnvConfig, describe_env, env_record, facts, is_bare, make_env, option_name
 from motorlab.envs.spaces import encode_space, flat_space, require_actions
 from motorlab.errors import MotorlabError
 from motorlab.faults import fault_line, fault_of
@@ -107,7 +107,7 @@ _worker: dict[str, Any] = {}
 
 def _init_worker(env_cfg: dict, policy_dir: str | None) -> None:
     torch.set_num_threads(1)
-    _worker["env"] = make_env(EnvConfig.model_validate(env_cfg), shaped=False)
+    _worker["env"] = make_env(EnvConfig.model_validate(env_cfg))
     _worker["policy"] = load_policy_files(Path(policy_dir)) if policy_dir else None
 
 
@@ -177,24 +177,27 @@ def require_continuous(env: gym.Env, env_id: str, user: str, random: bool = Fals
                             "and high) or collect with --policy RUN_DIR.")
 
 
-def collect_transitions(env_id: str, episodes: int, policy: str = "random", workers: int | None = None,
+def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "random", workers: int | None = None,
                         seed: int = 0, state: str = "auto", simulator: str = "auto",
                         progress: bool = True) -> Transitions:
-    """Transitions of `episodes` episodes of ENV_ID.
+    """Transitions of `episodes` episodes of an env.
 
     Args:
-        env_id: a Gymnasium (or MyoSuite) env id.
+        env: a Gymnasium (or MyoSuite) env id, or an EnvConfig: the env with motorlab's wrappers
+            (delay, noise, history, reward shaping, synergy actions, ...), whose observations, actions
+            and rewards are what the transitions record.
         episodes: number of episodes, each to its end (termination or time limit).
         policy: "random" (uniform actions) or a run folder from `motorlab train`.
         workers: processes or threads (default: all cores).
         state: state layout, "auto" (the env's catalogue entry: reacher for Reacher ids, else the observation),
             "reacher", "observation".
-        simulator: "auto" (for Reacher with random actions the arm's closed form where it reproduces
-            the model, else MuJoCo rollouts; Gymnasium for anything else), "closed-form", "mujoco"
-            or "gymnasium".
+        simulator: "auto" (for the bare Reacher with random actions the arm's closed form where it
+            reproduces the model, else MuJoCo rollouts; Gymnasium for anything else, an env with
+            wrappers or arguments included), "closed-form", "mujoco" or "gymnasium".
 
     Raises:
-        MotorlabError: bad counts, unknown env or layout, a policy folder that does not fit the env.
+        MotorlabError: bad counts, unknown env or layout, a policy folder that does not fit the env,
+            closed-form or mujoco asked for an env with wrappers or arguments.
     """
     if episodes <= 0:
         raise MotorlabError(f"--episodes must be positive, got {episodes}.")
@@ -202,8 +205,14 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
         raise MotorlabError(f"--workers must be positive, got {workers}.")
     if simulator not in SIMULATORS:
         raise MotorlabError(f"--simulator {simulator!r}: choose {', '.join(SIMULATORS[:-1])} or {SIMULATORS[-1]}.")
-    env_cfg = EnvConfig(id=env_id)
-    env = make_env(env_cfg, shaped=False)
+    env_cfg = env if isinstance(env, EnvConfig) else EnvConfig(id=env)
+    env_id = env_cfg.id
+    bare = is_bare(env_cfg)
+    if simulator in ("closed-form", "mujoco") and not bare:
+        given = ", ".join(option_name(k) for k in env_record(env_cfg) if k != "id")
+        raise MotorlabError(f"--simulator {simulator} steps the bare Reacher arm and cannot apply {given} "
+                            f"({describe_env(env_cfg)}); use --simulator gymnasium (auto picks it).")
+    env = make_env(env_cfg)  # reward shaping (--reward) too: the rewards recorded are the ones a learned head fits
     try:  # before any work: one line for an env a forward model cannot act on
         require_continuous(env, env_id, "dynamics collect", random=policy == "random")
         layout = env_layout(env, env_id, state)
@@ -221,7 +230,7 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
         if expected is not None and expected.shape != env.observation_space.shape:
             raise MotorlabError(f"the policy in {policy} expects observations of shape {expected.shape}, "
                                 f"{env_id} gives {env.observation_space.shape}; pick the env it was trained on.")
-    fast = _is_reacher(env) and policy_dir is None
+    fast = _is_reacher(env) and policy_dir is None and bare
     if simulator in ("closed-form", "mujoco") and not fast:
         raise MotorlabError(f"--simulator {simulator} covers Reacher with random actions only; use auto or gymnasium.")
     fast = fast and simulator != "gymnasium"
@@ -244,7 +253,7 @@ def collect_transitions(env_id: str, episodes: int, policy: str = "random", work
         raise MotorlabError(f"every episode of {env_id} ended on a numerical fault before its first step "
                             f"(first: {faults[0]}); nothing to collect.")
     seconds = time.perf_counter() - start
-    meta = {"env_id": env_id, "state_layout": layout.name, "state_labels": list(layout.labels),
+    meta = {"env_id": env_id, "env": env_record(env_cfg), "state_layout": layout.name, "state_labels": list(layout.labels),
             "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),
             "obs_layout": layout.keys_json(), "action_space": encode_space(env.action_space),
             "action_low": env.action_space.low.tolist(), "action_high": env.action_space.high.tolist(),

@@ -12,6 +12,7 @@ import torch
 
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import ForwardModel
+from motorlab.envs import EnvConfig
 
 REPORT_STEPS = (1, 5, 10, 25)
 
@@ -19,13 +20,16 @@ REPORT_STEPS = (1, 5, 10, 25)
 def open_loop(model: ForwardModel, episodes: int, seed: int = 0, steps: int | None = None) -> dict[str, np.ndarray]:
     """Simulator and model states (E, T+1, S) under the same random actions (E, T, A), and goals (E, G).
 
-    The simulator side is `collect_transitions` on Gymnasium's env (episode k from seed + k), so the
+    The simulator side is `collect_transitions` on Gymnasium's env (episode k from seed + k), with
+    the env settings the model's transitions were collected under (model.json's "env"), so the
     check sees exactly what `dynamics collect --simulator gymnasium` would record. Episodes that
     end early (an env's termination) keep their own length: the steps after an episode's end are
     NaN in "true" and "model", and "live" (E, T+1) says which steps exist.
     """
-    data = collect_transitions(model.meta["env_id"], episodes, workers=1, seed=seed,
-                               state=model.meta["state_layout"], simulator="gymnasium", progress=False)
+    fitted = model.meta.get("env")  # the env settings the model's transitions were collected under
+    env = EnvConfig.model_validate(fitted) if isinstance(fitted, dict) else model.meta["env_id"]
+    data = collect_transitions(env, episodes, workers=1, seed=seed, state=model.meta["state_layout"],
+                               simulator="gymnasium", progress=False)
     rows = [np.flatnonzero(data.episode == e) for e in range(episodes)]
     horizon = int(min(max(len(r) for r in rows), steps or np.inf))
     lengths = np.array([min(len(r), horizon) for r in rows])

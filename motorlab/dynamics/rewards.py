@@ -201,6 +201,20 @@ class GoalDistance:
         return f"GoalDistance(achieved={self.achieved.start}:{self.achieved.stop})"
 
 
+class NewestFrame:
+    """A StateFn written for one observation, on a state of stacked ones (--history: gymnasium's
+    FrameStackObservation, flattened, the newest last): it reads the newest, the last `size` entries."""
+
+    def __init__(self, fn: StateFn, size: int):
+        self.fn, self.size = fn, size
+
+    def __call__(self, state, action, next_state, goal):
+        return self.fn(state[..., -self.size:], action, next_state[..., -self.size:], goal)
+
+    def __repr__(self) -> str:
+        return f"NewestFrame({self.fn!r}, {self.size})"
+
+
 # ---- one-line messages ------------------------------------------------------------------
 
 def _one_line(text, limit: int | None = None) -> str:
@@ -233,6 +247,13 @@ def _no_builtin_reason(env_id: str, layout: str, state_size: int | None) -> str:
         return ""
     return (f" with the {layout!r} state layout (its bundled reward is for the {' and '.join(others)} "
             f"layout{'s' if len(others) > 1 else ''})")
+
+
+def _synergy_reward(env_id: str) -> str:
+    """The one line for a bundled reward under synergy actions (--sar)."""
+    return (f"--reward builtin: {env_id}'s bundled reward charges the env's own actions, and with --sar the planner "
+            "acts in synergies; use --reward MODULE:FUNCTION (your torch function (obs, action, next_obs) -> reward) "
+            "or --reward learned (fit the model with --learn-reward).")
 
 
 def missing_reward_message(env_id: str, layout: str = "observation", state_size: int | None = None) -> str:
@@ -421,7 +442,8 @@ def _no_goal(env_id: str) -> MotorlabError:
 
 def resolve_task(env_id: str, layout: str, state_size: int, action_size: int, goal_size: int = 0,
                  reward: str = "auto", termination: str = "auto",
-                 learned: frozenset[str] = frozenset(), achieved: slice | None = None) -> Task:
+                 learned: frozenset[str] = frozenset(), achieved: slice | None = None, frames: int = 1,
+                 synergies: bool = False) -> Task:
     """The reward and termination to plan with on env_id.
 
     Args:
@@ -435,29 +457,41 @@ def resolve_task(env_id: str, layout: str, state_size: int, action_size: int, go
         learned: the heads the model has ({"reward"}, {"reward", "termination"} or none).
         achieved: the state's achieved_goal entries, for a goal-conditioned env whose goal is the
             desired_goal (StateLayout.achieved): what makes the goal reward available.
+        frames: observations stacked in the state (--history; StateLayout.frames): the bundled
+            reward and termination, written for one observation, read the newest.
+        synergies: the planner's actions are synergies (--sar), not the env's own: the bundled
+            rewards, which charge the env's own actions, do not apply.
 
     Raises:
         MotorlabError: one line naming what is missing and the ways to give it.
     """
     learned = frozenset(learned)
-    builtin = _builtin(env_id, layout, state_size, action_size)
+    frame = state_size // frames if frames > 1 and state_size % frames == 0 else state_size  # one observation
+    builtin = _builtin(env_id, layout, frame, action_size)
+    if builtin is not None and frame != state_size:
+        builtin = _Builtin(NewestFrame(builtin.reward, frame),
+                           builtin.termination and NewestFrame(builtin.termination, frame), builtin.state_size)
     reward = reward.strip()
     if reward == "auto":
-        if builtin is not None:
+        if builtin is not None and not synergies:
             reward = "builtin"
         elif "reward" in learned:
             reward = "learned"
         elif achieved is not None:
             reward = "goal"
+        elif builtin is not None:
+            raise MotorlabError(_synergy_reward(env_id))
         else:
-            raise MotorlabError(missing_reward_message(env_id, layout, state_size))
+            raise MotorlabError(missing_reward_message(env_id, layout, frame))
     if reward == "builtin":
         if builtin is None:
             raise MotorlabError(_one_line(f"--reward builtin: no bundled reward for {env_id}"
-                                          f"{_no_builtin_reason(env_id, layout, state_size)}; bundled for "
+                                          f"{_no_builtin_reason(env_id, layout, frame)}; bundled for "
                                           f"{', '.join(builtin_envs())}. Use --reward MODULE:FUNCTION (your torch "
                                           "function (obs, action, next_obs) -> reward) or --reward learned (fit "
                                           "the model with --learn-reward)."))
+        if synergies:
+            raise MotorlabError(_synergy_reward(env_id))
         reward_fn = builtin.reward
     elif reward == "learned":
         if "reward" not in learned:
@@ -484,7 +518,7 @@ def resolve_task(env_id: str, layout: str, state_size: int, action_size: int, go
     if termination == "builtin":
         if builtin is None:
             raise MotorlabError(_one_line(f"--termination builtin: no bundled termination for {env_id}"
-                                          f"{_no_builtin_reason(env_id, layout, state_size)} (bundled for "
+                                          f"{_no_builtin_reason(env_id, layout, frame)} (bundled for "
                                           f"{', '.join(_termination_envs())}); use "
                                           f"{_ways('termination', builtin=False)}."))
         termination_fn = builtin.termination

@@ -13,7 +13,7 @@ their keys ("achieved_goal[0]", ...), and takes the desired_goal as the planner'
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import gymnasium as gym
 import numpy as np
@@ -34,6 +34,9 @@ class StateLayout:
     _goal: Callable[[np.ndarray], np.ndarray] | None = field(default=None, repr=False, compare=False)
     # a Dict observation's keys and where each lies in the state (empty for a Box observation)
     keys: tuple[KeySlice, ...] = ()
+    # observations stacked in the state (--history K: gymnasium's FrameStackObservation, flattened,
+    # the newest last); what is written for one observation (a bundled reward) reads the newest
+    frames: int = 1
 
     @property
     def size(self) -> int:
@@ -133,6 +136,31 @@ def layout_for(env_id: str, obs_dim: int, name: str = "auto", keys: Sequence[Key
     raise MotorlabError(f"unknown state layout {name!r}; choose auto, reacher or observation.")
 
 
+def stacked_frames(env: gym.Env) -> int:
+    """How many observations `env`'s observation stacks (--history K: gymnasium's
+    FrameStackObservation), 1 where it stacks none."""
+    layer = env
+    while isinstance(layer, gym.Wrapper):
+        if isinstance(layer, gym.wrappers.FrameStackObservation):
+            return int(layer.stack_size)
+        layer = layer.env
+    return 1
+
+
 def env_layout(env: gym.Env, env_id: str, name: str = "auto") -> StateLayout:
-    """`layout_for` the env `make_env` built (its flattened observation, and its Dict keys if any)."""
-    return layout_for(env_id, int(np.prod(env.observation_space.shape)), name, observation_keys(env))
+    """`layout_for` the env `make_env` built (its flattened observation, and its Dict keys if any).
+
+    With an observation history (--history K) the state is the K stacked observations ("auto": the
+    observation layout; a layout that reads one observation, reacher, or the goal keys of a Dict
+    observation, is refused in one line)."""
+    frames = stacked_frames(env)
+    obs_dim = int(np.prod(env.observation_space.shape))
+    if frames == 1:
+        return layout_for(env_id, obs_dim, name, observation_keys(env))
+    if name == "reacher":
+        raise MotorlabError(f"the reacher state layout reads one Reacher observation, and with --history {frames} "
+                            f"the state is {frames} stacked observations; use --state observation (or auto).")
+    if observation_keys(env):
+        raise MotorlabError(f"{env_id}'s Dict observation names its goal keys in one observation, and --history "
+                            f"{frames} stacks {frames} of them; plan on it without --history.")
+    return replace(layout_for(env_id, obs_dim, "observation" if name == "auto" else name), frames=frames)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -13,7 +13,7 @@ from rich.console import Console
 
 from motorlab.dynamics.state import xy_columns
 from motorlab.dynamics.transitions import TRANSITIONS, load_transitions
-from motorlab.envs import check_env_id
+from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, check_env_id, describe_env
 from motorlab.envs.spaces import decode_space, require_actions
 from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric, Number
@@ -24,8 +24,21 @@ from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
 # ---- dynamics-collect -------------------------------------------------------------------------
 
 
-class DynamicsCollectSettings(Settings):
-    env: str = Field(description="Gymnasium env id, e.g. Reacher-v5")
+def with_env(what: str, settings: EnvSettings) -> str:
+    """A kind's "what" cell (a format of its settings) with the env in a few words: its id and the
+    wrappers it was given ("Reacher-v5, history 3")."""
+    return what.format(**{**settings.model_dump(), "env": describe_env(settings.env)})
+
+
+class DynamicsCollectSettings(EnvSettings):
+    """The env as every env-building kind takes it (EnvConfig: id, delay, history, noise, ...,
+    flat on the command line and in recipes): the transitions are what that env gives."""
+
+    aliases: ClassVar[frozenset[str]] = frozenset(ENV_KEYS) - {"success"}
+    env_refused: ClassVar[dict[str, str]] = {
+        "success": "dynamics collect counts no successes (it records transitions); drop it."}
+    env: EnvConfig = Field(description="The env to collect from: its id (e.g. Reacher-v5) and motorlab's "
+                           "wrappers, given flat (--delay, --history, ...)")
     episodes: int = Field(1000, gt=0, description="Episodes to run, each to its end")
     policy: str = Field("random", description="random (uniform actions) or a run folder from `motorlab train`")
     workers: int | None = Field(None, gt=0, description="Processes or threads (default: all cores)")
@@ -33,8 +46,9 @@ class DynamicsCollectSettings(Settings):
         "auto", description="State layout: auto (Reacher: cos, sin, joint velocities, fingertip x-y; else the "
         "observation), reacher, observation")
     simulator: Literal["auto", "closed-form", "mujoco", "gymnasium"] = Field(
-        "auto", description="auto (Reacher with random actions: closed-form where the arm's closed-form dynamics "
-        "reproduce MuJoCo's, else mujoco; any other env or policy: gymnasium); closed-form (the arm's equations "
+        "auto", description="auto (Reacher with random actions and no env settings besides its id: closed-form "
+        "where the arm's closed-form dynamics reproduce MuJoCo's, else mujoco; any other env, env settings or "
+        "policy: gymnasium); closed-form (the arm's equations "
         "of motion in NumPy, all episodes at once, equal to MuJoCo's to its solver tolerance); mujoco "
         "(mujoco.rollout in C on every core, bit for bit Gymnasium's joints); gymnasium (the env itself, in a "
         "process pool)")
@@ -65,14 +79,17 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
                Metric("transitions_per_second", "transitions per second", "count"),
                Metric("simulator", "simulator", "text", setup=True),
                Metric("collect_seconds", "collection time", "s", setup=True))
-    refs = (Ref("policy", ("policy",)),)
+    refs = (Ref("policy", ("policy",)), Ref("sar", ("sar",)))  # sar = "@fit": act in a fit step's synergies
     provides = Artifact("transitions", TRANSITIONS)
     arguments = ("env",)
     examples = ("motorlab dynamics collect Reacher-v5 --episodes 20000 --out runs/reacher-data",
                 "motorlab dynamics collect InvertedPendulum-v5 --episodes 200 --policy runs/ppo")
 
     def check(self, settings: DynamicsCollectSettings) -> None:
-        check_env_id(settings.env)
+        check_env_id(settings.env.id)
+
+    def describe(self, settings: DynamicsCollectSettings, copies: int = 1) -> str:
+        return with_env(self.what, settings)
 
     def run(self, settings: DynamicsCollectSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> DynamicsCollectSummary:
@@ -84,7 +101,7 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
         data.save(run_dir / TRANSITIONS)
         seconds = data.meta["seconds"]
         summary = DynamicsCollectSummary(
-            env_id=s.env, transitions=len(data), episodes=s.episodes, transitions_per_second=len(data) / seconds,
+            env_id=s.env.id, transitions=len(data), episodes=s.episodes, transitions_per_second=len(data) / seconds,
             collect_seconds=seconds, simulator=data.meta["simulator"], state_layout=data.meta["state_layout"],
             state_size=data.states.shape[1], action_size=data.actions.shape[1],
             return_mean=float(np.bincount(data.episode, weights=data.rewards)[np.unique(data.episode)].mean()),

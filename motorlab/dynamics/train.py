@@ -145,6 +145,8 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
         raise MotorlabError("no training rows left after the validation split; collect more episodes.")
     meta = {k: data.meta.get(k) for k in ("env_id", "state_layout", "state_labels", "goal_labels", "obs_dim",
                                           "obs_layout", "action_space", "action_low", "action_high")}
+    if "env" in data.meta:  # the env settings the transitions were collected under (wrappers, disturbances)
+        meta["env"] = data.meta["env"]
     model = ForwardModel(data.states.shape[1], data.actions.shape[1], hidden, ensemble, meta=meta,
                          probabilistic=probabilistic, heads=heads)
     if init is not None:

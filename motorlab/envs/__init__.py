@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import gymnasium as gym
-from pydantic import ConfigDict, Field, field_validator, model_validator
+from pydantic import ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails
 
 from motorlab.envs.catalog import EnvFacts, facts, register_env
 from motorlab.envs.disturbances import (
@@ -45,7 +46,7 @@ from motorlab.user_modules import (
 
 __all__ = ["EnvConfig", "EnvSettings", "ENV_KEYS", "DISTURBANCES", "describe_env", "make_env", "check_env_id", "max_return", "env_dt", "LowPassDelay", "RewardShaping",
            "delay_alpha", "register_myosuite", "register_robotics", "reads_observations", "early_end_label", "EnvFacts",
-           "facts", "register_env"]
+           "facts", "register_env", "fold_env", "given_env", "env_record", "is_bare", "option_name", "refuse_settings"]
 
 def _route_mujoco_warnings() -> None:
     """Send MuJoCo's C-level warnings to Python logging instead of stderr and a
@@ -163,24 +164,86 @@ ENV_KEYS = {"env": "id", "delay": "delay", "delay_on": "delay_on", "history": "h
 
 class EnvSettings(Settings):
     """Settings of a step that builds an env: recipes and the CLI give the env's settings flat
-    (env, delay, history, ...); they are folded into one `EnvConfig`."""
+    (env, delay, history, ...); they are folded into one `EnvConfig`.
+
+    A kind says which of them it takes flat (`aliases`), whether the env id must be given (its
+    `env` field without a default: required), and which EnvConfig settings it cannot honour
+    (`env_refused`: the field and the rest of the one-line error, why and what to do instead), so
+    that a setting it would not apply is refused, never silently ignored. A field of the kind's own
+    that shares a flat env name (mpc's planner `reward`) stays the kind's."""
 
     aliases: ClassVar[frozenset[str]] = frozenset(ENV_KEYS)
+    env_refused: ClassVar[dict[str, str]] = {}
     env: EnvConfig = Field(default_factory=EnvConfig)
 
     @model_validator(mode="before")
     @classmethod
     def _fold_env(cls, data: Any) -> Any:
-        return fold_env(data) if isinstance(data, dict) else data
+        if not isinstance(data, dict):
+            return data
+        folded = fold_env(data, keep=frozenset(cls.model_fields) - {"env"})
+        if cls.model_fields["env"].is_required() and "id" not in folded["env"]:
+            raise ValidationError.from_exception_data(cls.__name__, [InitErrorDetails(
+                type="missing", loc=("env",), input=data)])
+        if not folded["env"] and cls.model_fields["env"].default is None:  # an optional env, not given
+            folded.pop("env")
+        return folded
+
+    @model_validator(mode="after")
+    def _honoured(self):
+        env = getattr(self, "env", None)
+        if env is not None:
+            refuse_settings(env, type(self).env_refused, type(self).aliases)
+        return self
 
 
-def fold_env(fields: dict[str, Any]) -> dict[str, Any]:
-    """Flat env settings (env = "id", delay, history, ...) folded into one "env" dict."""
+def option_name(field: str) -> str:
+    """The command-line option of an EnvConfig field: --env (id), --env-arg (kwargs), --history, ..."""
+    alias = {f: k for k, f in ENV_KEYS.items()}[field]
+    return "--env-arg" if alias == "env_kwargs" else "--" + alias.replace("_", "-")
+
+
+def refuse_settings(cfg: EnvConfig, refused: dict[str, str], flat: frozenset[str] = frozenset(ENV_KEYS)) -> None:
+    """Refuse, in one line, the first env setting of `refused` that `cfg` sets (to other than its
+    default): `refused` maps an EnvConfig field to why it does not apply and what to do instead.
+    A setting is named as the command line names it where it is one of the `flat` ones (--history),
+    else as a field of the env ("env.reward": a kind whose --reward is its own).
+
+    Raises:
+        MotorlabError: "--history 3: <why>".
+    """
+    names = {field: key for key, field in ENV_KEYS.items()}
+    for field, why in refused.items():
+        value = getattr(cfg, field)
+        if value != EnvConfig.model_fields[field].get_default(call_default_factory=True):
+            name = option_name(field) if names[field] in flat else f"env.{field}"
+            raise MotorlabError(f"{name} {value!r}: {why}")
+
+
+def given_env(cfg: EnvConfig) -> dict[str, Any]:
+    """The env settings `cfg` was given (not its defaults), as EnvConfig names them."""
+    return cfg.model_dump(mode="json", include=cfg.model_fields_set)
+
+
+def env_record(cfg: EnvConfig) -> dict[str, Any]:
+    """`cfg` as files record it: its id and the settings that differ from their defaults."""
+    return {"id": cfg.id, **cfg.model_dump(mode="json", exclude_defaults=True, exclude={"id"})}
+
+
+def is_bare(cfg: EnvConfig) -> bool:
+    """Whether `cfg` is its env id alone: no wrapper, no disturbance, no argument."""
+    return cfg.model_dump() == EnvConfig(id=cfg.id).model_dump()
+
+
+def fold_env(fields: dict[str, Any], keep: frozenset[str] = frozenset()) -> dict[str, Any]:
+    """Flat env settings (env = "id", delay, history, ...) folded into one "env" dict (a str env
+    is its id: config.toml files that recorded only the id load as before); `keep`: names that
+    are the settings' own fields, left where they are."""
     data = dict(fields)
     env = data.get("env")
     env = {"id": env} if isinstance(env, str) else dict(env or {})
     for key, field in ENV_KEYS.items():
-        if key != "env" and key in data:
+        if key != "env" and key in data and key not in keep:
             env[field] = data.pop(key)
     data["env"] = env
     return data

@@ -1,5 +1,6 @@
-"""Evaluation: batched rollouts of any policy (returns, success, falls, numerical faults) and
-zero-shot transfer to envs a policy never trained on.
+"""Evaluation: batched rollouts of any policy (returns, success, falls, numerical faults),
+zero-shot transfer to envs a policy never trained on, the motor signals of a policy's good
+episodes (activations.py, for synergies), and a run's figures and videos (figures.py, videos.py).
 
     from motorlab.evaluation import evaluate, Evaluator, Rollouts
 """

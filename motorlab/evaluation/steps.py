@@ -132,7 +132,7 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
             fields = data
         return super().validate(fields)
 
-    def make(self, **fields: Any) -> EvaluateSettings:
+    def make(self, how: Any = None, /, **fields: Any) -> EvaluateSettings:
         """Settings as the command line and the Python API give them.
 
         Raises:
@@ -143,7 +143,7 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
         if isinstance(policy, str) and not is_folder_policy(policy) and not policy.startswith("@") \
                 and policy.split(":", 1)[0] not in BUILTIN_POLICIES:
             raise MotorlabError(unknown_policy_message(policy))
-        settings = super().make(**fields)
+        settings = super().make(how, **fields)
         if "id" not in settings.env.model_fields_set:
             raise MotorlabError(f"no env for {policy!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")
         return settings
@@ -195,7 +195,7 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
         return ["success_rate" if h.get("success_rate") is not None else "return_mean"]
 
     def figures(self, run_dir: Path) -> None:
-        from motorlab.report.run import plot_run
+        from motorlab.evaluation.figures import plot_run
 
         plot_run(run_dir)
 

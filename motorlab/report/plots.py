@@ -22,7 +22,7 @@ files_only_backend()
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from motorlab.runs import atomic_write_bytes, read_metrics  # noqa: E402
+from motorlab.runs import METRICS, atomic_write_bytes, read_config, read_json, read_metrics  # noqa: E402
 
 # Legends sit on a translucent white box (no border) so they stay readable over dense data;
 # constrained layout keeps suptitles and colorbars from leaving gaps or overlapping.
@@ -113,6 +113,28 @@ def learning_curve(run_dir: Path, path: Path, title: str = "", solve_return: flo
                    "evaluations (mean and min), against environment steps"
                    + (f"; solved at {steps_to_success:,} steps" if steps_to_success is not None else "") + ".")
         return save_figure(fig, path, caption)
+
+
+def plot_learning_curve(run_dir: Path) -> Path | None:
+    """plots/learning_curve.png of a training run (None for runs without metrics.csv)."""
+    if not (Path(run_dir) / METRICS).is_file():
+        return None
+    config = read_config(run_dir)
+    summary = read_json(Path(run_dir) / "summary.json")
+    return learning_curve(run_dir, Path(run_dir) / "plots" / "learning_curve.png",
+                          title=f"{summary.get('algo', '').upper()} on {summary.get('env_id')}"
+                                f"{env_tag(config.get('env', {}))} (seed {summary.get('seed')})",
+                          solve_return=summary.get("solve_return"), steps_to_success=summary.get("steps_to_success"))
+
+
+def env_tag(env: dict) -> str:
+    """What a figure's title says of a run's env settings: " (delay 0.2 s on action, history 3)", or ""."""
+    parts = []
+    if env.get("delay"):
+        parts.append(f"delay {env['delay']} s on {env.get('delay_on', 'action')}")
+    if env.get("history", 1) > 1:
+        parts.append(f"history {env['history']}")
+    return f" ({', '.join(parts)})" if parts else ""
 
 
 def observation_trace(observations: np.ndarray, actions: np.ndarray, dt: float, labels: list[str],

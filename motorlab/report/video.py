@@ -1,4 +1,5 @@
-"""`motorlab video RUN_DIR`: episodes of a run's policy as H.264 MP4, rendered offscreen.
+"""Filming an env: offscreen frames of its episodes, written as H.264 MP4. `motorlab video RUN_DIR`
+films a run's policy (motorlab.evaluation.videos), `mpc --video` a planner's episode.
 
 Rendering uses MuJoCo's own offscreen renderer on the unwrapped env's model and
 data, so it works for Gymnasium's MuJoCo envs and MyoSuite alike; set
@@ -10,18 +11,14 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from motorlab.envs import EnvConfig, env_dt, facts, make_env
 from motorlab.envs.disturbances import mujoco_model_data
 from motorlab.errors import MotorlabError
-from motorlab.evaluation import trained_env_settings
-from motorlab.policies import load_policy
-from motorlab.runs import atomic_path, read_config, require_run_dir, write_json
+from motorlab.runs import atomic_path
 
 MAX_FPS = 50  # browsers and players want at most this; faster envs are subsampled
 
@@ -94,47 +91,6 @@ def make_video_env(env_cfg: EnvConfig):
         env.close()
         env = make_env(env_cfg, shaped=False, render_mode="rgb_array")
     return env
-
-
-def render_video(run_dir: Path, episodes: int = 5, seed: int = 0, camera: str | None = None,
-                 width: int = 640, height: int = 480, out: Path | None = None,
-                 start: Callable[[], Path] | None = None) -> dict[str, Any]:
-    """Render `episodes` deterministic episodes of the run's policy to `<out>/episode_<k>.mp4`
-    (default out: RUN_DIR/videos), with an index videos.json beside them.
-
-    Args:
-        start: called once the env has rendered a first frame and the policy is loaded, before
-            anything is written; returns the folder to write (a step kind's `start`). A mistake
-            (an env that cannot render, a policy that does not fit it) so leaves no folder behind.
-
-    Returns:
-        The files, frame counts, fps, episode returns, camera and size.
-
-    Raises:
-        MotorlabError: not a finished run, an env that cannot render, a policy that does not fit it.
-    """
-    if episodes <= 0:
-        raise MotorlabError(f"--episodes must be positive, got {episodes}.")
-    run_dir = require_run_dir(Path(run_dir))
-    config = read_config(run_dir)
-    env_cfg = EnvConfig.model_validate(trained_env_settings(run_dir))
-    files, returns, frames_per = [], [], []
-    with filming(make_video_env(env_cfg), width, height, camera) as (env, cam, every, fps):
-        policy = load_policy(config.get("policy", str(run_dir)), env, env_cfg.id, seed)
-        env.reset(seed=seed)
-        cam.grab()  # the env renders: checked before the folder is touched
-        folder = start() if start is not None else Path(out) if out else run_dir / "videos"
-        for k in range(episodes):
-            frames, ret = record_episode(env, policy, cam, seed + k, every)
-            path = folder / f"episode_{k}.mp4"
-            write_mp4(path, frames, fps)
-            files.append(str(path))
-            returns.append(ret)
-            frames_per.append(len(frames))
-    summary = {"videos": files, "frames": frames_per, "fps": fps, "returns": returns, "camera": cam.camera,
-               "width": width, "height": height}
-    write_json(folder / "videos.json", summary)
-    return summary
 
 
 def record_episode(env, policy, cam, seed: int, every: int = 1) -> tuple[list[np.ndarray], float]:

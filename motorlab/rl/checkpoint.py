@@ -37,7 +37,7 @@ HER_ARRAYS = ("ep_start", "ep_length")  # HerReplayBuffer's episode bounds, row 
 HER_CURRENT = "_current_ep_start"  # where each env's episode in progress started
 
 
-def save_checkpoint(run_dir: Path, model: BaseAlgorithm, tracker_state: dict[str, Any]) -> int:
+def save_checkpoint(run_dir: Path, model: BaseAlgorithm, monitor_state: dict[str, Any]) -> int:
     """Write a checkpoint of `model` at its current step count; returns that count."""
     import safetensors.torch
     from stable_baselines3.common.vec_env import VecNormalize
@@ -63,7 +63,7 @@ def save_checkpoint(run_dir: Path, model: BaseAlgorithm, tracker_state: dict[str
         atomic_write_npz(folder / files["normalize"], **_statistics(venv.obs_rms))
     write_json(folder / LATEST, {"steps": steps, "n_updates": int(getattr(model, "_n_updates", 0)),
                                  "episode_num": int(getattr(model, "_episode_num", 0)), "files": files,
-                                 "tracker": tracker_state})
+                                 "monitor": monitor_state})
     for old in folder.iterdir():  # earlier checkpoints, now that this one is complete
         if old.name != LATEST and old.name not in files.values():
             old.unlink(missing_ok=True)
@@ -193,3 +193,4 @@ def _attr(model: BaseAlgorithm, dotted: str):
     for part in dotted.split("."):
         obj = getattr(obj, part)
     return obj
+

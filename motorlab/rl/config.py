@@ -12,7 +12,7 @@ from typing import Any
 
 from pydantic import Field, field_validator, model_validator
 
-from motorlab.control.lqr import LQRSettings
+from motorlab.controllers.lqr import LQRSettings
 from motorlab.envs import EnvSettings, fold_env
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.rl import algos

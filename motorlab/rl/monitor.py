@@ -83,7 +83,7 @@ class TrainingMonitor:
         self.last_eval_steps = -1
         self.evaluations = 0
         if resume is not None:
-            self.restore(resume["monitor"])
+            self.restore(monitor_record(resume))
 
     def state(self) -> dict:
         """What a checkpoint keeps of the monitor (JSON)."""
@@ -147,3 +147,9 @@ class TrainingMonitor:
         self.metrics.close()
         self.tb.close()
         self.evaluator.close()
+
+
+def monitor_record(record: dict) -> dict:
+    """The training monitor's state in a checkpoint record (latest.json): "monitor", or "tracker"
+    in checkpoints written before rl/tracking.py became rl/monitor.py."""
+    return record["monitor"] if "monitor" in record else record["tracker"]

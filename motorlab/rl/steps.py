@@ -6,7 +6,7 @@ import statistics
 from pathlib import Path
 from typing import Any
 
-from pydantic import Field
+from pydantic import Field, PrivateAttr
 from rich.console import Console
 
 from motorlab.command import Tracked
@@ -26,12 +26,6 @@ from motorlab.stepkind import (
     seeds_headline,
     warn_faults,
 )
-
-# where TrainKind.validate keeps the fields it was given (flat, as given: not the preset's), on the
-# settings it returns: `--config` puts them over a run's config.toml, and `--resume` refuses them
-GIVEN = "_motorlab_given"
-# a resumed run's summary says so to `report` (its resumed_from is None where no checkpoint was left)
-RESUMED = "_motorlab_resumed"
 
 
 class TrainSummary(Summary):
@@ -68,6 +62,8 @@ class TrainSummary(Summary):
     eval_falls: int
     eval_numerical_faults: int
     eval_episode_lengths: list[int]
+    # a resumed run says so to `report` (its resumed_from is None where no checkpoint was left); not in summary.json
+    _resumed: bool = PrivateAttr(False)
 
 
 class TrainInvocation(Tracked):
@@ -122,48 +118,63 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
         fields = dict(fields)
         if isinstance(fields.get("preset_file"), (str, Path)):  # config.toml records where it was read
             fields["preset_file"] = str(Path(fields["preset_file"]).resolve())
-        settings = resolve(fields)  # the named preset under the given settings
-        object.__setattr__(settings, GIVEN, fields)  # not a field: config.toml does not record it
-        return settings
+        return resolve(fields)  # the named preset under the given settings
 
-    def given(self, settings: TrainConfig) -> dict[str, Any]:
-        """The fields `settings` were made from, as given (settings made otherwise: those set)."""
-        given = getattr(settings, GIVEN, None)
-        return dict(given) if given is not None else settings.model_dump(exclude_unset=True)
+    def fields_for(self, how: TrainInvocation, given: dict[str, Any]) -> dict[str, Any]:
+        """What `make` validates on a command line (or in a job): with --config, that run's
+        config.toml under the fields given; with --resume, the interrupted run's own settings (only
+        the progress bar may be given); else the fields given, which must name an env.
+
+        Raises:
+            MotorlabError: no env id and no --config; --resume with other settings, or of a folder
+                that holds no interrupted training run; a config.toml that cannot be read.
+        """
+        if how.resume is not None:
+            if set(given) - {"progress"} or how.config is not None or how.out is not None:
+                raise self._resume_alone(Path(how.resume))
+            return self._own_fields(Path(how.resume), given.get("progress", True))
+        if how.config is not None:
+            merged = super().fields_for(how, given)
+            if "progress" not in given:  # the progress bar is the flags' (on by default), never the config's
+                merged.pop("progress", None)
+            return merged
+        if "id" not in fold_env(given)["env"]:
+            raise MotorlabError("give an env id (motorlab train InvertedPendulum-v5) or --config RUN/config.toml.")
+        return given
 
     def execute(self, settings: TrainConfig, how: TrainInvocation, console: Console | None,
                 progress: bool) -> TrainSummary:
-        """Train as the settings say; with --config, its config.toml under the settings given; with
-        --resume, the interrupted run in that folder, on its own settings."""
-        given = self.given(settings)
-        if how.resume is not None:
-            return self._resume(how, given, settings.progress, console, progress)
-        if how.config is not None:
-            # the progress bar is the flags' (on by default), never the config's
-            settings = self.validate({**self.with_config(how.config, given), "progress": settings.progress})
-        elif "id" not in fold_env(given)["env"]:
-            raise MotorlabError("give an env id (motorlab train InvertedPendulum-v5) or --config RUN/config.toml.")
-        return self.run(settings, how.out, console=console, progress=progress)
-
-    def _resume(self, how: TrainInvocation, given: dict[str, Any], show: bool, console: Console | None,
-                progress: bool) -> TrainSummary:
+        """Train as the settings say (`make(how, ...)` laid the flags over --config's config.toml);
+        with --resume, continue the interrupted run in that folder, on its own settings."""
+        if how.resume is None:
+            return self.run(settings, how.out, console=console, progress=progress)
         run_dir = Path(how.resume)
-        if set(given) - {"progress"} or how.config is not None or how.out is not None:
-            raise MotorlabError(f"--resume continues {run_dir} with the settings in its config.toml; "
-                                "drop the other settings (and --out, --config).")
+        if how.config is not None or how.out is not None:
+            raise self._resume_alone(run_dir)
+        own = self.validate(self._own_fields(run_dir, settings.progress))
+        if settings.model_dump() != own.model_dump():  # settings made without `how`: not the run's own
+            raise self._resume_alone(run_dir)
+        summary = self.run(own, run_dir, console=console, progress=progress, resume=True)
+        summary._resumed = True
+        return summary
+
+    def _own_fields(self, run_dir: Path, progress: bool) -> dict[str, Any]:
+        """The settings of the interrupted run in `run_dir` (its config.toml), with the progress bar given."""
         if not (run_dir / "config.toml").is_file():
             raise MotorlabError(f"{run_dir} is not a training run folder (no config.toml); give the --out of the "
                                 "interrupted motorlab train.")
         if is_complete(run_dir):
             raise MotorlabError(f"{run_dir} finished already (it has summary.json); there is nothing to resume.")
-        settings = self.validate({**self.with_config(run_dir / "config.toml", {}), "progress": show})
-        summary = self.run(settings, run_dir, console=console, progress=progress, resume=True)
-        object.__setattr__(summary, RESUMED, True)
-        return summary
+        return {**self.with_config(run_dir / "config.toml", {}), "progress": progress}
+
+    @staticmethod
+    def _resume_alone(run_dir: Path) -> MotorlabError:
+        return MotorlabError(f"--resume continues {run_dir} with the settings in its config.toml; "
+                             "drop the other settings (and --out, --config).")
 
     def report(self, s: TrainSummary, settings: TrainConfig, console: Console) -> None:
         start = s.resumed_from
-        if start is not None or getattr(s, RESUMED, False):  # resumed (with no checkpoint left: started over)
+        if start is not None or s._resumed:  # resumed (with no checkpoint left: started over)
             console.print(f"[green]done[/green] {s.run_dir}: "
                           + (f"resumed at {start:,} steps; " if start else "no checkpoint yet, started over; ")
                           + f"return {s.eval_return_mean:.1f} over {s.eval_episodes} episodes, {s.timesteps:,} steps")
@@ -243,7 +254,7 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
             ["success_rate" if h.get("success_rate") is not None else "return_mean"]
 
     def figures(self, run_dir: Path) -> None:
-        from motorlab.report.run import plot_run
+        from motorlab.evaluation.figures import plot_run
 
         plot_run(run_dir)
 
@@ -251,7 +262,7 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
         return last_timesteps(run_dir), settings.timesteps
 
     def warm_up(self) -> None:
-        import motorlab.report.run  # noqa: F401  (the study's figures: SB3 policies, torch)
+        import motorlab.evaluation.figures  # noqa: F401  (the study's figures: SB3 policies, torch)
         import motorlab.rl.checkpoint  # noqa: F401  (can_resume, in the background thread)
         import motorlab.rl.sb3  # noqa: F401  (torch and SB3 themselves: the modules above import them when used)
 

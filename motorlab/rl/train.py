@@ -22,11 +22,11 @@ from motorlab.envs import max_return
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import success_by, success_mode
 from motorlab.policies import load_policy_files
-from motorlab.report.run import plot_learning_curve
+from motorlab.report.plots import plot_learning_curve
 from motorlab.rl import algos
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.envcheck import check_train_env
-from motorlab.rl.monitor import EVAL_SEED_OFFSET, TrainingMonitor
+from motorlab.rl.monitor import EVAL_SEED_OFFSET, TrainingMonitor, monitor_record
 from motorlab.runs import prepare_run_dir, run_path, write_config, write_summary
 
 
@@ -79,7 +79,7 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
             from motorlab.rl.sb3 import train_sb3
 
             steps = train_sb3(cfg, model, run_dir, monitor)
-        wall = time.perf_counter() - t0 + (record["monitor"]["wall"] if record else 0.0)
+        wall = time.perf_counter() - t0 + (monitor_record(record)["wall"] if record else 0.0)
         # Reload from disk, so the reported numbers are those of the saved files.
         rollouts = monitor.evaluator.run(load_policy_files(run_dir))
         final = rollouts.summary()

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from rich.progress import Progress
 
-from motorlab.envs import EnvConfig, early_end_label, make_env, max_return
+from motorlab.envs import EnvConfig, early_end_label, given_env, make_env, max_return
 from motorlab.envs.catalog import facts
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.rollouts import evaluate, step_success, trained_env_settings
@@ -30,7 +30,7 @@ class Subject:
 
     spec: str
     label: str  # "ppo", "ppo/seed1", "pid"
-    env: dict[str, Any]  # the env it acts in before any disturbance of the grid
+    env: EnvConfig  # the env it acts in before any disturbance of the grid
 
     @property
     def group(self) -> str:
@@ -125,13 +125,15 @@ class Curves:
 STRUCTURE = ("id", "history", "sar", "phi", "kwargs", "success")
 
 
-def subjects(policies: list[str], env: dict[str, Any]) -> list[Subject]:
-    """The policies as run folders (their env's STRUCTURE, under `env`) or built-in controllers
-    (in `env`, whose id defaults to the first run's).
+def subjects(policies: list[str], env: EnvConfig | dict[str, Any]) -> list[Subject]:
+    """The policies as run folders (their env's STRUCTURE, under the settings `env` was given) or
+    built-in controllers (in `env`, whose id defaults to the first run's). What `env` was not
+    given (EnvConfig.model_fields_set; a dict: its keys) is each run's own, or the default.
 
     Raises:
         MotorlabError: a policy that is neither; no env id for a built-in controller.
     """
+    env = given_env(env if isinstance(env, EnvConfig) else EnvConfig.model_validate(env))
     found: list[tuple[str, Path | None]] = []
     for spec in policies:
         if Path(spec).exists():
@@ -147,11 +149,11 @@ def subjects(policies: list[str], env: dict[str, Any]) -> list[Subject]:
         if run is None:
             if default_id is None:
                 raise MotorlabError(f"no env for {spec!r}: give --env ENV_ID (e.g. --env InvertedPendulum-v5).")
-            out.append(Subject(spec, spec, {**env, "id": default_id}))
+            out.append(Subject(spec, spec, EnvConfig.model_validate({**env, "id": default_id})))
         else:
             own = {k: v for k, v in trained_env_settings(run).items() if k in STRUCTURE}
             kwargs = {**own.get("kwargs", {}), **env.get("kwargs", {})}
-            out.append(Subject(str(run), run_label(run), {**own, **env, "kwargs": kwargs}))
+            out.append(Subject(str(run), run_label(run), EnvConfig.model_validate({**own, **env, "kwargs": kwargs})))
     labels = [s.label for s in out]
     if len(set(labels)) < len(labels):
         out = [Subject(s.spec, s.spec, s.env) for s in out]
@@ -176,7 +178,7 @@ def measure(targets: list[Subject], axes: list[Axis], episodes: int, seed: int, 
             progress: bool = True) -> Curves:
     """Evaluate every policy at every grid value of every axis (the other axes at the policy's own
     settings), episode i of every point from reset seed `seed + i`."""
-    configs = {s.label: EnvConfig.model_validate(s.env) for s in targets}
+    configs = {s.label: s.env for s in targets}
     for axis in axes:  # a bad combination fails before the first episode: e.g. pushes without a body
         probe = {**configs[targets[0].label].model_dump(), axis.key: axis.env_value(axis.values[-1])}
         if axis.key == "push_force" and not probe["push_body"]:

@@ -5,22 +5,24 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, ClassVar
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, field_validator
 from rich.console import Console
 from rich.table import Table
 
-from motorlab.envs import ENV_KEYS, EnvConfig, fold_env
+from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, given_env
 from motorlab.report.results import Metric, Number, show
 from motorlab.robustness_curves.grid import VARIABLES, parse_axes
-from motorlab.settings import Settings, Summary
+from motorlab.settings import Summary
 from motorlab.stepkind import Ref, StepKind, warn_faults
 
 
-class RobustnessSettings(Settings):
+class RobustnessSettings(EnvSettings):
     """Evaluate policies across a grid of disturbances: one curve per policy and disturbance."""
 
     # flat env settings (push_body, delay_on, env_kwargs, ...) go into `env`, on top of each policy's own
     aliases: ClassVar[frozenset[str]] = frozenset(ENV_KEYS) - {"reward"}
+    env_refused: ClassVar[dict[str, str]] = {
+        "reward": "robustness reports the env's own return (evaluation applies no reward shaping); drop it."}
     policies: list[str] = Field(min_length=1, description="Policies to compare: run folders (one per seed of a "
                                 "step: a band) or built-in controllers (pid, zero, random)")
     vary: list[str] = Field(min_length=1, description="A disturbance and its grid, KEY=START:STOP:N or "
@@ -30,26 +32,20 @@ class RobustnessSettings(Settings):
     seed: int = Field(0, ge=0, description="Random seed (episode i of every point resets with seed + i)")
     workers: int | None = Field(None, ge=1, description="Processes that step the envs (default: every core "
                                 "when the work is large enough)")
-    env: dict[str, Any] = Field(default_factory=dict, description="The env every policy is tested in, under "
-                                "the grid's disturbance (e.g. push_body, delay_on, kwargs; id for built-in "
-                                "controllers); run folders keep their own env id, arguments, history and "
-                                "synergies, not the disturbances they trained with")
+    env: EnvConfig = Field(default_factory=EnvConfig, description="The env every policy is tested in, under "
+                           "the grid's disturbance (e.g. push_body, delay_on, kwargs; id for built-in controllers): "
+                           "the settings given only (model_fields_set); run folders keep their own env id, "
+                           "arguments, history and synergies, not the disturbances they trained with")
 
-    @model_validator(mode="before")
-    @classmethod
-    def _fold_env(cls, data: Any) -> Any:
-        if not isinstance(data, dict):
-            return data
-        folded = fold_env(data)
-        if not folded["env"]:
-            folded.pop("env")
-        return folded
-
-    @field_validator("env")
-    @classmethod
-    def _check_env(cls, v: dict[str, Any]) -> dict[str, Any]:
-        checked = EnvConfig.model_validate(v)  # types and ranges now, not after the first policy ran
-        return checked.model_dump(include=set(v))
+    def config(self) -> dict[str, Any]:
+        """config.toml: the env settings as given (those not given are each policy's own)."""
+        data = self.model_dump()
+        given = given_env(self.env)
+        if given:
+            data["env"] = given
+        else:
+            data.pop("env")
+        return data
 
     @field_validator("vary")
     @classmethod
@@ -90,7 +86,7 @@ class RobustnessKind(StepKind[RobustnessSettings, RobustnessSummary]):
         "motorlab robustness runs/ppo --vary obs-noise=0:0.05:6 --vary latency=0:4:5",
         "motorlab robustness pid runs/ppo --vary push-force=0:40:5 --push-body pole --push-direction x",
     )
-    refs = (Ref("policies", ("policy",)),)
+    refs = (Ref("policies", ("policy",)), Ref("sar", ("sar",)))
     key_figures = ("plots/robustness.png",)
 
     def check(self, settings: RobustnessSettings) -> None:
@@ -107,13 +103,13 @@ class RobustnessKind(StepKind[RobustnessSettings, RobustnessSummary]):
         run_dir = self.start(out)
         write_points_csv(run_dir / "curves.csv", curves)
         robustness_plot(curves, run_dir / "plots" / "robustness.png",
-                        f"Robustness on {targets[0].env['id']}: {settings.episodes} episodes per point")
+                        f"Robustness on {targets[0].env.id}: {settings.episodes} episodes per point")
         bands = {(g, a.key): curves.holds(g, a.key) for g in curves.groups for a in axes}
         holds = {f"{g}.{key}.holds_{end}": (band[i] if band else None)
                  for (g, key), band in bands.items() for i, end in enumerate(("from", "to"))}
         rule = (f"{curves.measure} in >= 90% of episodes" if curves.measure != "return"
                 else "mean return within 10% of its best")
-        table = Table(title=f"robustness on {targets[0].env['id']}: {settings.episodes} episodes per point; "
+        table = Table(title=f"robustness on {targets[0].env.id}: {settings.episodes} episodes per point; "
                             f"holds over: the widest range of grid values with {rule}")
         table.add_column("policy")
         for a in axes:

@@ -3,8 +3,9 @@
 `motorlab.synergies.collect(...)`, `.vaf(...)`, `.fit(...)`, `.import_sklearn(...)`,
 `.export_sklearn(...)`, `.load_sar(...)` are the Python API's functions (motorlab/api/synergies.py),
 here because users reach synergies by this name, as the CLI's `motorlab synergies ...`. The domain
-code is in the modules: `collection` (activations), `sar` (SAR, fit_sar, vaf_curve), `wrapper`
-(SynergyActionWrapper), `sklearn_import` and `sklearn_export`.
+code is in the modules: `sar` (SAR, fit_sar, vaf_curve), `wrapper` (SynergyActionWrapper),
+`sklearn_import` and `sklearn_export`. They sit below the envs, which act in synergy space through
+the wrapper; the activations a fit starts from are rollouts of a policy (motorlab.evaluation.activations).
 """
 
 import importlib

@@ -13,10 +13,10 @@ from rich.console import Console
 from rich.table import Table
 
 from motorlab.errors import MotorlabError
+from motorlab.evaluation.activations import ACTIVATIONS, collect, load_activations, save_activations
 from motorlab.report.results import Metric, Number
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
-from motorlab.synergies.collection import ACTIVATIONS, collect, load_activations, save_activations
 from motorlab.synergies.sar import fit_sar, require_sklearn, save_sar, smallest_n, vaf_curve
 
 SAR_FILE = "sar.npz"

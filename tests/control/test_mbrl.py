@@ -23,7 +23,7 @@ from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_FIT
 from motorlab.dynamics.train import fit_model
 from motorlab.dynamics.transitions import Transitions
 from motorlab.errors import MotorlabError
-from tests.helpers import USER_PACKAGES, assert_ok, assert_one_line_error, read_summary, run_cli, run_kind
+from tests.helpers import USER_PACKAGES, assert_ok, assert_one_line_error, read_summary, run_cli, run_here, run_kind
 
 IP = "InvertedPendulum-v5"
 ARM = "userpkg.arm:ArmReach-v0"
@@ -304,3 +304,97 @@ def test_the_loop_runs_on_a_users_env_with_a_users_reward(tmp_path):
     s = read_summary(out)
     assert s["reward_source"] == "userpkg.arm_reward:reward" and s["env_steps"] == 2 * 3 * 100
     assert "userpkg.arm" in json.loads((out / "environment.json").read_text())["imports"]
+
+
+# ---- the env setting: one EnvConfig, flat on the command line ------------------------------------
+
+TINY_LOOP = ["--rounds", "2", "--episodes-per-round", "2", "--eval-episodes", "1", "--ensemble", "2", "--epochs",
+             "3", "--horizon", "5", "--population", "20", "--iterations", "1", "--elites", "4"]
+
+
+def test_mbrl_and_mpc_take_env_settings_flat_and_plan_through_the_wrappers(tmp_path):
+    """--history and --delay act through the env's wrappers: the loop collects from the wrapped env, its
+    model's state is the stacked observations and the bundled reward reads the newest; config.toml records
+    the env as EnvConfig does, and mpc plans on the model in the same env (another env: one line)."""
+    import tomllib
+
+    out = tmp_path / "loop"
+    assert_ok(cli("mbrl", IP, "--history", "2", "--delay", "0.05", *TINY_LOOP, "--out", out))
+    s = read_summary(out)
+    assert s["env_id"] == IP and s["reward_source"] == "builtin" and s["termination_source"] == "builtin"
+    env = tomllib.loads((out / "config.toml").read_text())["env"]
+    assert (env["id"], env["history"], env["delay"]) == (IP, 2, 0.05)
+    assert json.loads((out / "loop.json").read_text())["env"] == {"delay": 0.05, "history": 2}
+    model = json.loads((out / "model" / "model.json").read_text())
+    assert model["architecture"]["state_size"] == 2 * 4 and model["env"] == {"id": IP, "delay": 0.05, "history": 2}
+
+    mpc = tmp_path / "mpc"
+    assert_ok(cli("mpc", IP, "--model", out / "model", "--history", "2", "--delay", "0.05", "--episodes", "1",
+                  "--horizon", "5", "--population", "20", "--iterations", "1", "--elites", "4", "--out", mpc))
+    assert tomllib.loads((mpc / "config.toml").read_text())["env"]["history"] == 2
+    assert read_summary(mpc)["reward_source"] == "builtin"
+    assert_one_line_error(run_here("mpc", IP, "--model", out / "model", "--out", tmp_path / "bare"),
+                          "predicts 8 state entries", "plan on the env it was fit on", "history 2")
+    assert not (tmp_path / "bare").exists()
+
+
+def test_the_builtin_reward_reads_the_newest_of_stacked_observations():
+    """Under --history the bundled reward (written for one observation) equals the env's own reward."""
+    from motorlab.dynamics.rewards import resolve_task
+    from motorlab.envs import EnvConfig
+
+    for env_id in ("Reacher-v5", IP):
+        data = collect_transitions(EnvConfig(id=env_id, history=3), 3, workers=1, seed=0, progress=False)
+        size = data.states.shape[1]
+        task = resolve_task(env_id, "observation", size, data.actions.shape[1], frames=3)
+        s, a, n = (torch.as_tensor(x) for x in (data.states, data.actions, data.next_states))
+        goal = torch.zeros(len(s), 0, dtype=s.dtype)
+        np.testing.assert_allclose(task.reward(s, a, n, goal).numpy(), data.rewards, atol=1e-9)
+        if task.termination is not None:
+            np.testing.assert_array_equal(task.termination(s, a, n, goal).numpy(), data.terminated)
+    # synergy actions (--sar): the bundled reward's control cost is on the env's own actions
+    with pytest.raises(MotorlabError, match="--reward builtin: Reacher-v5's bundled reward charges the env's own"):
+        resolve_task("Reacher-v5", "observation", 10, 2, synergies=True)
+    assert resolve_task("Reacher-v5", "observation", 10, 2, synergies=True,
+                        learned=frozenset({"reward"})).reward_source == "learned"
+
+
+def test_planning_refuses_env_settings_it_cannot_honour_in_one_line(tmp_path):
+    from motorlab.control.steps import MBRL
+
+    # reward shaping and a success rule: mpc and mbrl report the env's own return, and --reward is the planner's
+    with pytest.raises(MotorlabError, match=r"^env\.reward 'alive': mbrl reports the env's own return"):
+        MBRL.make(env={"id": IP, "reward": "alive"})
+    with pytest.raises(MotorlabError, match=r"^env\.success 'final': mpc reports returns"):
+        MPC.make(env=IP, model="m", success="final")
+    assert MPC.make(env=IP, model="m", reward="learned").reward == "learned"  # the planner's own
+    # a layout of one observation under --history, and no env id: one line, nothing written
+    assert_one_line_error(run_here("mbrl", "Reacher-v5", "--state", "reacher", "--history", "2", *TINY_LOOP,
+                                   "--out", tmp_path / "a"), "--history 2", "--state observation")
+    assert_one_line_error(run_here("mbrl", *TINY_LOOP, "--out", tmp_path / "b"), "--env")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_config_toml_and_loop_json_written_before_still_load(tmp_path):
+    """Run folders written before the env was an EnvConfig: `env = "InvertedPendulum-v5"` in config.toml
+    (the planner's `reward` beside it stays the planner's), and a loop.json without the env's settings
+    resumes with the same (bare) env."""
+    import tomllib
+    from dataclasses import asdict
+
+    from motorlab.control.mbrl import LOOP_JSON, _comparable, check_resumable
+    from motorlab.control.steps import MBRL
+    from motorlab.envs import EnvConfig
+
+    old = f'env = "{IP}"\nmodel = "runs/m"\nreward = "builtin"\nepisodes = 5\nhorizon = 15\n'
+    mpc = MPC.validate(tomllib.loads(old))
+    assert mpc.env == EnvConfig(id=IP) and mpc.reward == "builtin" and mpc.model == "runs/m"
+    assert MPC.describe(mpc) == f"MPC (cem) on runs/m · {IP}"
+    loop = MBRL.validate(tomllib.loads(f'env = "{IP}"\nrounds = 6\nreward = "auto"\n'))
+    assert loop.env == EnvConfig(id=IP) and loop.rounds == 6
+    plan = loop.loop_plan()
+    before = {k: v for k, v in _comparable(asdict(plan)).items() if k != "env"}  # what loop.json held before
+    (tmp_path / LOOP_JSON).write_text(json.dumps(before))
+    check_resumable(tmp_path, plan, resume=True)  # the same settings: no complaint
+    with pytest.raises(MotorlabError, match="history"):
+        check_resumable(tmp_path, MBRL.make(env=IP, rounds=6, history=2).loop_plan(), resume=True)

@@ -97,3 +97,66 @@ def test_fit_rejects_bad_transitions_without_touching_the_run(pipeline, tmp_path
     assert_one_line_error(run_here("dynamics", "fit", pipeline / "data", "--patience", "2", "--valid-fraction", "0",
                                    "--out", out), "--patience needs")
     assert json.loads((out / "summary.json").read_text()) == {"kept": True}
+
+
+# ---- the env setting: one EnvConfig, flat on the command line ----------------------------------
+
+
+def test_collect_takes_env_settings_flat_and_records_them_as_an_env_config(tmp_path):
+    """--history and --obs-noise act through the env's wrappers: the state is the stacked observations,
+    config.toml records the env as EnvConfig does ([env] id, history, ...), and the transitions (and the
+    model fit on them) remember the env they were collected under, for `dynamics check` and `mpc`."""
+    import tomllib
+
+    from motorlab.dynamics.transitions import load_transitions
+
+    out = tmp_path / "data"
+    assert_ok(run_here("dynamics", "collect", "InvertedPendulum-v5", "--episodes", "3", "--history", "3",
+                       "--obs-noise", "0.01", "--workers", "1", "--out", out))
+    s = read_summary(out)
+    assert s["env_id"] == "InvertedPendulum-v5" and s["state_size"] == 3 * 4 and s["simulator"] == "gymnasium"
+    env = tomllib.loads((out / "config.toml").read_text())["env"]
+    assert (env["id"], env["history"], env["obs_noise"]) == ("InvertedPendulum-v5", 3, 0.01)
+    assert load_transitions(out / "transitions.npz").meta["env"] == {"id": "InvertedPendulum-v5", "history": 3,
+                                                                     "obs_noise": 0.01}
+    # the bare Reacher under a delay: auto picks the env itself, and says so
+    assert_ok(run_here("dynamics", "collect", "Reacher-v5", "--episodes", "2", "--delay", "0.05", "--workers", "1",
+                       "--out", tmp_path / "delayed"))
+    assert read_summary(tmp_path / "delayed")["simulator"] == "gymnasium"
+
+
+@pytest.mark.parametrize("args, fragments", [
+    (["Reacher-v5", "--simulator", "closed-form", "--delay", "0.05"],
+     ["--simulator closed-form", "delay 0.05 s", "--simulator gymnasium"]),
+    (["Reacher-v5", "--simulator", "mujoco", "--env-arg", "reward_control_weight=2"],
+     ["--simulator mujoco", "cannot apply --env-arg", "--simulator gymnasium"]),
+    (["Reacher-v5", "--state", "reacher", "--history", "2"], ["--history 2", "--state observation"]),
+    (["--episodes", "2"], ["--env"]),
+])
+def test_collect_refuses_env_settings_it_cannot_honour_in_one_line(args, fragments, tmp_path):
+    assert_one_line_error(run_here("dynamics", "collect", *args, "--out", tmp_path / "out"), *fragments)
+    assert not (tmp_path / "out").exists()
+
+
+def test_collect_refuses_a_success_rule_and_keeps_its_own_fields():
+    from motorlab.dynamics.steps import DYNAMICS_COLLECT
+    from motorlab.errors import MotorlabError
+
+    with pytest.raises(MotorlabError, match=r"^env\.success 'final': dynamics collect counts no successes"):
+        DYNAMICS_COLLECT.make(env="Reacher-v5", success="final")
+    settings = DYNAMICS_COLLECT.make(env="Reacher-v5", state="observation", seed=3)
+    assert (settings.env.id, settings.state, settings.seed) == ("Reacher-v5", "observation", 3)
+
+
+def test_a_config_toml_with_the_env_as_a_string_still_loads(tmp_path):
+    """Run folders written before the env was an EnvConfig recorded `env = "Reacher-v5"`."""
+    import tomllib
+
+    from motorlab.dynamics.steps import DYNAMICS_COLLECT
+    from motorlab.envs import EnvConfig
+
+    old = ('env = "Reacher-v5"\nepisodes = 300\npolicy = "random"\nstate = "auto"\nsimulator = "auto"\n'
+           'seed = 0\n')
+    settings = DYNAMICS_COLLECT.validate(tomllib.loads(old))
+    assert settings.env == EnvConfig(id="Reacher-v5") and settings.episodes == 300
+    assert DYNAMICS_COLLECT.describe(settings) == "collect 300 random episodes of Reacher-v5"

@@ -204,7 +204,7 @@ def test_pid_uses_the_gains_a_user_module_declares(tmp_path, monkeypatch):
 
 # The modules that tested env-id prefixes before the catalogue, and what they tested with
 FORMER = ["envs/__init__.py", "evaluation/rollouts.py", "evaluation/pool.py", "dynamics/collection.py",
-          "dynamics/state.py", "dynamics/rewards.py", "control/pid.py", "report/video.py"]
+          "dynamics/state.py", "dynamics/rewards.py", "controllers/pid.py", "report/video.py"]
 FAMILIES = ("Reacher", "Inverted", "Pusher", "myo", "Upkie", "Cookie", "Hopper", "Walker", "Humanoid", "Ant",
             "Fetch", "PointMaze", "AntMaze", "Hand", "Adroit", "Franka")
 PREFIX_TEST = re.compile(r"startswith\(\s*(?:\"(?:%s)|[A-Z_]*(?:PREFIX|FALL|ALIVE|BROKEN|GAINS))" % "|".join(FAMILIES))

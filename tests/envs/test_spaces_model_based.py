@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 import torch
 
-from motorlab.control.lqr import LQRSettings, learn_lqr
 from motorlab.control.mpc import CEMPlanner, MPPIPlanner, PlannerFaults, model_scorer
 from motorlab.control.mpc_episodes import build_policy, run_episodes
-from motorlab.control.pid import pid_for_env
 from motorlab.control.steps import MPC
+from motorlab.controllers.lqr import LQRSettings, learn_lqr
+from motorlab.controllers.pid import pid_for_env
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import ForwardModel, load_model
 from motorlab.dynamics.rewards import Task, resolve_task

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from motorlab.control.pid import make_pid
+from motorlab.controllers.pid import make_pid
 from motorlab.envs import EnvConfig, LowPassDelay, make_env
 from motorlab.envs.rewards import BUILTIN, resolve_reward
 from motorlab.envs.wrappers import delay_alpha

@@ -14,13 +14,14 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from motorlab.control.pid import make_pid
+from motorlab.controllers import save_controller
+from motorlab.controllers.pid import make_pid
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import Evaluator, evaluate, pool
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
 from motorlab.evaluation.zeroshot import transfer
-from motorlab.policies import RandomPolicy, load_policy, save_controller
+from motorlab.policies import RandomPolicy, load_policy
 from motorlab.runs import write_json
 from motorlab.user_modules import import_modules
 from tests.helpers import ENV_ID, USER_PACKAGES, run_kind
@@ -199,7 +200,7 @@ def test_evaluate_step_takes_workers(pid_run, tmp_path):
 
 
 def test_collect_does_not_depend_on_workers(pid_run, tmp_path):
-    from motorlab.synergies.collection import collect
+    from motorlab.evaluation.activations import collect
 
     kwargs = dict(episodes=2, percentile=50.0, preview=3, seed=0, signal="ctrl", progress=False)
     one, two = (collect(pid_run, workers=w, **kwargs) for w in (1, 2))

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from motorlab.envs import EnvConfig
+from motorlab.evaluation.figures import plot_run
 from motorlab.evaluation.steps import EVALUATE
 from motorlab.report.plots import comparison_bars, obs_labels, observation_trace
-from motorlab.report.run import plot_run
 from tests.helpers import ENV_ID, assert_ok, assert_png, run_cli, run_kind
 
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level

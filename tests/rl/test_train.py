@@ -14,7 +14,7 @@ from safetensors.numpy import load_file
 
 from motorlab.policies import SB3Policy, load_run_policy
 from motorlab.rl.monitor import METRIC_FIELDS
-from tests.helpers import ENV_ID, TINY_PPO, assert_ok, read_summary, run_cli
+from tests.helpers import ENV_ID, TINY_PPO, assert_ok, assert_one_line_error, read_summary, run_cli, run_here
 
 SB3_CLASSES = {"ppo": "PPO", "sac": "SAC", "td3": "TD3"}
 
@@ -141,6 +141,32 @@ def test_off_policy_run_writes_loadable_policy(algo, tmp_path):
     theirs, _ = sb3_model(out, algo).predict(obs, deterministic=True)
     np.testing.assert_allclose(policy.act(obs), theirs, rtol=1e-5, atol=1e-6)
     assert np.all(np.abs(theirs) <= 3.0)
+
+
+MAZE = "PointMaze_UMaze-v3"  # Gymnasium-Robotics: a goal-conditioned env (Dict observation), for --her
+TINY_MAZE_SAC = ["--algo", "sac", "--timesteps", "200", "--eval-every", "200", "--solve-episodes", "2",
+                 "--checkpoint-every", "0", "--env-arg", "continuing_task=false", "--env-arg", "max_episode_steps=50",
+                 "--set", "learning_starts=100", "--set", "buffer_size=500", "--set", 'policy_kwargs={"net_arch":[16,16]}',
+                 "--no-progress"]
+
+
+def test_config_flags_are_judged_with_the_config(tmp_path):
+    """`train --config SAC_RUN/config.toml --her`: --her is judged with the config's SAC (alone it would
+    meet the default PPO); a flag overrides the config's value, a bad one is one line naming it."""
+    sac = tmp_path / "sac"
+    assert_ok(run_here("train", MAZE, *TINY_MAZE_SAC, "--out", sac))
+    config = sac / "config.toml"
+    assert tomllib.loads(config.read_text())["her"] is False
+    her = tmp_path / "her"
+    assert_ok(run_here("train", "--config", config, "--her", "--seed", "3", "--no-progress", "--out", her))
+    again = tomllib.loads((her / "config.toml").read_text())
+    assert (again["algo"], again["her"], again["seed"], again["env"]["id"]) == ("sac", True, 3, MAZE)
+    assert {k: v for k, v in again.items() if k not in ("her", "seed")} == {
+        k: v for k, v in tomllib.loads(config.read_text()).items() if k not in ("her", "seed")}
+    assert read_summary(her)["algo"] == "sac" and read_summary(her)["seed"] == 3
+    assert_one_line_error(run_here("train", "--config", config, "--seed", "-1", cwd=tmp_path), "--seed -1")
+    assert_one_line_error(run_here("train", "--config", config, "--her", "--algo", "ppo", cwd=tmp_path), "--her", "PPO")
+    assert not (tmp_path / "runs").exists()  # refused before a run folder was made
 
 
 def test_normalized_run_applies_observation_statistics(tmp_path):

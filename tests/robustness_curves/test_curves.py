@@ -77,10 +77,44 @@ def test_pid_holds_less_as_the_delay_grows(tmp_path, ppo_seeds):
 
 def test_runs_keep_their_structure_but_not_their_training_disturbances(ppo_seeds):
     (run,) = subjects([str(ppo_seeds / "seed0")], {"push_body": "pole"})
-    assert run.env["history"] == 2 and run.env["push_body"] == "pole"
-    assert "obs_noise" not in run.env  # trained with noise; tested on the grid's own
+    assert run.env.history == 2 and run.env.push_body == "pole"
+    assert run.env.obs_noise is None  # trained with noise; tested on the grid's own
     (pid,) = subjects(["pid"], {"id": ENV_ID})
-    assert pid.env["id"] == ENV_ID
+    assert pid.env.id == ENV_ID
+
+
+def test_the_env_is_an_env_config_recorded_as_given(ppo_seeds):
+    """The env settings are an EnvConfig like every env-building kind's (flat on the command line); what
+    was not given stays each run's own, in config.toml too, so that a run's history survives a re-run."""
+    import tomllib
+
+    from motorlab.envs import EnvConfig
+    from motorlab.robustness_curves.steps import ROBUSTNESS
+
+    settings = ROBUSTNESS.make(policies=[str(ppo_seeds / "seed0")], vary=["delay=0:0.1:2"], push_body="pole")
+    assert isinstance(settings.env, EnvConfig) and settings.env.push_body == "pole"
+    assert settings.config()["env"] == {"push_body": "pole"}
+    again = ROBUSTNESS.validate(settings.config())  # a job's settings, a study's re-run
+    (run,) = subjects(again.policies, again.env)
+    assert run.env.history == 2 and run.env.push_body == "pole"
+    assert "env" not in ROBUSTNESS.make(policies=["pid"], vary=["delay=0:0.1:2"]).config()
+    # config.toml written before: the env as an id, or as a table of the settings given
+    old = ROBUSTNESS.validate(tomllib.loads(f'policies = ["pid"]\nvary = ["delay=0:0.1:2"]\nenv = "{ENV_ID}"\n'))
+    assert old.env == EnvConfig(id=ENV_ID) and subjects(old.policies, old.env)[0].env.id == ENV_ID
+    table = ROBUSTNESS.validate(tomllib.loads('policies = ["pid"]\nvary = ["delay=0:0.1:2"]\n'
+                                              f'[env]\nid = "{ENV_ID}"\ndelay_on = "action"\n'))
+    assert table.env.delay_on == "action" and table.config()["env"] == {"id": ENV_ID, "delay_on": "action"}
+
+
+def test_reward_shaping_is_refused_in_one_line(tmp_path):
+    from motorlab.robustness_curves.steps import ROBUSTNESS
+
+    with pytest.raises(MotorlabError, match=r"^env\.reward 'alive': robustness reports the env's own return"):
+        ROBUSTNESS.make(policies=["pid"], vary=["delay=0:0.1:2"], env={"id": ENV_ID, "reward": "alive"})
+    proc = run_here("robustness", "pid", "--env", ENV_ID, "--vary", "delay=0:0.1:2", "--delay-on", "sideways",
+                    "--out", tmp_path / "out")
+    assert_one_line_error(proc, "--delay-on")
+    assert not (tmp_path / "out").exists()
 
 
 def test_cli_errors_are_one_line(tmp_path):

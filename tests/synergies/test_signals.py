@@ -14,8 +14,8 @@ from gymnasium.utils.env_checker import check_env
 
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
+from motorlab.evaluation.activations import load_activations, read_signal, resolve_signal, signal_bounds
 from motorlab.synergies import SynergyActionWrapper, fit_sar, save_sar
-from motorlab.synergies.collection import load_activations, read_signal, resolve_signal, signal_bounds
 from motorlab.synergies.sar import load_sar, signal_of
 from motorlab.synergies.steps import COLLECT, FIT
 from tests.helpers import (

@@ -1,4 +1,4 @@
-"""LQR: motorlab's model-based learner (control/lqr.py), not an SB3 algorithm.
+"""LQR: motorlab's model-based learner (controllers/lqr.py), not an SB3 algorithm.
 
 A least-squares linear model of the dynamics, refitted as steps come in, and the LQR gain on it;
 NumPy and SciPy only, so an LQR run starts without torch. It is an `Algorithm` (a name, presets,
@@ -10,25 +10,25 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from motorlab.errors import MotorlabError
 from motorlab.rl.algos.base import Algorithm, Preset
-
-if TYPE_CHECKING:
-    from motorlab.rl.monitor import TrainingMonitor
 
 
 @dataclass(frozen=True)
 class LQR(Algorithm):
     """Trains itself (train.py calls `learn`): no SB3 model, no checkpoint."""
 
-    def learn(self, cfg: Any, run_dir: Path, monitor: TrainingMonitor) -> int:
-        """Fit, control and evaluate to the budget; write policy.json. Returns env steps used."""
+    def learn(self, cfg: Any, run_dir: Path, monitor: Any) -> int:
+        """Fit, control and evaluate to the budget; write policy.json. Returns env steps used.
+
+        `monitor` is the run's rl.monitor.TrainingMonitor, which sits above this registry (it
+        evaluates policies, which the registry's algorithms load)."""
         from rich.progress import Progress
 
-        from motorlab.control.lqr import learn_lqr
-        from motorlab.policies import save_controller
+        from motorlab.controllers import save_controller
+        from motorlab.controllers.lqr import learn_lqr
 
         stop = {"solved": False}
 
@@ -57,7 +57,7 @@ ALGORITHM = LQR(
     eval_cadence="each LQR refit",
     presets={
         # motorlab's most sample-efficient configuration for balance/regulation tasks:
-        # least-squares linear model + LQR, refitted every 100 steps (see control/lqr.py).
+        # least-squares linear model + LQR, refitted every 100 steps (see controllers/lqr.py).
         # InvertedPendulum: ~100 env steps plain, ~100-300 with 0.2 s actuation + perception delay.
         "fast": Preset("linear model + LQR, refitted every 100 steps: the most sample-efficient on balance tasks",
                        {"lqr": {}}),

@@ -1,4 +1,5 @@
-"""`motorlab synergies collect`: the motor commands of a trained policy's good episodes.
+"""`motorlab synergies collect`: the motor commands of a trained policy's good episodes, the
+data a synergy fit (motorlab.synergies) starts from.
 
 Preview episodes set a return threshold at the P-th percentile; then episodes are
 run until N of them reach it, and one motor signal per step is kept, read after

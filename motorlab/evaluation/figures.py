@@ -1,4 +1,5 @@
-"""`motorlab plot RUN_DIR`: the figures of one run folder."""
+"""`motorlab plot RUN_DIR`: the figures of one run folder (its policy rolled out, drawn with
+motorlab.report.plots)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ from pathlib import Path
 from motorlab.envs import EnvConfig, make_env
 from motorlab.evaluation import evaluate, trained_env_settings
 from motorlab.policies import load_policy
-from motorlab.report.plots import learning_curve, obs_labels, observation_trace
-from motorlab.runs import METRICS, read_config, read_json, require_run_dir
+from motorlab.report.plots import env_tag, obs_labels, observation_trace, plot_learning_curve
+from motorlab.runs import read_config, require_run_dir
 
 TRACE_SEED = 123  # a fixed episode, so re-plotting gives the same figure
 
@@ -38,26 +39,5 @@ def plot_run(run_dir: Path) -> list[Path]:
     obs = obs[:, -base_dim:]  # newest frame of the history
     written += [p for p in [observation_trace(
         obs, result.actions[0], result.dt, obs_labels(env_cfg.id, base_dim), plots / "observation_trace.png",
-        title=f"{env_cfg.id}{_env_tag(env_cfg.model_dump())}: return {result.returns[0]:.0f}")] if p is not None]
+        title=f"{env_cfg.id}{env_tag(env_cfg.model_dump())}: return {result.returns[0]:.0f}")] if p is not None]
     return written
-
-
-def plot_learning_curve(run_dir: Path) -> Path | None:
-    """plots/learning_curve.png of a training run (None for runs without metrics.csv)."""
-    if not (Path(run_dir) / METRICS).is_file():
-        return None
-    config = read_config(run_dir)
-    summary = read_json(Path(run_dir) / "summary.json")
-    return learning_curve(run_dir, Path(run_dir) / "plots" / "learning_curve.png",
-                          title=f"{summary.get('algo', '').upper()} on {summary.get('env_id')}"
-                                f"{_env_tag(config.get('env', {}))} (seed {summary.get('seed')})",
-                          solve_return=summary.get("solve_return"), steps_to_success=summary.get("steps_to_success"))
-
-
-def _env_tag(env: dict) -> str:
-    parts = []
-    if env.get("delay"):
-        parts.append(f"delay {env['delay']} s on {env.get('delay_on', 'action')}")
-    if env.get("history", 1) > 1:
-        parts.append(f"history {env['history']}")
-    return f" ({', '.join(parts)})" if parts else ""

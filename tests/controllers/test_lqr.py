@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from motorlab.control.lqr import LQRPolicy, LQRSettings, companion_form, fit_linear_model, learn_lqr, lqr_gain
+from motorlab.controllers.lqr import LQRPolicy, LQRSettings, companion_form, fit_linear_model, learn_lqr, lqr_gain
 from motorlab.envs import EnvConfig
 from motorlab.evaluation import evaluate
 

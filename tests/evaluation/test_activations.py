@@ -1,5 +1,6 @@
-"""`synergies collect`: muscle activations of a policy's episodes at or above the
-P-th percentile of the preview returns; the result depends on seeds, not on workers."""
+"""`synergies collect` (motorlab.evaluation.activations): muscle activations of a policy's
+episodes at or above the P-th percentile of the preview returns; the result depends on seeds,
+not on workers."""
 
 from __future__ import annotations
 
@@ -12,8 +13,8 @@ import torch
 
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
+from motorlab.evaluation.activations import Episode
 from motorlab.policies import load_run_policy
-from motorlab.synergies.collection import Episode
 from motorlab.synergies.steps import COLLECT
 from tests.helpers import (
     COLLECT_EPISODES,
@@ -28,7 +29,7 @@ from tests.helpers import (
     run_kind,
 )
 
-collect_mod = importlib.import_module("motorlab.synergies.collection")  # the module (motorlab.synergies.collection is the function)
+collect_mod = importlib.import_module("motorlab.evaluation.activations")
 
 
 def collect(run_dir, out, progress=False, **fields):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from motorlab.control.pid import PIDController, make_pid, parse_gains
+from motorlab.controllers.pid import PIDController, make_pid, parse_gains
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import evaluate
