@@ -183,9 +183,8 @@ class EnvSettings(Settings):
             return data
         folded = fold_env(data, keep=frozenset(cls.model_fields) - {"env"})
         if cls.model_fields["env"].is_required() and "id" not in folded["env"]:
-            raise ValidationError.from_exception_data(cls.__name__, [InitErrorDetails(
-                type="missing", loc=("env",), input=data)])
-        if not folded["env"] and cls.model_fields["env"].default is None:  # an optional env, not given
+            folded.pop("env")  # pydantic says the id is missing, beside the other fields' errors
+        elif not folded["env"] and cls.model_fields["env"].default is None:  # an optional env, not given
             folded.pop("env")
         return folded
 

@@ -371,7 +371,7 @@ def test_planning_refuses_env_settings_it_cannot_honour_in_one_line(tmp_path):
     # a layout of one observation under --history, and no env id: one line, nothing written
     assert_one_line_error(run_here("mbrl", "Reacher-v5", "--state", "reacher", "--history", "2", *TINY_LOOP,
                                    "--out", tmp_path / "a"), "--history 2", "--state observation")
-    assert_one_line_error(run_here("mbrl", *TINY_LOOP, "--out", tmp_path / "b"), "--env")
+    assert_one_line_error(run_here("mbrl", *TINY_LOOP, "--out", tmp_path / "b"), "Missing argument 'ENV'")
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 

@@ -131,7 +131,7 @@ def test_collect_takes_env_settings_flat_and_records_them_as_an_env_config(tmp_p
     (["Reacher-v5", "--simulator", "mujoco", "--env-arg", "reward_control_weight=2"],
      ["--simulator mujoco", "cannot apply --env-arg", "--simulator gymnasium"]),
     (["Reacher-v5", "--state", "reacher", "--history", "2"], ["--history 2", "--state observation"]),
-    (["--episodes", "2"], ["--env"]),
+    (["--episodes", "2"], ["Missing argument 'ENV'"]),
 ])
 def test_collect_refuses_env_settings_it_cannot_honour_in_one_line(args, fragments, tmp_path):
     assert_one_line_error(run_here("dynamics", "collect", *args, "--out", tmp_path / "out"), *fragments)
