@@ -16,8 +16,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import gymnasium as gym
-from pydantic import ConfigDict, Field, ValidationError, field_validator, model_validator
-from pydantic_core import InitErrorDetails
+from pydantic import ConfigDict, Field, field_validator, model_validator
 
 from motorlab.envs.catalog import EnvFacts, facts, register_env
 from motorlab.envs.disturbances import (
