@@ -19,7 +19,7 @@ SHARED = {
     # sar_hand_quick (below): its report in Chromium, and the SAR study's steps
     "tests/studies/test_bundled_reports.py": "sar-hand-quick", "tests/studies/test_sar_recipes.py": "sar-hand-quick",
     # hand_play_run and hand_activations: SAC on the MyoSuite hand, and activations collected from it
-    "tests/synergies/test_collection.py": "hand", "tests/synergies/test_steps.py": "hand", "tests/rl/test_determinism.py": "hand",
+    "tests/evaluation/test_activations.py": "hand", "tests/synergies/test_steps.py": "hand", "tests/rl/test_determinism.py": "hand",
     "tests/evaluation/test_zeroshot.py": "hand",
     # one local Ray head (ray_address, below), started once for both and stopped with `ray stop --force`,
     # which stops every Ray on the machine: one unit, so never beside another Ray test
@@ -44,9 +44,9 @@ SECONDS = {
     "tests/test_extras.py": 13, "tests/dynamics/test_train.py": 13, "tests/test_cli.py": 11,
     "tests/studies/test_reacher_recipe.py": 11, "tests/synergies/test_sklearn_export.py": 9, "tests/report/test_plots.py": 9,
     "tests/rl/test_monitor.py": 7, "tests/envs/test_myosuite.py": 5.5, "tests/synergies/test_wrapper.py": 4,
-    "tests/dynamics/test_rewards.py": 1.4, "tests/control/test_pid.py": 1, "tests/synergies/test_sklearn_import.py": 1,
+    "tests/dynamics/test_rewards.py": 1.4, "tests/controllers/test_pid.py": 1, "tests/synergies/test_sklearn_import.py": 1,
     "tests/envs/test_disturbances.py": 0.7, "tests/report/test_results.py": 0.6, "tests/test_layers.py": 0.5,
-    "tests/control/test_lqr.py": 0.4, "tests/dynamics/test_collection.py": 0.4, "tests/rl/test_schedules.py": 0.2,
+    "tests/controllers/test_lqr.py": 0.4, "tests/dynamics/test_collection.py": 0.4, "tests/rl/test_schedules.py": 0.2,
     "tests/studies/test_runner.py": 0.2, "tests/synergies/test_sar.py": 0.2, "tests/envs/test_wrappers.py": 0.2, "tests/test_runs.py": 0.05,
     "tests/api/test_policies.py": 60, "tests/test_docs.py": 35, "tests/test_notebooks.py": 1, "tests/studies/test_sar_legs_recipe.py": 65,
     "tests/envs/test_spaces.py": 110, "tests/envs/test_spaces_model_based.py": 30, "tests/adversarial/test_run_folders.py": 60,
