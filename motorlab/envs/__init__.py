@@ -230,7 +230,7 @@ def env_record(cfg: EnvConfig) -> dict[str, Any]:
 
 def is_bare(cfg: EnvConfig) -> bool:
     """Whether `cfg` is its env id alone: no wrapper, no disturbance, no argument."""
-    return cfg.model_dump() == EnvConfig(id=cfg.id).model_dump()
+    return env_record(cfg).keys() == {"id"}
 
 
 def fold_env(fields: dict[str, Any], keep: frozenset[str] = frozenset()) -> dict[str, Any]:

@@ -21,6 +21,8 @@ _DOMAIN = {"SAR": "motorlab.synergies.sar", "fit_sar": "motorlab.synergies.sar",
 def __getattr__(name: str):
     if name in _DOMAIN:
         return getattr(importlib.import_module(_DOMAIN[name]), name)
+    if name.startswith("_"):  # a probe (copy, inspect, pickle) for a private name: no API import for it
+        raise AttributeError(f"module 'motorlab.synergies' has no attribute {name!r}")
     api = importlib.import_module("motorlab.api.synergies")
     if name in api.__all__:
         return getattr(api, name)
