@@ -1,51 +1,95 @@
-"""`motorlab mbrl` against SB3 SAC: env steps to SAC's return, on two Gymnasium envs and the user's own.
+"""`motorlab mbrl` against SB3 SAC: env steps to a fixed threshold, one env per invocation.
 
-The loop (motorlab.control.steps.MBRL, PETS-style): each round collects episodes with the current
-MPC planner (random in round 1), refits the forward-model ensemble on all the data so far, and
-evaluates the planner; curve.csv has one row per round with the env steps collected so far.
-SAC: stable_baselines3.SAC("MlpPolicy", env, seed=s), all defaults, for --sac-steps env steps; its
-deterministic policy is evaluated every --eval-every steps on --eval-episodes episodes of a
-separate env (the same fixed reset seeds at every evaluation).
+    .venv/bin/python benchmarks/mbrl.py ENV [--keep DIR] [--sac-from DIR/runs.json] [--sac-full] [--quick]
 
-Envs: Pusher-v5 and InvertedPendulum-v5 (their built-in rewards), and VerticalArmReach-v0, a
-two-link arm lifting its tip to a target against gravity: a MuJoCo body built here
-(benchmarks/mbrl_body.py and .xml), taken as "mbrl_body:VerticalArmReach-v0" with the torch
-reward "mbrl_body:reward"; that reward is first checked equal to the env's on random steps.
+ENV is one of (threshold, the loop's budget of env steps, the target: loop seeds reaching the
+threshold within that budget):
 
-Measured, per env, over --seeds seeds (0, 1, 2):
-  target return   = IQM over seeds of SAC's final evaluation return (SAC's return after its budget)
-  steps to target = per seed, the env steps at the first evaluation whose mean return >= target
-                    (SAC: a multiple of --eval-every; the loop: the end of a round). A seed that never
-                    gets there is reported as None and counted as its whole budget (a lower bound).
-  for each learner: the per-seed steps, their IQM and 95% stratified-bootstrap CI (rliable), the
-  final returns; the ratio loop / SAC of the IQMs and whether it is <= 1/5 (met only when every
-  seed of the loop got there); the loop's planning time per control step (the median over seeds
-  of each run's median), <= 50 ms on Pusher; SAC's seconds per 1k env steps (training only).
-Evaluation episodes are not counted as env steps for either learner.
+  pendulum  InvertedPendulum-v5          1000 on ALL 10 evaluation episodes (their min)     2,000   >= 4 of 5
+  reacher   Reacher-v5                   mean return >= -5.0                                3,000   >= 4 of 5
+  cartpole  CartpoleSwingup-v0 (bundled) mean return >= 170 (of 200)                        3,000   >= 4 of 5
+  pusher    Pusher-v5                    SAC's IQM (3 seeds) of its final mean return at    6,000   >= 3 of 5
+                                         its cap (30k env steps)
+  arm       the two-link arm             mean >= oracle - 0.1 |oracle|: the oracle MPC's     3,000   >= 4 of 5
+            (benchmarks/mbrl_body.py)    mean return on the same evaluation reset seeds
 
-The issue's figure is SAC's return after 100k env steps (the default). SB3 SAC runs ~65 env
-steps/s per core here, so 100k steps x 3 envs x 3 seeds is ~4 h of CPU: within the 40-min
-budget use a smaller --sac-steps (the JSON names the budget used). SAC seeds run as separate
-processes two at a time (one torch thread each); then the loop's runs one at a time, alone.
+What runs
+  The loop: motorlab.control.steps.MBRL (collect with MPC on the last model -> refit the ensemble ->
+  evaluate; round 1 random), 5 seeds (0-4), each in its own process, 2 at a time (--loop-jobs; the
+  loop plans on one torch thread, so each run has a core to itself; --loop-jobs 1: one at a time, alone
+  on the machine). Its settings are the loop's DEFAULTS (motorlab's, and the env
+  catalogue's per-env planner settings); the benchmark sets only: the reward to plan with ("builtin",
+  or the arm's "mbrl_body:reward"), seed, device=cpu, eval_episodes=10 with parallel=10 (the 10
+  evaluation episodes side by side, one batched planner call per control step), max_env_steps (the
+  budget) with rounds=budget (a cap that never binds: every round collects at least one step), and
+  the stopping rule until_return (+ until_every_episode on the pendulum). --loop-set KEY=VALUE
+  changes any MbrlSettings field, for experiments (the JSON records it).
+  SAC: stable_baselines3.SAC("MlpPolicy", env, seed=s), all defaults, 3 seeds (0-2), each in its own
+  process on one torch thread, 2 processes at a time; capped at 30,000 env steps; its deterministic
+  policy is evaluated every 1,000 env steps on 10 episodes of a separate env.
+  Evaluation episodes (both learners): seed s's episode j resets with s * 1,000,000 + 900,000 + j, the
+  loop's own evaluation seeds (motorlab.control.mbrl), the same at every evaluation; SAC seed s and loop
+  seed s meet the same 10 initial states. Evaluation steps are never counted as env steps.
+  The arm's oracle: motorlab.control.oracle.oracle_episodes, MPC on the true simulator, on seed s's
+  evaluation reset seeds, for each loop seed s (SAC seed s uses the same threshold). It costs ~0.2 s
+  per control step, so by default it plays --oracle-episodes 3 of the 10 (the first 3) per seed;
+  the threshold compares the learners' mean over 10 episodes to the oracle's mean over those 3 (the
+  arm's initial states differ by a few hundredths of a radian). The JSON says which.
+  The arm's torch reward is first checked equal to the env's own on random steps (float64).
 
-Measured here (2026-11-25; SAC at <= 15k steps, the loop only in --quick form): SAC's training costs
-per 1k env steps, CPU seconds of its one thread: Pusher 14-18, InvertedPendulum 14-17 (+~1.7
-for evaluation once it balances 1000 steps), VerticalArmReach 13-16 (the low ends on a quiet
-machine). Nine runs on two cores take ~70-86 s of wall per 1k SAC steps (the last run goes
-alone), so with the loop's ~12 min a 40-min run fits --sac-steps 15000 (~18-22 min of SAC;
-about 19000 at most); on a machine others are using too, wall is ~1.5x CPU. One seed at 15k:
-VerticalArmReach went from -65 (random) to -3.0 (tip held at the target from ~9k steps on);
-InvertedPendulum reached 1000 at 6k steps.
+Measured
+  Steps to threshold, per seed: the env steps collected at the first evaluation that meets the
+  threshold (SAC: a multiple of 1,000; the loop: the end of a round). The loop stops at the first
+  round that meets it; SAC stops at its first evaluation that meets it (steps to threshold needs only
+  the first hit), except on pusher, whose threshold is SAC's own final return (all 30k steps), and
+  with --sac-full.
+  Censoring: a seed that never meets the threshold within its budget (the loop: max_env_steps; SAC:
+  its cap) is right-censored AT THE BUDGET, never at the steps it happened to collect; the loop's last
+  round may collect past the budget (it stops after the round that reaches it), and a hit there is
+  no hit within the budget: censored at the budget too. Over seeds (motorlab.stats.steps_to_threshold):
+  "k of n" seeds reached it, and the Kaplan-Meier median of the steps (scipy.stats.ecdf on
+  CensoredData: the smallest time where the KM estimate of the CDF reaches 0.5), or "> budget" when
+  fewer than half reached it. The ratio SAC / loop of the medians (motorlab.stats.steps_ratio):
+  exact; a LOWER bound (SAC's budget / the loop's median) when SAC's median is censored; an upper
+  bound when the loop's is; unknown when both are.
+  Targets: the loop's k >= the table's; planning time <= 50 ms per control step (the median over
+  seeds of each run's median over its rounds' evaluations). That figure is the loop's
+  plan_ms_median: PER ENV IN A BATCHED CALL of 10 envs (the call's time / 10), not one env's latency;
+  the JSON also gives the call's own time (x 10: all 10 evaluation episodes of a round run as one
+  group, so every call plans for 10 envs, also after some of them ended).
+  Also: each loop seed's final return (its last round), rounds, env steps collected, wall time; SAC's
+  whole curve per seed (every evaluation's 10 returns), its training seconds per 1k steps.
 
-Usage:  .venv/bin/python benchmarks/mbrl.py [--envs pusher,pendulum,arm] [--seeds 3]
-            [--sac-steps 100000] [--eval-every 1000] [--eval-episodes 5] [--arms sac,mbrl]
-            [--keep DIR] [--quick]
-        --keep DIR: the loop's run folders and runs.json (every run, learning curves included) go there.
-        --sac-from DIR/runs.json: take SAC's runs from an earlier run's runs.json instead of training
-        SAC again (its budget and evaluation settings come with it), e.g. a 100k-step SAC reference
-        made once (~2 h here) for runs of the loop alone that fit in 40 min.
-        --quick: a smoke run (1 seed, 2k SAC steps, tiny loop budgets).
-Prints one JSON object; progress goes to stderr.
+Time on this 2-core machine (measured 2026-11-26 in --quick runs on Reacher, the machine shared with other
+work, load 2-4; the loop's part depends on its defaults, which are being tuned):
+  SAC: ~10-13 s of wall per 1k env steps on Reacher, so 30k steps ~5-7 min a seed, 3 seeds on 2 cores
+  ~10-14 min to the cap; early stopping (all but pusher) ends sooner. The pendulum's evaluations (10
+  episodes of up to 1000 steps) add ~3 s each once SAC balances.
+  The loop at the defaults of 2026-11-26 (CEM population 100 x 5 iterations x horizon 15, 5 probabilistic
+  members, TS): one planner call for the 10 evaluation envs takes 250-370 ms (25-37 ms per env), so a
+  round's evaluation costs ~0.3 s x its episodes' length: Reacher (50 steps) ~15 s, Pusher (100) ~30 s,
+  the arm (150) ~45 s, cartpole (200) ~60 s, the pendulum up to ~5 min once it balances 1000 steps;
+  plus collection (one env, 25-55 ms a step) and the refit (40 epochs on all data). A seed that runs
+  its whole budget (rounds = budget / episode length): Reacher 60 rounds ~17 min, the arm 20 ~16 min,
+  cartpole 15 ~16 min, Pusher 60 ~35 min; the pendulum depends on how soon its episodes get long.
+  With 2 seeds at a time, 5 seeds take ~3x one seed when they all run to the budget; seeds that stop
+  at the threshold end sooner. So at these defaults a full run fits 40 min only where most seeds stop
+  early; pusher does not (make SAC once with --keep and reuse it with --sac-from).
+  The arm's oracle: ~19 s per 150-step episode (~125 ms a control step), 5 seeds x 3 episodes ~2.5 min
+  on 2 processes (10 episodes a seed would take ~8 min).
+Full size = the defaults (5 loop seeds, 3 SAC seeds, the budgets above); e.g.
+    .venv/bin/python benchmarks/mbrl.py reacher --keep runs/bench-reacher
+--quick: a smoke run (1 loop seed, 1 SAC seed to 2k steps evaluated every 500, the loop's budget 300
+steps in at most 8 rounds, the arm's oracle 2 episodes), ~2-3 min.
+
+Output: ONE JSON object on stdout (progress on stderr), also written to benchmarks/results/mbrl-ENV.json
+(--quick: mbrl-ENV-quick.json, so a smoke run never overwrites a full result), with the settings, the
+thresholds, every per-seed number, the statistics, the targets and whether each is met, the git commit
+(and whether the tree was dirty), the date, package versions, the CPU, its cores and the load average
+at the start and the end.
+--keep DIR: the loop's run folders (DIR/loop-seedN) and DIR/runs.json (every run, every curve, the
+oracle's returns); --sac-from DIR/runs.json takes SAC's runs (and the arm's oracle, which SAC's early
+stop used) from such a file, with their settings, instead of running them again.
 """
 
 from __future__ import annotations
@@ -55,68 +99,82 @@ import csv
 import importlib
 import json
 import os
+import platform
+import subprocess
 import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from datetime import datetime, timezone
+from importlib import metadata
 from multiprocessing import get_context
 from pathlib import Path
 
-# name -> env id and the reward the loop plans with ("builtin": motorlab's own for that env)
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results"
+
+# name -> env id, the reward the loop plans with, the threshold, the loop's budget, the target
+# threshold "on": mean (the evaluation's mean return) or min (its worst episode); "value": a number,
+# "sac_final_iqm" (SAC's IQM over seeds of its final mean return) or "oracle" (per seed, see oracle_threshold)
 ENVS = {
-    "pusher": {"id": "Pusher-v5", "reward": "builtin"},
-    "pendulum": {"id": "InvertedPendulum-v5", "reward": "builtin"},
-    "arm": {"id": "mbrl_body:VerticalArmReach-v0", "reward": "mbrl_body:reward"},
+    "pendulum": {"id": "InvertedPendulum-v5", "reward": "builtin", "on": "min", "value": 1000.0,
+                 "budget": 2000, "target": 4,
+                 "threshold": "1000 on all 10 evaluation episodes (their min return >= 1000)"},
+    "reacher": {"id": "Reacher-v5", "reward": "builtin", "on": "mean", "value": -5.0, "budget": 3000, "target": 4,
+                "threshold": "mean return >= -5.0 over the 10 evaluation episodes"},
+    "cartpole": {"id": "CartpoleSwingup-v0", "reward": "builtin", "on": "mean", "value": 170.0, "budget": 3000,
+                 "target": 4, "threshold": "mean return >= 170 (of 200) over the 10 evaluation episodes"},
+    "pusher": {"id": "Pusher-v5", "reward": "builtin", "on": "mean", "value": "sac_final_iqm", "budget": 6000,
+               "target": 3, "threshold": "mean return >= SAC's IQM over its seeds of its final mean return "
+                                         "(after its cap of env steps)"},
+    "arm": {"id": "mbrl_body:VerticalArmReach-v0", "reward": "mbrl_body:reward", "on": "mean", "value": "oracle",
+            "budget": 3000, "target": 4,
+            "threshold": "mean return >= oracle - 0.1 * |oracle|, oracle = the oracle MPC's mean return on the "
+                         "seed's evaluation reset seeds (true simulator)"},
 }
-# The loop's budget and planner per env: at most `rounds` x `episodes_per_round` episodes collected
-# (round 1 random), `eval_episodes` planner episodes after each refit (not counted as env steps). Each
-# run stops at the first round whose evaluation reaches SAC's return (until_return), so `rounds` is a
-# cap. Episode lengths: Pusher 100, InvertedPendulum up to 1000 (random ones fall in ~5-10), the arm
-# 150. Planning time is per control step of one env: Pusher and the arm plan one episode at a time;
-# InvertedPendulum's evaluation runs its episodes side by side (parallel) so that 1000-step episodes
-# fit the time budget, and its planning time is per env of that batched call. Model: motorlab's
-# mbrl defaults (5 members 64x64, 40 epochs of 64-row batches a round, warm-started; since
-# 2026-11-25 probabilistic with TS-inf, one particle per member: --loop-set probabilistic=false
-# --loop-set propagation=mean runs the deterministic variant). Measured 2026-11-25, SAC at 12k steps,
-# 3 seeds, Pusher at population 150: deterministic 39 ms a step, TS 73 ms (machine shared with a
-# test run); the TS default plans Pusher with population 80 to stay within 50 ms.
-PER_ENV = {
-    "pusher": {"rounds": 8, "episodes_per_round": 2, "eval_episodes": 2,
-               "horizon": 20, "population": 80, "iterations": 4, "elites": 8, "optimizer": "cem"},
-    "pendulum": {"rounds": 10, "episodes_per_round": 1, "eval_episodes": 2, "parallel": 2,
-                 "horizon": 15, "population": 100, "iterations": 3, "optimizer": "cem"},
-    "arm": {"rounds": 8, "episodes_per_round": 2, "eval_episodes": 2,
-            "horizon": 15, "population": 100, "iterations": 3, "optimizer": "cem"},
-}
-# Every loop run: on the CPU (the issue's planning time is this 2-core CPU's, also where a GPU is seen)
-LOOP_COMMON = {"device": "cpu"}
-QUICK_LOOP = {"rounds": 2, "episodes_per_round": 2, "eval_episodes": 1, "population": 50, "iterations": 2}
-QUICK = {"seeds": 1, "sac_steps": 2000, "eval_every": 500, "eval_episodes": 2}
-
-RATIO_TARGET = 0.2
-PLAN_MS_TARGET = {"pusher": 50.0}
+LOOP_SEEDS, SAC_SEEDS = 5, 3
+SAC_CAP, EVAL_EVERY, EVAL_EPISODES = 30_000, 1000, 10
+ORACLE_EPISODES, ORACLE_MARGIN = 3, 0.1
+PLAN_MS_TARGET = 50.0
 WALL_TARGET_S = 40 * 60
-EVAL_SEED = 10_000  # evaluation episode i resets with seed EVAL_SEED + i, every time, for every SAC seed
+QUICK = {"loop_seeds": 1, "sac_seeds": 1, "sac_steps": 2000, "eval_every": 500, "oracle_episodes": 2}
+QUICK_LOOP = {"budget": 300, "rounds": 8}  # rounds: a cap on the smoke run's time (early pendulum episodes are short)
+# the loop's evaluation reset seeds (motorlab.control.mbrl.SEED_STRIDE, EVAL_OFFSET; checked in main)
+SEED_STRIDE, EVAL_OFFSET = 1_000_000, 900_000
 
 
-def fmt(x: float | None) -> str:
-    return "-" if x is None else f"{x:.2f}"
+def eval_seeds(seed: int, episodes: int) -> list[int]:
+    """The reset seeds of seed `seed`'s evaluation episodes: the loop's, for SAC too."""
+    return [seed * SEED_STRIDE + EVAL_OFFSET + j for j in range(episodes)]
 
 
 def say(msg: str) -> None:
     print(f"[mbrl-bench {time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
 
 
+def fmt(x: float | None) -> str:
+    return "-" if x is None else f"{x:.2f}"
+
+
+def meets(point: dict, on: str, value: float) -> bool:
+    """Whether an evaluation (return_mean, return_min) meets the threshold."""
+    got = point.get(f"return_{on}")
+    return got is not None and got >= value
+
+
+def first_hit(curve: list[dict], on: str, value: float) -> int | None:
+    """Env steps at the first evaluation meeting the threshold; None if none does."""
+    return next((p["env_steps"] for p in curve if meets(p, on, value)), None)
+
+
 # ---------------------------------------------------------------------------------------- SAC
 
 
-def evaluate(model, env, episodes: int) -> tuple[float, float]:
-    """Mean and std of the deterministic policy's return over `episodes` fixed-seed episodes."""
-    import numpy as np
-
+def evaluate(model, env, seeds: list[int]) -> list[float]:
+    """The deterministic policy's return on one episode per reset seed."""
     returns = []
-    for i in range(episodes):
-        obs, _ = env.reset(seed=EVAL_SEED + i)
+    for s in seeds:
+        obs, _ = env.reset(seed=s)
         total, done = 0.0, False
         while not done:
             action, _ = model.predict(obs, deterministic=True)
@@ -124,17 +182,21 @@ def evaluate(model, env, episodes: int) -> tuple[float, float]:
             total += float(reward)
             done = terminated or truncated
         returns.append(total)
-    return float(np.mean(returns)), float(np.std(returns))
+    return returns
 
 
-def run_sac(name: str, env_id: str, seed: int, steps: int, eval_every: int, eval_episodes: int) -> dict:
-    """SB3 SAC with defaults for `steps` env steps, its learning curve every `eval_every` steps.
+def run_sac(env_id: str, seed: int, cap: int, eval_every: int, seeds: list[int], stop: dict | None) -> dict:
+    """SB3 SAC with defaults for up to `cap` env steps, evaluated every `eval_every` steps on one episode
+    per reset seed; with `stop` ({"on", "value"}) it stops at its first evaluation meeting it.
     Runs in its own (spawned) process, on one torch thread."""
     import gymnasium as gym
+    import numpy as np
     import torch
     from stable_baselines3 import SAC
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.logger import Logger
+
+    import motorlab.envs  # noqa: F401  (registers the bundled envs: CartpoleSwingup-v0)
 
     torch.set_num_threads(1)
     env, eval_env = gym.make(env_id), gym.make(env_id)
@@ -143,22 +205,24 @@ def run_sac(name: str, env_id: str, seed: int, steps: int, eval_every: int, eval
     curve: list[dict] = []
     eval_seconds, eval_cpu = [0.0], [0.0]
 
-    def record() -> None:
+    def record() -> bool:
         started, cpu = time.perf_counter(), time.process_time()
-        mean, std = evaluate(model, eval_env, eval_episodes)
+        returns = evaluate(model, eval_env, seeds)
         eval_seconds[0] += time.perf_counter() - started
         eval_cpu[0] += time.process_time() - cpu
-        curve.append({"env_steps": model.num_timesteps, "return_mean": mean, "return_std": std})
-        say(f"sac {name} seed {seed}: {model.num_timesteps} steps, return {mean:.2f}")
+        point = {"env_steps": model.num_timesteps, "return_mean": float(np.mean(returns)),
+                 "return_std": float(np.std(returns)), "return_min": float(np.min(returns)), "returns": returns}
+        curve.append(point)
+        say(f"sac {env_id} seed {seed}: {model.num_timesteps} steps, return {point['return_mean']:.2f} "
+            f"(min {point['return_min']:.2f})")
+        return stop is not None and meets(point, stop["on"], stop["value"])
 
     class EvalEvery(BaseCallback):
         def _on_step(self) -> bool:
-            if self.num_timesteps % eval_every == 0:
-                record()
-            return True
+            return not (self.num_timesteps % eval_every == 0 and record())
 
     started, cpu = time.perf_counter(), time.process_time()
-    model.learn(total_timesteps=steps, callback=EvalEvery())
+    model.learn(total_timesteps=cap, callback=EvalEvery())
     if not curve or curve[-1]["env_steps"] != model.num_timesteps:
         record()
     wall, cpu = time.perf_counter() - started, time.process_time() - cpu
@@ -166,87 +230,47 @@ def run_sac(name: str, env_id: str, seed: int, steps: int, eval_every: int, eval
     eval_env.close()
     per_1k = 1000 / model.num_timesteps
     # wall time depends on what else runs on the machine; CPU time (this process's) much less
-    return {"name": name, "seed": seed, "curve": curve, "wall_seconds": round(wall, 1),
-            "eval_seconds": round(eval_seconds[0], 1),
+    return {"seed": seed, "cap": cap, "env_steps": model.num_timesteps,
+            "stopped_early": model.num_timesteps < cap, "stop": stop, "curve": curve,
+            "wall_seconds": round(wall, 1), "eval_seconds": round(eval_seconds[0], 1),
             "train_seconds_per_1k_steps": round(per_1k * (wall - eval_seconds[0]), 2),
-            "train_cpu_seconds_per_1k_steps": round(per_1k * (cpu - eval_cpu[0]), 2),
-            "eval_cpu_seconds_per_1k_steps": round(per_1k * eval_cpu[0], 2)}
+            "train_cpu_seconds_per_1k_steps": round(per_1k * (cpu - eval_cpu[0]), 2)}
 
 
-SAC_SETTINGS = ("sac_steps", "eval_every", "eval_episodes")
-
-
-def reused_sac(args, names: list[str], seeds: list[int]) -> dict[str, list[dict]]:
-    """SAC's runs of `names` x `seeds` from an earlier runs.json; args takes on their settings."""
-    saved = json.loads(args.sac_from.read_text())
-    for k in SAC_SETTINGS:
-        setattr(args, k, saved["settings"][k])
-    out = {}
-    for n in names:
-        runs = {r["seed"]: r for r in saved["sac"].get(n, [])}
-        missing = [s for s in seeds if s not in runs]
-        if missing:
-            raise SystemExit(f"{args.sac_from} has no SAC run of {n} for seed(s) {missing}")
-        out[n] = [runs[s] for s in seeds]
-    return out
-
-
-def run_sac_all(names: list[str], seeds: list[int], args) -> dict[str, list[dict]]:
-    """Every (env, seed) SAC run, two processes at a time; results per env, in seed order."""
-    jobs = [(n, ENVS[n]["id"], s, args.sac_steps, args.eval_every, args.eval_episodes) for n in names for s in seeds]
-    out: dict[str, list[dict]] = {n: [] for n in names}
-    with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
-        futures = [pool.submit(run_sac, *job) for job in jobs]
+def in_processes(fn, jobs: list[tuple], workers: int, label) -> list:
+    """fn(*job) for every job in spawned processes, `workers` at a time; results in job order."""
+    out: list = [None] * len(jobs)
+    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+        futures = {pool.submit(fn, *job): i for i, job in enumerate(jobs)}
         for fut in as_completed(futures):
-            r = fut.result()
-            out[r["name"]].append(r)
-            say(f"sac {r['name']} seed {r['seed']} done in {r['wall_seconds']} s "
-                f"(final return {r['curve'][-1]['return_mean']:.2f})")
-    return {n: sorted(rs, key=lambda r: r["seed"]) for n, rs in out.items()}
-
-
-# ---------------------------------------------------------------------------------------- the loop
-
-
-def run_mbrl(env_id: str, reward: str, seed: int, budget: dict, out_dir: Path) -> dict:
-    """One run of motorlab's model-based loop; its learning curve from out_dir/curve.csv."""
-    from motorlab.control.steps import MBRL, MbrlSettings
-
-    settings = MbrlSettings(env=env_id, reward=reward, seed=seed, **LOOP_COMMON, **budget)
-    started = time.perf_counter()
-    summary = MBRL.run(settings, out=out_dir, progress=False)
-    wall = time.perf_counter() - started
-
-    def num(x: str | None) -> float | None:  # an empty cell: not measured (e.g. no evaluation that round)
-        return float(x) if x not in (None, "", "None", "nan") else None
-
-    with open(out_dir / "curve.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
-    curve = [{"round": int(r["round"]), "env_steps": int(r["env_steps"]), "return_mean": num(r["eval_return_mean"]),
-              "return_std": num(r["eval_return_std"]), "valid_mse": num(r["valid_mse"]),
-              "plan_ms_median": num(r["plan_ms_median"])} for r in rows]
-    return {"seed": seed, "curve": curve, "env_steps": int(summary.env_steps),
-            "plan_ms_median": summary.plan_ms_median, "wall_seconds": round(wall, 1),
-            "reward_source": summary.reward_source, "termination_source": summary.termination_source}
-
-
-def run_mbrl_all(names: list[str], seeds: list[int], budgets: dict[str, dict], root: Path,
-                 targets: dict[str, float]) -> dict[str, list[dict]]:
-    """The loop's runs one at a time in this process, so planning time is measured on an idle machine;
-    each stops at the first round whose evaluation reaches SAC's return on its env."""
-    out: dict[str, list[dict]] = {}
-    for name in names:
-        out[name] = []
-        for seed in seeds:
-            budget = {**budgets[name], "until_return": targets[name]}
-            r = run_mbrl(ENVS[name]["id"], ENVS[name]["reward"], seed, budget, root / f"mbrl-{name}-{seed}")
-            out[name].append(r)
-            say(f"mbrl {name} seed {seed} done in {r['wall_seconds']} s: {r['env_steps']} env steps, "
-                f"final return {fmt(r['curve'][-1]['return_mean'])}, plan {fmt(r['plan_ms_median'])} ms/step")
+            out[futures[fut]] = fut.result()
+            say(f"{label(out[futures[fut]])} done")
     return out
 
 
-# ---------------------------------------------------------------------------------------- checks, statistics
+# ---------------------------------------------------------------------------------------- the arm's oracle
+
+
+def run_oracle(env_id: str, seed: int, seeds: list[int], settings: dict) -> dict:
+    """The oracle MPC (the true simulator) on these reset seeds; in its own process, one torch thread."""
+    import numpy as np
+    import torch
+
+    from motorlab.control.oracle import oracle_episodes
+
+    torch.set_num_threads(1)
+    started = time.perf_counter()
+    result = oracle_episodes(env_id, len(seeds), seeds, seed=seed, progress=False, **settings)
+    returns = [float(x) for x in np.asarray(result.returns)]
+    return {"seed": seed, "reset_seeds": seeds, "returns": returns, "return_mean": float(np.mean(returns)),
+            "lengths": [int(x) for x in np.asarray(result.lengths)],
+            "plan_ms_median": float(np.median(result.plan_ms)), "wall_seconds": round(time.perf_counter() - started, 1),
+            "settings": {k: getattr(result, k) for k in ("horizon", "population", "iterations", "elites", "seed")}}
+
+
+def oracle_threshold(oracle_mean: float) -> float:
+    """Within 10% of the oracle's mean return: oracle - 0.1 |oracle| (returns may be negative)."""
+    return oracle_mean - ORACLE_MARGIN * abs(oracle_mean)
 
 
 def check_user_reward(name: str, steps: int = 300) -> dict:
@@ -279,149 +303,369 @@ def check_user_reward(name: str, steps: int = 300) -> dict:
             "max_abs_diff_float32": float(np.abs(as32 - r).max())}
 
 
-def steps_to(curve: list[dict], target: float) -> int | None:
-    """Env steps at the first evaluation whose mean return reaches `target`; None if none does."""
-    return next((p["env_steps"] for p in curve if p["return_mean"] is not None and p["return_mean"] >= target), None)
+# ---------------------------------------------------------------------------------------- the loop
 
 
-def stat(values: list[float]) -> tuple[float, list[float]]:
-    from motorlab.stats import iqm_with_ci
-
-    iqm, low, high = iqm_with_ci(values)
-    return round(iqm, 2), [round(low, 2), round(high, 2)]
-
-
-def learner(runs: list[dict], target: float, budget_of) -> dict:
-    """Steps to target per seed (None: not reached, counted as that seed's budget), IQM and CI."""
-    steps = [steps_to(r["curve"], target) for r in runs]
-    counted = [s if s is not None else budget_of(r) for s, r in zip(steps, runs)]
-    iqm, ci = stat([float(c) for c in counted])
-    finals = [next(p["return_mean"] for p in reversed(r["curve"]) if p["return_mean"] is not None) for r in runs]
-    f_iqm, f_ci = stat(finals)
-    return {"steps_to_target": steps, "steps_counted": counted, "unsolved_seeds": sum(s is None for s in steps),
-            "iqm": iqm, "ci95": ci, "final_returns": [round(f, 2) for f in finals],
-            "final_return_iqm": f_iqm, "final_return_ci95": f_ci}
+def loop_settings(name: str, seed: int, budget: int, rounds: int | None, stop: float | None,
+                  overrides: dict) -> dict:
+    """What the benchmark gives MbrlSettings (everything else: the loop's defaults)."""
+    env = ENVS[name]
+    settings = {"env": env["id"], "reward": env["reward"], "seed": seed, "device": "cpu",
+                "eval_episodes": EVAL_EPISODES, "parallel": EVAL_EPISODES,
+                "max_env_steps": budget, "rounds": rounds or budget, "until_return": stop}
+    if env["on"] == "min":
+        settings["until_every_episode"] = True
+    return {**settings, **overrides}
 
 
-def sac_target(sac_runs: list[dict]) -> float:
-    """The return the loop must reach on an env: the IQM over seeds of SAC's final evaluation."""
-    from motorlab.stats import iqm_with_ci
+def run_loop(settings: dict, out_dir: Path) -> dict:
+    """One run of motorlab's model-based loop, on one torch thread (its planner's own setting, its fitting's
+    too: the same numbers at any --loop-jobs); its learning curve from out_dir/curve.csv."""
+    import torch
 
-    return iqm_with_ci([r["curve"][-1]["return_mean"] for r in sac_runs])[0]
+    from motorlab.control.steps import MBRL, MbrlSettings
+
+    torch.set_num_threads(1)
+
+    resolved = MbrlSettings(**settings)
+    started = time.perf_counter()
+    summary = MBRL.run(resolved, out=out_dir, progress=False)
+    wall = time.perf_counter() - started
+
+    def num(x: str | None) -> float | None:  # an empty cell: not measured (e.g. no evaluation that round)
+        return float(x) if x not in (None, "", "None", "nan") else None
+
+    with open(out_dir / "curve.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    curve = [{"round": int(r["round"]), "env_steps": int(r["env_steps"]), "episodes": int(r["episodes"]),
+              "return_mean": num(r["eval_return_mean"]), "return_std": num(r["eval_return_std"]),
+              "return_min": num(r.get("eval_return_min")), "plan_ms_per_env": num(r["plan_ms_median"]),
+              **{k: num(r.get(k)) for k in ("collect_return_mean", "valid_mse", "disagreement_mean",
+                                            "collect_seconds", "fit_seconds", "eval_seconds")}}
+             for r in rows]
+    # collection rounds (2 on: MPC) one wall time per control step: planning + the env's step, for
+    # min(parallel, episodes_per_round) envs side by side (1 with the default of one episode a round)
+    for before, row in zip(curve, curve[1:]):
+        collected = row["env_steps"] - before["env_steps"]
+        row["collect_ms_per_step"] = 1000 * row["collect_seconds"] / collected if collected else None
+    group = min(resolved.parallel, resolved.episodes_per_round)
+    collect_ms = [row["collect_ms_per_step"] for row in curve[1:] if row["collect_ms_per_step"] is not None]
+    return {"seed": settings["seed"], "settings": {k: v for k, v in settings.items() if k != "seed"},
+            "settings_resolved": resolved.model_dump(mode="json"),
+            "collect_ms_per_step_median": median(collect_ms), "collect_envs_side_by_side": group,
+            "curve": curve, "rounds": len(curve), "env_steps": int(summary.env_steps),
+            "plan_ms_per_env_median": summary.plan_ms_median, "wall_seconds": round(wall, 1),
+            "reward_source": summary.reward_source, "termination_source": summary.termination_source,
+            "reached_return": summary.reached_return}
 
 
-def env_result(name: str, sac_runs: list[dict], mbrl_runs: list[dict] | None, sac_steps: int, budget: dict) -> dict:
+# ---------------------------------------------------------------------------------------- provenance
+
+
+def git_state() -> dict:
+    def git(*args: str) -> str:  # not stripped: a porcelain line starts with its status columns
+        return subprocess.run(["git", *args], cwd=HERE, capture_output=True, text=True, check=True).stdout
+
+    try:
+        changed = [line[3:] for line in git("status", "--porcelain").splitlines() if line.strip()]
+        return {"commit": git("rev-parse", "HEAD").strip(), "dirty": bool(changed), "changed_files": changed}
+    except (OSError, subprocess.CalledProcessError) as e:
+        return {"commit": None, "error": str(e)}
+
+
+def versions() -> dict:
+    out = {}
+    for pkg in ("motorlab", "torch", "mujoco", "gymnasium", "stable-baselines3", "scipy", "numpy"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return {"python": platform.python_version(), **out}
+
+
+def cpu_model() -> str | None:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or None
+
+
+def load() -> list[float]:
+    return [round(x, 2) for x in os.getloadavg()]
+
+
+def result_path(name: str, quick: bool) -> Path:
+    """benchmarks/results/mbrl-NAME.json (--quick: mbrl-NAME-quick.json)."""
+    return RESULTS / f"mbrl-{name}{'-quick' if quick else ''}.json"
+
+
+def write_result(out: dict, path: Path) -> None:
+    """The JSON at `path`, through a temporary file renamed over it (a reader never sees half of it)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(out, f, indent=2)
+            f.write("\n")
+        os.chmod(tmp, 0o644)  # mkstemp's file is private
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+# ---------------------------------------------------------------------------------------- statistics
+
+
+def median(values: list[float]) -> float | None:
     import statistics
 
-
-    target = sac_target(sac_runs)  # compared unrounded
-    sac = learner(sac_runs, target, lambda r: sac_steps)
-    for key in ("train_seconds_per_1k_steps", "train_cpu_seconds_per_1k_steps", "eval_cpu_seconds_per_1k_steps"):
-        sac[f"{key}_median"] = statistics.median(r[key] for r in sac_runs)
-    sac["wall_seconds"] = [r["wall_seconds"] for r in sac_runs]
-    out = {"env": ENVS[name]["id"], "reward": ENVS[name]["reward"], "target_return": round(target, 4), "sac": sac}
-    if mbrl_runs is None:
-        return out
-    mbrl = learner(mbrl_runs, target, lambda r: r["env_steps"])
-    timed = [r["plan_ms_median"] for r in mbrl_runs if r["plan_ms_median"] is not None]  # None: nothing planned
-    plan = statistics.median(timed) if timed else None
-    mbrl.update({"env_steps_collected": [r["env_steps"] for r in mbrl_runs],
-                 "plan_ms_median_per_seed": [None if r["plan_ms_median"] is None else round(r["plan_ms_median"], 2)
-                                             for r in mbrl_runs],
-                 "reward_source": mbrl_runs[0]["reward_source"], "termination_source": mbrl_runs[0]["termination_source"],
-                 "plan_ms_median": None if plan is None else round(plan, 2), "wall_seconds": [r["wall_seconds"] for r in mbrl_runs],
-                 "budget": budget})
-    ratio = round(mbrl["iqm"] / sac["iqm"], 4) if sac["iqm"] > 0 else None
-    out.update({"mbrl": mbrl, "ratio_mbrl_over_sac_steps_iqm": ratio,
-                "meets_target": ratio is not None and ratio <= RATIO_TARGET and mbrl["unsolved_seeds"] == 0})
-    if name in PLAN_MS_TARGET:
-        out["plan_ms_target"] = PLAN_MS_TARGET[name]
-        out["plan_ms_ok"] = None if plan is None else plan <= PLAN_MS_TARGET[name]
-    return out
+    return statistics.median(values) if values else None
 
 
-def main() -> None:
+def summarize(name: str, thresholds: list[float], loop: list[dict], sac: list[dict], budget: int) -> dict:
+    """The statistics of both learners (motorlab.stats), the targets, every per-seed number."""
+    from motorlab.stats import steps_ratio, steps_to_threshold
+
+    on = ENVS[name]["on"]
+    by_seed = dict(enumerate(thresholds))
+    loop_steps = [first_hit(r["curve"], on, by_seed[r["seed"]]) for r in loop]
+    sac_steps = [first_hit(r["curve"], on, by_seed[r["seed"]]) for r in sac]
+    loop_stats = steps_to_threshold(loop_steps, budget)
+    sac_stats = steps_to_threshold(sac_steps, [r["cap"] for r in sac])
+    ratio = steps_ratio(loop_stats, sac_stats)
+    plan = [r["plan_ms_per_env_median"] for r in loop]
+    plan_known = [p for p in plan if p is not None]
+    plan_median = median(plan_known)
+    calls = [None if p is None else p * EVAL_EPISODES for p in plan]
+    k_target = ENVS[name]["target"]
+    return {
+        "loop": {
+            "seeds": [r["seed"] for r in loop], "budget_env_steps": budget,
+            "steps_to_threshold": loop_stats.to_json(),
+            "first_hit_env_steps": loop_steps,  # as the curve says, before censoring at the budget
+            "final_return_mean": [r["curve"][-1]["return_mean"] for r in loop],
+            "final_return_min": [r["curve"][-1]["return_min"] for r in loop],
+            "env_steps_collected": [r["env_steps"] for r in loop], "rounds": [r["rounds"] for r in loop],
+            "plan_ms_per_env_median": plan, "plan_ms_median": plan_median,
+            "plan_call_ms_median": calls,
+            "collect_ms_per_step_median": [r["collect_ms_per_step_median"] for r in loop],
+            "collect_envs_side_by_side": [r["collect_envs_side_by_side"] for r in loop],
+            "collect_ms_basis": "the MPC collection rounds' wall time per control step (planning, the env's step, "
+                                "recording), median over rounds: one env's latency (an upper bound of its planning "
+                                "time) where collect_envs_side_by_side is 1, else per step of that many envs",
+            "plan_ms_basis": f"per env in a batched call of {EVAL_EPISODES} envs (the evaluation's episodes side by "
+                             "side; the call's time / 10), median over a run's rounds of each round's median over "
+                             "its control steps; plan_call_ms_median = x 10, the call's own time; a single env's "
+                             "latency is not measured by the loop",
+            "wall_seconds": [r["wall_seconds"] for r in loop],
+            "reward_source": loop[0]["reward_source"], "termination_source": loop[0]["termination_source"],
+        },
+        "sac": {
+            "seeds": [r["seed"] for r in sac], "budget_env_steps": [r["cap"] for r in sac],
+            "steps_to_threshold": sac_stats.to_json(),
+            "env_steps_trained": [r["env_steps"] for r in sac], "stopped_early": [r["stopped_early"] for r in sac],
+            "final_return_mean": [r["curve"][-1]["return_mean"] for r in sac],
+            "train_seconds_per_1k_steps": [r["train_seconds_per_1k_steps"] for r in sac],
+            "train_cpu_seconds_per_1k_steps": [r["train_cpu_seconds_per_1k_steps"] for r in sac],
+            "wall_seconds": [r["wall_seconds"] for r in sac],
+        },
+        "ratio_sac_over_loop": {**ratio.to_json(),
+                                "meaning": "SAC's median steps to the threshold / the loop's (Kaplan-Meier medians); "
+                                           "bound: exact, lower (SAC's median censored: > its budget / the loop's "
+                                           "median), upper (the loop's censored), unknown (both)"},
+        "targets": {
+            "loop_seeds": {"target": f">= {k_target} of {LOOP_SEEDS}", "k": loop_stats.solved,
+                           "of": loop_stats.seeds,  # not judged on another number of seeds (--quick: 1)
+                           "met": loop_stats.solved >= k_target if loop_stats.seeds == LOOP_SEEDS else None},
+            "plan_ms": {"target": f"<= {PLAN_MS_TARGET} ms per control step (per env in a batched call of "
+                                  f"{EVAL_EPISODES})", "median": plan_median,
+                        "met": None if plan_median is None else plan_median <= PLAN_MS_TARGET},
+        },
+    }
+
+
+# ---------------------------------------------------------------------------------------- main
+
+
+def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--envs", default=",".join(ENVS), help=f"comma-separated subset of {', '.join(ENVS)}")
-    parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--sac-steps", type=int, default=100_000, help="SAC's budget (the issue's: 100k)")
-    parser.add_argument("--eval-every", type=int, default=1000, help="SAC evaluation interval, env steps")
-    parser.add_argument("--eval-episodes", type=int, default=5, help="episodes per SAC evaluation")
-    parser.add_argument("--arms", default="sac,mbrl", help="sac,mbrl; SAC always runs (or comes from --sac-from): the loop's target is its return")
-    parser.add_argument("--jobs", type=int, default=2, help="SAC processes at once (one per core)")
+    parser.add_argument("env", choices=list(ENVS), help="the env to benchmark (one per invocation)")
+    parser.add_argument("--loop-seeds", type=int, default=LOOP_SEEDS)
+    parser.add_argument("--sac-seeds", type=int, default=SAC_SEEDS)
+    parser.add_argument("--sac-steps", type=int, default=SAC_CAP, help="SAC's cap of env steps")
+    parser.add_argument("--eval-every", type=int, default=EVAL_EVERY, help="SAC's evaluation interval, env steps")
+    parser.add_argument("--sac-full", action="store_true",
+                        help="train SAC to its cap even after it has met the threshold")
+    parser.add_argument("--oracle-episodes", type=int, default=ORACLE_EPISODES,
+                        help=f"arm: the oracle's episodes per seed (the first of its {EVAL_EPISODES} evaluation seeds)")
+    parser.add_argument("--oracle-set", action="append", default=[], metavar="KEY=VALUE",
+                        help="arm: an oracle_episodes setting (horizon, population, iterations, elites)")
+    parser.add_argument("--jobs", type=int, default=2, help="SAC and oracle processes at once (one per core)")
+    parser.add_argument("--loop-jobs", type=int, default=2,
+                        help="the loop's seeds at once, each in its own process (1: one at a time, alone)")
     parser.add_argument("--keep", type=Path, default=None, help="keep the loop's run folders and runs.json here")
     parser.add_argument("--sac-from", type=Path, default=None,
-                        help="reuse SAC's runs from an earlier run's runs.json (with their budget and evaluation)")
-    parser.add_argument("--quick", action="store_true", help="a smoke run: " + json.dumps(QUICK))
+                        help="reuse SAC's runs (and the arm's oracle) from an earlier run's runs.json")
+    parser.add_argument("--quick", action="store_true", help="a smoke run: " + json.dumps({**QUICK, **QUICK_LOOP}))
     parser.add_argument("--loop-set", action="append", default=[], metavar="KEY=VALUE",
-                        help="a loop setting for every env (MbrlSettings field), e.g. the PETS variant: "
-                             "--loop-set probabilistic=true --loop-set propagation=ts --loop-set particles=5")
-    args = parser.parse_args()
+                        help="a loop setting (an MbrlSettings field), for experiments, e.g. --loop-set horizon=20")
+    args = parser.parse_args(argv)
     if args.quick:
         for k, v in QUICK.items():
             setattr(args, k, v)
-    names = [n.strip() for n in args.envs.split(",") if n.strip()]
-    unknown = [n for n in names if n not in ENVS]
-    if unknown:
-        parser.error(f"unknown env(s) {unknown}; choose from {list(ENVS)}")
-    arms = {a.strip() for a in args.arms.split(",")}
-    seeds = list(range(args.seeds))
-    overrides = dict(item.split("=", 1) for item in args.loop_set)  # pydantic reads "true", "5" into their types
-    budgets = {n: {**PER_ENV[n], **(QUICK_LOOP if args.quick else {}), **overrides} for n in names}
+    return args
 
-    started = time.perf_counter()
-    reward_checks = {n: check_user_reward(n) for n in names if ENVS[n]["reward"] != "builtin"}
-    for n, c in reward_checks.items():
-        say(f"{ENVS[n]['reward']} equals {ENVS[n]['id']}'s reward on {c['steps']} random steps "
-            f"(max |diff| {c['max_abs_diff_float64']:.1g}; float32 {c['max_abs_diff_float32']:.1g})")
-    sac_started = time.perf_counter()
-    if args.sac_from:
-        sac = reused_sac(args, names, seeds)
-        say(f"SAC's runs taken from {args.sac_from} ({args.sac_steps} env steps each)")
+
+def reused(args, name: str) -> tuple[list[dict], list[dict] | None]:
+    """SAC's runs (and the oracle's) from an earlier runs.json; args takes on SAC's settings."""
+    saved = json.loads(args.sac_from.read_text())
+    if saved.get("env") != name:
+        raise SystemExit(f"{args.sac_from} holds the runs of {saved.get('env')!r}, not {name!r}")
+    for k in ("sac_steps", "eval_every"):
+        setattr(args, k, saved["settings"][k])
+    runs = {r["seed"]: r for r in saved["sac"]}
+    missing = [s for s in range(args.sac_seeds) if s not in runs]
+    if missing:
+        raise SystemExit(f"{args.sac_from} has no SAC run for seed(s) {missing}")
+    oracle = saved.get("oracle")
+    if ENVS[name]["value"] == "oracle":
+        if not oracle or any(s not in {o["seed"] for o in oracle} for s in range(args.loop_seeds)):
+            raise SystemExit(f"{args.sac_from} lacks the oracle's returns for the loop's seeds")
+        args.oracle_episodes = len(oracle[0]["returns"])
+    return [runs[s] for s in range(args.sac_seeds)], oracle
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse(argv)
+    name, env = args.env, ENVS[args.env]
+    from motorlab.control import mbrl as loop_module
+    from motorlab.control.steps import MbrlSettings
+
+    if (loop_module.SEED_STRIDE, loop_module.EVAL_OFFSET) != (SEED_STRIDE, EVAL_OFFSET):
+        raise SystemExit("the loop's evaluation reset seeds changed: update SEED_STRIDE, EVAL_OFFSET here")
+    needed = ["max_env_steps"] + (["until_every_episode"] if env["on"] == "min" else [])
+    lacking = [k for k in needed if k not in MbrlSettings.model_fields]
+    if lacking:
+        raise SystemExit(f"the loop lacks MbrlSettings.{', '.join(lacking)} (a budget of env steps; a threshold "
+                         "on every evaluation episode), which this benchmark needs")
+    loop_seeds, sac_seeds = list(range(args.loop_seeds)), list(range(args.sac_seeds))
+    if not set(sac_seeds) <= set(loop_seeds):
+        raise SystemExit("SAC seed s uses loop seed s's threshold and evaluation seeds: --sac-seeds <= --loop-seeds")
+    budget = QUICK_LOOP["budget"] if args.quick else env["budget"]
+    overrides = dict(item.split("=", 1) for item in args.loop_set)  # pydantic reads "true", "5" into their types
+    oracle_settings = {k: float(v) if "." in v else int(v) for k, v in (i.split("=", 1) for i in args.oracle_set)}
+    started, load_start = time.perf_counter(), load()
+    walls: dict[str, float | None] = {}
+    say(f"{name} ({env['id']}): threshold {env['threshold']}; loop budget {budget:,} env steps, seeds {loop_seeds}; "
+        f"SAC cap {args.sac_steps:,}, seeds {sac_seeds}")
+
+    reward_check = check_user_reward(name) if env["reward"] not in ("builtin", "auto") else None
+    if reward_check:
+        say(f"{env['reward']} equals {env['id']}'s reward on {reward_check['steps']} random steps "
+            f"(max |diff| {reward_check['max_abs_diff_float64']:.1g}; float32 {reward_check['max_abs_diff_float32']:.1g})")
+
+    sac, oracle = (reused(args, name) if args.sac_from else (None, None))
+    # 1. the arm's oracle (before SAC: SAC's early stop needs the thresholds)
+    if env["value"] == "oracle" and oracle is None:
+        t = time.perf_counter()
+        jobs = [(env["id"], s, eval_seeds(s, args.oracle_episodes), oracle_settings) for s in loop_seeds]
+        oracle = in_processes(run_oracle, jobs, args.jobs,
+                              lambda r: f"oracle seed {r['seed']}: mean return {r['return_mean']:.2f}, "
+                                        f"{r['plan_ms_median']:.0f} ms/step, {r['wall_seconds']} s")
+        walls["oracle"] = round(time.perf_counter() - t, 1)
+    thresholds: list[float] | None = None
+    if isinstance(env["value"], float):
+        thresholds = [env["value"]] * len(loop_seeds)
+    elif env["value"] == "oracle":
+        by_seed = {o["seed"]: o for o in oracle}
+        thresholds = [oracle_threshold(by_seed[s]["return_mean"]) for s in loop_seeds]
+    # 2. SAC, two processes at a time (pusher: the whole cap, its final return is the threshold)
+    early = thresholds is not None and not args.sac_full
+    if sac is None:
+        t = time.perf_counter()
+        jobs = [(env["id"], s, args.sac_steps, args.eval_every, eval_seeds(s, EVAL_EPISODES),
+                 {"on": env["on"], "value": thresholds[s]} if early else None) for s in sac_seeds]
+        sac = in_processes(run_sac, jobs, args.jobs,
+                           lambda r: f"sac seed {r['seed']}: {r['env_steps']} steps in {r['wall_seconds']} s, "
+                                     f"final return {r['curve'][-1]['return_mean']:.2f}")
+        walls["sac"] = round(time.perf_counter() - t, 1)
     else:
-        sac = run_sac_all(names, seeds, args)
-    sac_wall = time.perf_counter() - sac_started
-    mbrl, mbrl_wall = None, None
-    if "mbrl" in arms:
-        mbrl_started = time.perf_counter()
-        with tempfile.TemporaryDirectory() as tmp:
-            root = args.keep or Path(tmp)
-            root.mkdir(parents=True, exist_ok=True)
-            targets = {n: sac_target(sac[n]) for n in names}
-            mbrl = run_mbrl_all(names, seeds, budgets, root, targets)
-        mbrl_wall = time.perf_counter() - mbrl_started
+        say(f"SAC's runs taken from {args.sac_from} (cap {args.sac_steps:,} env steps)")
+    if thresholds is None:  # pusher: SAC's IQM over seeds of its final mean return
+        from motorlab.stats import iqm_with_ci
+
+        if any(r["stopped_early"] for r in sac):
+            raise SystemExit("the threshold is SAC's final return, but a SAC run stopped early")
+        thresholds = [iqm_with_ci([r["curve"][-1]["return_mean"] for r in sac])[0]] * len(loop_seeds)
+    for r in sac:  # a reused run that stopped early at another threshold cannot say when it would meet this one
+        if r["stopped_early"] and first_hit(r["curve"], env["on"], thresholds[r["seed"]]) is None:
+            raise SystemExit(f"SAC seed {r['seed']} stopped early (at {r['stop']}) before meeting this threshold "
+                             f"({thresholds[r['seed']]:.4g}): run SAC again (or with --sac-full)")
+    say("thresholds per seed: " + ", ".join(f"{x:.4g}" for x in thresholds))
+
+    # 3. the loop, --loop-jobs seeds at a time (each plans on one torch thread)
+    t = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        root = args.keep or Path(tmp)
+        root.mkdir(parents=True, exist_ok=True)
+        rounds = QUICK_LOOP["rounds"] if args.quick else None
+        jobs = [(loop_settings(name, s, budget, rounds, thresholds[s], overrides), root / f"loop-seed{s}")
+                for s in loop_seeds]
+        loop = in_processes(run_loop, jobs, args.loop_jobs,
+                            lambda r: f"loop seed {r['seed']}: {r['rounds']} rounds, {r['env_steps']:,} env steps in "
+                                      f"{r['wall_seconds']} s, final return {fmt(r['curve'][-1]['return_mean'])} "
+                                      f"(min {fmt(r['curve'][-1]['return_min'])}), plan "
+                                      f"{fmt(r['plan_ms_per_env_median'])} ms/step per env")
+    walls["loop"] = round(time.perf_counter() - t, 1)
     wall = time.perf_counter() - started
 
-    results = {n: env_result(n, sac[n], mbrl[n] if mbrl else None, args.sac_steps, budgets[n]) for n in names}
+    stats = summarize(name, thresholds, loop, sac, budget)
     out = {
-        "benchmark": "mbrl", "quick": args.quick, "seeds": seeds, "arms": sorted(arms),
-        "sac": "stable_baselines3.SAC('MlpPolicy', env, seed=s), defaults; 1 torch thread, "
-               f"{args.jobs} processes at once",
-        "sac_steps": args.sac_steps,
-        "sac_eval": {"every_env_steps": args.eval_every, "episodes": args.eval_episodes, "deterministic": True,
-                     "reset_seeds": f"{EVAL_SEED}..{EVAL_SEED + args.eval_episodes - 1}"},
-        "target_return": f"IQM over seeds of SAC's final evaluation return: SAC's return after its budget of "
-                         f"{args.sac_steps} env steps",
-        "full_size_note": None if args.sac_steps == 100_000 else
-        f"the issue's target is SAC's return after 100k env steps; this run used {args.sac_steps}",
-        "steps_to_target": "first evaluation whose mean return >= the target; None = not reached, counted as the "
-                           "learner's whole budget (SAC: sac_steps; the loop: the env steps it collected) in the "
-                           "IQM, so that IQM is a lower bound; evaluation episodes are not counted",
-        "ratio_target": RATIO_TARGET,
-        "reward_checks": reward_checks,
-        "envs": results,
-        "wall_seconds": round(wall, 1), "sac_wall_seconds": round(sac_wall, 1),
-        "mbrl_wall_seconds": None if mbrl_wall is None else round(mbrl_wall, 1),
-        "wall_target_seconds": WALL_TARGET_S, "cpus": os.cpu_count(),
+        "benchmark": "mbrl", "env": name, "env_id": env["id"], "quick": args.quick,
+        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "threshold": {"rule": env["threshold"], "on": f"eval_return_{env['on']}",
+                      "per_seed": thresholds},  # index: the seed (SAC seed s uses loop seed s's)
+        "budgets": {"loop_env_steps": budget, "sac_env_steps": args.sac_steps},
+        **stats,
+        "loop_runs": loop,
+        "sac_runs": sac,
+        "settings": {
+            "loop": {"given": loop[0]["settings"] if loop else None, "loop_set": overrides,
+                     "processes_at_once": args.loop_jobs,
+                     "note": "the rest are the loop's defaults (MbrlSettings, the env catalogue's planner settings)"},
+            "sac": {"algo": "stable_baselines3.SAC('MlpPolicy', env, seed=s), defaults; 1 torch thread, "
+                            f"{args.jobs} processes at once", "cap": args.sac_steps, "eval_every": args.eval_every,
+                    "eval_episodes": EVAL_EPISODES, "deterministic": True,
+                    "early_stop": early, "sac_full": args.sac_full},
+            "eval_reset_seeds": f"seed s, episode j: s * {SEED_STRIDE} + {EVAL_OFFSET} + j (j < {EVAL_EPISODES}); the "
+                                "loop's and SAC's, the same at every evaluation",
+        },
+        "reward_check": reward_check,
+        "wall_seconds": {"total": round(wall, 1), **walls}, "wall_target_seconds": WALL_TARGET_S,
+        "git": git_state(), "versions": versions(),
+        "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "load_average_start": load_start,
+                    "load_average_end": load()},
     }
+    if oracle is not None:
+        out["oracle"] = {"runs": oracle, "episodes_per_seed": args.oracle_episodes,
+                         "settings": oracle_settings or "oracle_episodes' defaults",
+                         "note": f"per loop seed s, the oracle plays the first {args.oracle_episodes} of s's "
+                                 f"{EVAL_EPISODES} evaluation reset seeds; the threshold compares the learners' mean "
+                                 f"over all {EVAL_EPISODES} with the oracle's mean over those"}
     if args.sac_from:
         out["sac_from"] = str(args.sac_from)
-        out["sac_wall_seconds"] = None
-    if args.keep:  # every run with its learning curve, and the SAC settings --sac-from needs
-        args.keep.mkdir(parents=True, exist_ok=True)
-        settings = {k: getattr(args, k) for k in SAC_SETTINGS}
-        (args.keep / "runs.json").write_text(json.dumps({"settings": settings, "sac": sac, "mbrl": mbrl}))
+    if args.keep:
+        saved = {"env": name, "settings": {"sac_steps": args.sac_steps, "eval_every": args.eval_every,
+                                           "eval_episodes": EVAL_EPISODES},
+                 "sac": sac, "oracle": oracle, "loop": loop}
+        (args.keep / "runs.json").write_text(json.dumps(saved))
         out["runs"] = str(args.keep / "runs.json")
+    out["result_file"] = str(result_path(name, args.quick).relative_to(HERE.parent))
+    write_result(out, result_path(name, args.quick))
     print(json.dumps(out, indent=2))
 
 

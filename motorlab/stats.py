@@ -1,14 +1,19 @@
 """Statistics across seeds with rliable (Agarwal et al., 2021): interquartile mean (IQM) with
 95% stratified-bootstrap confidence intervals, probability of improvement between settings,
 and performance profiles. Bootstraps use a fixed random state, so the same runs give the
-same numbers."""
+same numbers.
+
+Steps to a threshold across seeds (`steps_to_threshold`, `steps_ratio`): a seed that never
+reached the threshold within its budget is right-censored at that budget, and the seeds'
+median is the Kaplan-Meier median (scipy.stats.ecdf on scipy.stats.CensoredData)."""
 
 from __future__ import annotations
 
 import contextlib
 import itertools
 import warnings
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Literal
 
 import numpy as np
 
@@ -152,3 +157,150 @@ def _profile(values: dict[str, np.ndarray]) -> dict[str, Any]:
         ci = {s: np.stack([p, p]) for s, p in point.items()}
     return {"tau": taus.tolist(), **{s: {"fraction": point[s].tolist(), "low": ci[s][0].tolist(),
                                          "high": ci[s][1].tolist()} for s in values}}
+
+
+# ---- steps to a threshold: censored at each seed's budget, Kaplan-Meier median ----------------
+
+_HALF = 0.5 - 1e-9  # the KM estimate is a product of fractions: 1 - (3/4)(2/3) may land a hair under 0.5
+
+
+@dataclass(frozen=True)
+class SeedSteps:
+    """One seed: the env steps at which it first reached the threshold, and its budget."""
+
+    steps: int | None  # None: never reached (as given; a number above the budget is kept, and censored)
+    budget: int  # the env steps this seed was allowed
+    censored: bool  # not reached within the budget: right-censored at `budget`
+
+    @property
+    def time(self) -> int:
+        """The seed's time for Kaplan-Meier: its steps if reached within the budget, else the budget."""
+        return self.budget if self.censored else int(self.steps)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class StepsToThreshold:
+    """Env steps to reach a threshold over seeds, each seed right-censored at its own budget.
+
+    `median` is the Kaplan-Meier median: the smallest time at which the KM estimate of the CDF
+    (the fraction of seeds that have reached the threshold, censored seeds leaving the risk set at
+    their budgets) reaches 0.5. It is None when the estimate stays below 0.5 at every observed
+    time: the median is then above `median_above`, the largest observed time (the budget, when
+    all seeds share one). With ties the smallest such time is taken: seeds at [1000, 1000, 2000,
+    2000] have median 1000 (the estimate is 0.5 at 1000), where numpy's median says 1500. With
+    every seed solved it is the ordinary lower median of the steps."""
+
+    per_seed: tuple[SeedSteps, ...]
+    median: float | None
+
+    @property
+    def seeds(self) -> int:
+        """n: the seeds."""
+        return len(self.per_seed)
+
+    @property
+    def solved(self) -> int:
+        """k: the seeds that reached the threshold within their budgets."""
+        return sum(not s.censored for s in self.per_seed)
+
+    @property
+    def budgets(self) -> tuple[int, ...]:
+        return tuple(s.budget for s in self.per_seed)
+
+    @property
+    def budget(self) -> int:
+        """The largest budget (the common one when the seeds share it)."""
+        return max(self.budgets)
+
+    @property
+    def median_above(self) -> int | None:
+        """When `median` is None: the median is above this (the largest observed time); else None."""
+        return None if self.median is not None else max(s.time for s in self.per_seed)
+
+    @property
+    def text(self) -> str:
+        """E.g. "3 of 5 seeds; median 1,400 steps (Kaplan–Meier)", "1 of 5 seeds; median > 3,000 (budget)"."""
+        head = f"{self.solved} of {self.seeds} seeds"
+        if self.median is not None:
+            return f"{head}; median {self.median:,.0f} steps (Kaplan–Meier)"
+        shared = len(set(self.budgets)) == 1
+        return f"{head}; median > {self.median_above:,} ({'budget' if shared else 'the largest budget'})"
+
+    def to_json(self) -> dict[str, Any]:
+        """Every number, for a results file."""
+        return {"solved": self.solved, "seeds": self.seeds, "budgets": list(self.budgets),
+                "median": self.median, "median_above": self.median_above, "text": self.text,
+                "per_seed": [{"steps": s.steps, "budget": s.budget, "censored": s.censored} for s in self.per_seed]}
+
+
+def steps_to_threshold(steps: list[int | None], budgets: list[int] | int) -> StepsToThreshold:
+    """Steps to a threshold over seeds, with their Kaplan-Meier median (see `StepsToThreshold`).
+
+    Args:
+        steps: per seed, the env steps at which the threshold was first reached; None if it never
+            was. A seed that never reached it is right-censored at its budget, never at the steps
+            it happened to collect; a number above the seed's budget (a loop whose last round went
+            past it) is no hit within the budget and is censored at the budget too.
+        budgets: each seed's budget of env steps, or one budget for every seed.
+    """
+    n = len(steps)
+    if n == 0:
+        raise ValueError("steps_to_threshold needs at least one seed")
+    per_budget = [budgets] * n if isinstance(budgets, int) else list(budgets)
+    if len(per_budget) != n:
+        raise ValueError(f"{n} seeds but {len(per_budget)} budgets")
+    if any(b <= 0 for b in per_budget) or any(s is not None and s <= 0 for s in steps):
+        raise ValueError("steps and budgets are positive numbers of env steps")
+    per_seed = tuple(SeedSteps(s, int(b), s is None or s > b) for s, b in zip(steps, per_budget))
+    return StepsToThreshold(per_seed, _km_median(per_seed))
+
+
+def _km_median(per_seed: tuple[SeedSteps, ...]) -> float | None:
+    from scipy.stats import CensoredData, ecdf
+
+    solved = [s.time for s in per_seed if not s.censored]
+    if not solved:  # nothing to estimate: the CDF is 0 up to the largest budget
+        return None
+    data = CensoredData(uncensored=solved, right=[s.time for s in per_seed if s.censored])
+    cdf = ecdf(data).cdf  # a step function: probabilities[i] from quantiles[i] on
+    reached = np.flatnonzero(cdf.probabilities >= _HALF)
+    return float(cdf.quantiles[reached[0]]) if len(reached) else None
+
+
+@dataclass(frozen=True)
+class StepsRatio:
+    """b's median steps over a's (e.g. a = the loop, b = SAC: how many times more steps SAC needs).
+
+    bound:
+      exact:   both medians are known; ratio = b.median / a.median.
+      lower:   b's median is censored (above b.median_above, its budget): the ratio is above
+               ratio = b.median_above / a.median.
+      upper:   a's median is censored (above a.median_above): the ratio is below
+               ratio = b.median / a.median_above.
+      unknown: both censored: ratio is None.
+    """
+
+    ratio: float | None
+    bound: Literal["exact", "lower", "upper", "unknown"]
+    numerator: float | None  # b's median, or b's budget where censored (lower); None when unknown
+    denominator: float | None  # a's median, or a's budget where censored (upper); None when unknown
+
+    @property
+    def text(self) -> str:
+        sign = {"exact": "=", "lower": ">", "upper": "<"}.get(self.bound)
+        return "unknown (both medians censored)" if sign is None else f"{sign} {self.ratio:.3g}"
+
+    def to_json(self) -> dict[str, Any]:
+        return {"ratio": self.ratio, "bound": self.bound, "numerator": self.numerator,
+                "denominator": self.denominator, "text": self.text}
+
+
+def steps_ratio(a: StepsToThreshold, b: StepsToThreshold) -> StepsRatio:
+    """The ratio of medians b / a, and what kind of number it is (see `StepsRatio`)."""
+    if a.median is not None and b.median is not None:
+        return StepsRatio(b.median / a.median, "exact", b.median, a.median)
+    if a.median is not None:  # b censored: its median > its budget, so the ratio > budget / a's median
+        return StepsRatio(b.median_above / a.median, "lower", float(b.median_above), a.median)
+    if b.median is not None:  # a censored: the ratio < b's median / a's budget
+        return StepsRatio(b.median / a.median_above, "upper", b.median, float(a.median_above))
+    return StepsRatio(None, "unknown", None, None)

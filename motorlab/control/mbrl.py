@@ -63,6 +63,7 @@ class RoundRecord:
     collect_return_mean: float  # this round's collected episodes (random in round 1)
     eval_return_mean: float | None
     eval_return_std: float | None
+    eval_return_min: float | None  # the worst evaluation episode (a threshold "on every episode" reads it)
     valid_mse: float | None
     valid_mse_first: float | None
     plan_ms_median: float | None  # per env per control step, this round's evaluation
@@ -117,6 +118,8 @@ class LoopPlan:
     parallel: int
     holdout_every: int
     until_return: float | None
+    until_every_episode: bool  # until_return on the worst evaluation episode, not the mean
+    max_env_steps: int | None  # stop after the round whose collection reaches this many env steps
     state: str
     fit: dict[str, Any]  # fit_model's keyword arguments
     optimizer: str
@@ -184,13 +187,14 @@ def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | N
 def _evaluate(plan: LoopPlan, model: ForwardModel, r: int, progress: bool) -> tuple[dict[str, float | None],
                                                                                    PhaseFaults]:
     if plan.eval_episodes == 0:
-        return {"eval_return_mean": None, "eval_return_std": None, "plan_ms_median": None,
+        return {"eval_return_mean": None, "eval_return_std": None, "eval_return_min": None, "plan_ms_median": None,
                 "disagreement_mean": None}, PhaseFaults()
     policy = _planner(plan, model, r)
     base = plan.seed * SEED_STRIDE + EVAL_OFFSET
     result = run_episodes(env_config(plan), policy, plan.eval_episodes, base, min(plan.parallel, plan.eval_episodes),
                           progress=progress)
     return ({"eval_return_mean": float(result.returns.mean()), "eval_return_std": float(result.returns.std()),
+             "eval_return_min": float(result.returns.min()),
              "plan_ms_median": float(np.median(result.per_env_ms)), "disagreement_mean": policy.disagreement_mean()},
             PhaseFaults.of(result, f"round {r + 1} eval", policy.task.reward_source, f"rounds/{r:02d}/model"))
 
@@ -231,7 +235,8 @@ def _comparable(plan: dict[str, Any]) -> dict[str, Any]:
     """The settings a resumed loop must share with the interrupted one (JSON-shaped, rounds left out)."""
     import json
 
-    return json.loads(json.dumps({k: v for k, v in plan.items() if k not in ("rounds", "until_return")}))
+    return json.loads(json.dumps({k: v for k, v in plan.items() if k not in ("rounds", "until_return", "until_every_episode",
+                                                                        "max_env_steps")}))
 
 
 @dataclass
@@ -299,7 +304,7 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                 start = time.perf_counter()
                 if (folder / ROUND_JSON).is_file():
                     done = read_json(folder / ROUND_JSON)
-                    record = RoundRecord(**done["record"])
+                    record = RoundRecord(**{"eval_return_min": None, **done["record"]})  # older rounds lack it
                     round_faults = PhaseFaults.from_json(done.get("faults"))
                 else:
                     bar.update(task, status="evaluating")
@@ -333,12 +338,20 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                                  record.env_steps)
                 shown = f"return {record.eval_return_mean:.1f}" if record.eval_return_mean is not None else ""
                 bar.update(task, advance=1, status=f"{record.env_steps:,} steps, {shown}")
-                if (plan.until_return is not None and record.eval_return_mean is not None
-                        and record.eval_return_mean >= plan.until_return):
+                if reached(record, plan.until_return, plan.until_every_episode):
+                    break
+                if plan.max_env_steps is not None and record.env_steps >= plan.max_env_steps:
                     break
     finally:
         curve.close()
     return LoopResult(records, model, concatenate(parts, meta), _planner(plan, model, len(records)).task, faults)
+
+
+def reached(record: RoundRecord, target: float | None, every_episode: bool = False) -> bool:
+    """Whether a round's evaluation reached `target`: its mean return, or with `every_episode` its worst
+    episode's (False without a target or an evaluation)."""
+    value = record.eval_return_min if every_episode else record.eval_return_mean
+    return target is not None and value is not None and value >= target
 
 
 def layout_name(env: str | EnvConfig, state: str) -> str:

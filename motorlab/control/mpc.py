@@ -114,18 +114,54 @@ def _reject_non_finite(returns: torch.Tensor, path: torch.Tensor, particles: int
     return returns.masked_fill(~finite, float("-inf"))
 
 
+class EndProbability:
+    """The probability that a predicted step ends the episode, for a termination written as a yes/no
+    function of the state: the share of `draws` states around each predicted one, spread by the
+    model's own measured open-loop error t steps ahead (model.json's "rollout_error", fit time), that
+    the termination calls ended.
+
+    Why: with a +1-per-step alive reward every candidate that survives the horizon on the predicted
+    path scores the same, so CEM cannot tell a pole near its limit from one upright and picks among
+    them at random. The probability grows as the predicted state nears the boundary, by as much as
+    the model's predictions can be off there, so the planner keeps away from it. The draws are fixed
+    (common random numbers): candidates are compared on the same noise, and a plan is repeatable.
+    """
+
+    def __init__(self, end_fn, drift, draws: int, seed: int = 0):
+        self.end_fn = end_fn
+        self.drift = torch.as_tensor(np.asarray(drift, dtype=np.float32))  # (T, S)
+        self.noise = torch.randn((draws, *self.drift.shape), generator=torch.Generator().manual_seed(seed))
+
+    def __call__(self, state, action, next_state, goal) -> torch.Tensor:
+        """(N, H, ...) tensors -> (N, H) probabilities."""
+        h = next_state.shape[1]
+        steps = torch.arange(h).clamp(max=len(self.drift) - 1)
+        spread = (self.drift[steps] * self.noise[:, steps]).to(next_state)  # (M, H, S)
+        drawn = next_state[None] + spread[:, None]  # (M, N, H, S)
+        ends = self.end_fn(state[None].expand_as(drawn), action[None].expand(len(drawn), *action.shape),
+                           drawn, goal[None].expand(len(drawn), *goal.shape))
+        return ends.to(next_state.dtype).mean(0)
+
+
 def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", particles: int | None = None,
-                 generator: torch.Generator | None = None, faults: PlannerFaults | None = None) -> Scorer:
+                 generator: torch.Generator | None = None, faults: PlannerFaults | None = None,
+                 termination_draws: int = 0) -> Scorer:
     """Return of each action sequence under the forward model and a task (reward, termination;
     see motorlab.dynamics.rewards.Task; a None reward or a "learned" termination use the model's heads)
     or a bare torch reward (state, action, next_state, goal) -> (...,).
 
-    A deterministic state-only model with mean propagation predicts the whole path first
-    (`fast_rollout`); then the reward scores all H steps in one call on (N, H, ...) tensors: a reward
+    A model of deterministic members with mean propagation predicts the whole path first
+    (`fast_rollout`; with a learned reward, the reward head's predictions come with it from the same
+    passes); then the reward scores all H steps in one call on (N, H, ...) tensors: a reward
     is elementwise over its leading dimensions, and one call instead of H saves ~10 torch calls per
-    step ahead. Other models step with `step_fn`, collecting their heads' outputs on the way.
+    step ahead. Other models (probabilistic members, TS propagation, a learned termination) step with
+    `step_fn`, collecting their heads' outputs on the way.
 
     A candidate whose return is NaN or Inf scores -inf (rejected), and is counted in `faults`.
+
+    `termination_draws` > 0 scores a yes/no termination as a probability of ending (`EndProbability`,
+    where the model measured its open-loop error): each step's reward counts with the chance that
+    the episode is still running.
     """
     if particles is None:  # one rollout per candidate, or under TS one particle per member
         particles = model.members if propagation == "ts" else 1
@@ -136,10 +172,17 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
                             f"{model.members} members, so use a multiple of {model.members}.")
     reward_fn = getattr(task, "reward", task)
     end_fn, end_source = getattr(task, "termination", None), getattr(task, "termination_source", "none")
+    drift = getattr(model, "meta", {}).get("rollout_error")
+    if end_fn is not None and termination_draws and drift is not None:
+        end_fn = EndProbability(end_fn, drift, termination_draws)
     learned_reward = reward_fn is None
     learned_end = end_fn is None and end_source == "learned"
-    fast = (getattr(model, "plain", True) and propagation == "mean" and not learned_reward and not learned_end)
-    if fast:
+    deterministic = getattr(model, "deterministic", getattr(model, "plain", True))
+    fast = (deterministic and propagation == "mean" and not learned_end
+            and (not learned_reward or "reward" in getattr(model, "heads", ())))
+    if fast and learned_reward:  # (path, the reward head's predictions (N, H))
+        rollout = model.fast_rollout(reward=True)
+    elif fast:
         rollout = model.fast_rollout() if hasattr(model, "fast_rollout") else stepwise_rollout(model.predict)
     else:
         step = model.step_fn(propagation, generator)
@@ -151,6 +194,8 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
         head_rewards, head_ends = [], []
         if fast:
             path = rollout(states, actions)
+            if learned_reward:
+                path, head_rewards = path
         else:
             path = [states]
             for t in range(h):
@@ -159,12 +204,16 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
                 head_rewards.append(r)
                 head_ends.append(end)
             path = torch.stack(path, 1)
+            if learned_reward:
+                head_rewards = torch.stack(head_rewards, 1)
         goals_h = goals[:, None].expand(-1, h, -1)
-        rewards = (torch.stack(head_rewards, 1) if learned_reward
-                   else reward_fn(path[:, :-1], actions, path[:, 1:], goals_h))
+        rewards = head_rewards if learned_reward else reward_fn(path[:, :-1], actions, path[:, 1:], goals_h)
         ends = (torch.stack(head_ends, 1) if learned_end
                 else end_fn(path[:, :-1], actions, path[:, 1:], goals_h) if end_fn else None)
-        if ends is not None:  # the ending step is paid, the steps after it are not (the episode is over):
+        if ends is not None and ends.dtype != torch.bool:  # a probability of ending at each step: a step's
+            alive = torch.cumprod(1 - ends.clamp(0, 1), 1)  # reward counts as much as the chance it is reached
+            rewards = rewards * torch.cat([alive.new_ones(alive.shape[:1] + (1,)), alive[:, :-1]], 1)
+        elif ends is not None:  # the ending step is paid, the steps after it are not (the episode is over):
             ends = ends.bool()  # left out, not multiplied by 0, so that what a model predicts past it cannot be NaN
             rewards = rewards.masked_fill(ends.cumsum(1) > ends.to(torch.int64), 0.0)
         if discount != 1.0:
@@ -186,14 +235,40 @@ def check_plan_settings(horizon: int, population: int, iterations: int, elites: 
         raise MotorlabError(f"--elites ({elites}) cannot exceed --population ({population}).")
 
 
+def colored_noise(shape: tuple[int, ...], beta: float, generator: torch.Generator,
+                  device: torch.device | str = "cpu") -> torch.Tensor:
+    """Gaussian noise of unit variance whose power falls as 1/f^beta along the second-to-last axis
+    (time): beta 0 is white, 2 is red (Brownian-like: slow, smooth action sequences), as iCEM samples
+    (Pinneri et al. 2020). A port of the `colorednoise` package's powerlaw_psd_gaussian (Timmer &
+    Koenig 1995) to torch, so it draws with the planner's seeded generator on its device."""
+    *lead, h, a = shape
+    if beta == 0 or h < 2:
+        return torch.randn(shape, generator=generator, device=device)
+    f = torch.fft.rfftfreq(h, device=device)
+    scale = f.clamp(min=1.0 / h) ** (-beta / 2)
+    w = scale[1:].clone()
+    w[-1] *= (1 + h % 2) / 2  # the Nyquist bin of an even length is real: half the weight
+    sigma = 2 * torch.sqrt((w ** 2).sum()) / h
+    size = (*lead, a, len(f))
+    real = torch.randn(size, generator=generator, device=device) * scale
+    imag = torch.randn(size, generator=generator, device=device) * scale
+    if h % 2 == 0:  # the Nyquist bin is real
+        imag[..., -1] = 0
+        real[..., -1] *= math.sqrt(2)
+    imag[..., 0] = 0  # and so is the mean's
+    real[..., 0] *= math.sqrt(2)
+    return (torch.fft.irfft(torch.complex(real, imag), n=h) / sigma).transpose(-1, -2)
+
+
 class GaussianPlanner:
     """What CEM and MPPI share: a Gaussian over action sequences per env, in the action bounds,
     sampled with a seeded generator on the planner's device, its mean warm-started from the last plan."""
 
     def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int, population: int,
                  iterations: int, init_std: float, seed: int, device: torch.device | str,
-                 faults: PlannerFaults | None = None):
+                 faults: PlannerFaults | None = None, noise_beta: float = 0.0):
         self.score = score
+        self.noise_beta = noise_beta
         self.faults = faults or PlannerFaults()
         self.device = torch.device(device)
         self.low = torch.as_tensor(low, dtype=torch.float32, device=self.device)
@@ -218,7 +293,7 @@ class GaussianPlanner:
     def sample(self, mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
         """`population` sequences (n, p, H, A) around each env's mean, clipped to the bounds; the first is the mean."""
         n, p, h = mean.shape[0], self.population, self.horizon
-        noise = torch.randn((n, p, h, mean.shape[-1]), generator=self.generator, device=self.device)
+        noise = colored_noise((n, p, h, mean.shape[-1]), self.noise_beta, self.generator, self.device)
         samples = torch.maximum(torch.minimum(mean[:, None] + std[:, None] * noise, self.high), self.low)
         samples[:, 0] = mean  # the current mean always competes
         return samples
@@ -255,9 +330,11 @@ class CEMPlanner(GaussianPlanner):
     def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int = 15,
                  population: int = 100, iterations: int = 5, elites: int = 10, init_std: float = 0.5,
                  min_std: float = 0.05, momentum: float = 0.1, keep: float = 0.3, execute: str = "mean",
-                 seed: int = 0, device: torch.device | str = "cpu", faults: PlannerFaults | None = None):
+                 seed: int = 0, device: torch.device | str = "cpu", faults: PlannerFaults | None = None,
+                 noise_beta: float = 0.0):
         check_plan_settings(horizon, population, iterations, elites)
-        super().__init__(score, low, high, horizon, population, iterations, init_std, seed, device, faults)
+        super().__init__(score, low, high, horizon, population, iterations, init_std, seed, device, faults,
+                         noise_beta)
         self.elites = elites
         self.min_std = min_std * (self.high - self.low) / 2
         self.momentum = momentum
@@ -320,11 +397,13 @@ class MPPIPlanner(GaussianPlanner):
 
     def __init__(self, score: Scorer, low: np.ndarray, high: np.ndarray, horizon: int = 15,
                  population: int = 100, iterations: int = 1, init_std: float = 0.5, temperature: float = 0.5,
-                 seed: int = 0, device: torch.device | str = "cpu", faults: PlannerFaults | None = None, **_):
+                 seed: int = 0, device: torch.device | str = "cpu", faults: PlannerFaults | None = None,
+                 noise_beta: float = 0.0, **_):
         check_plan_settings(horizon, population, iterations, 1)
         if temperature <= 0:
             raise MotorlabError(f"--temperature must be positive, got {temperature}.")
-        super().__init__(score, low, high, horizon, population, iterations, init_std, seed, device, faults)
+        super().__init__(score, low, high, horizon, population, iterations, init_std, seed, device, faults,
+                         noise_beta)
         self.temperature = temperature
 
     @torch.no_grad()

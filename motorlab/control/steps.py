@@ -48,6 +48,8 @@ class PlannerSettings(Settings):
         "samples), evotorch (EvoTorch's CEM, one env at a time)")
     temperature: float = Field(0.5, gt=0, description="MPPI: weights exp(standardized return / temperature); "
                                "smaller is greedier")
+    noise_beta: float = Field(2.0, ge=0, description="Colour of the sampled action sequences' noise (iCEM): power "
+                              "falling as 1/f^beta along the horizon; 0 white, 2 smooth (red); cem and mppi")
     propagation: Literal["mean", "ts"] = Field(
         "mean", description="How candidates roll through an ensemble: mean (the members' mean prediction) or ts "
         "(trajectory sampling TS-inf: each particle keeps one member and, probabilistic, samples its next state)")
@@ -56,6 +58,10 @@ class PlannerSettings(Settings):
                                   "members)")
     device: str = Field("auto", description="Where the planner runs: auto (a GPU where torch sees one, else the "
                         "CPU), cpu, cuda, cuda:N")
+    termination_draws: int = Field(16, ge=0, description="Plan on the probability of ending: a termination is "
+                                   "judged on this many states around each predicted one, spread by the model's "
+                                   "measured open-loop error, so candidates nearer the boundary score lower "
+                                   "(0: on the predicted state alone, a yes/no end)")
 
     @model_validator(mode="before")
     @classmethod
@@ -73,12 +79,14 @@ class PlannerSettings(Settings):
         """The optimizer's settings."""
         keys = ("horizon", "population", "iterations") + (("temperature",) if self.optimizer == "mppi" else
                                                           ("elites",))
+        if self.optimizer != "evotorch":
+            keys += ("noise_beta",)
         return {k: getattr(self, k) for k in keys}
 
     def scoring(self) -> dict[str, Any]:
         """How candidates are scored (build_policy's keyword arguments besides the optimizer's)."""
         return dict(reward=self.reward, termination=self.termination, propagation=self.propagation,
-                    particles=self.particles, device=self.device)
+                    particles=self.particles, device=self.device, termination_draws=self.termination_draws)
 
 
 def _env_id(env: Any) -> str | None:
@@ -164,6 +172,7 @@ class MpcSummary(PlannerFaultsSummary):
     iterations: int
     elites: int | None = None
     temperature: float | None = None
+    noise_beta: float | None = None
     wall_seconds: float  # and "video", the first episode's MP4, when one was asked for
 
 
@@ -268,6 +277,9 @@ MPC = MpcKind()
 # ---- mbrl ---------------------------------------------------------------------------------------
 
 
+STEPS_PER_ROUND = 200  # what a round collects by default (MbrlSettings.round_episodes)
+
+
 class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
     aliases: ClassVar[frozenset[str]] = PLANNED_ENV_KEYS
     env_refused: ClassVar[dict[str, str]] = {k: v.format(kind="mbrl") for k, v in PLANNED_ENV_REFUSED.items()}
@@ -275,7 +287,10 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
                            "and motorlab's wrappers, given flat (--delay, --history, ...)")
     rounds: int = Field(10, gt=0, description="Rounds of collect -> refit -> evaluate (round 1 collects with random "
                         "actions)")
-    episodes_per_round: int = Field(1, gt=0, description="Episodes collected each round")
+    episodes_per_round: int | None = Field(
+        None, gt=0, description="Episodes collected each round before the model is refit (default: about "
+        f"{STEPS_PER_ROUND} env steps' worth at the env's time limit: 4 of Reacher's 50-step episodes, 1 of 200 "
+        "steps or more)")
     eval_episodes: int = Field(3, ge=0, description="MPC episodes evaluating each round's model (fixed reset seeds; "
                                "not added to the data)")
     # PETS by default: in benchmarks/mbrl.py (3 seeds, same budgets) probabilistic members with TS-inf
@@ -296,6 +311,10 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
     parallel: int = Field(1, gt=0, description="Episodes run side by side, planned in one batched call")
     until_return: float | None = Field(None, description="Stop after the first round whose evaluation reaches this "
                                        "mean return (the env steps it took are the loop's steps to that return)")
+    until_every_episode: bool = Field(False, description="With --until-return: every evaluation episode must reach "
+                                      "it, not their mean (e.g. InvertedPendulum's 1000 on every episode)")
+    max_env_steps: int | None = Field(None, gt=0, description="A budget of env steps: stop after the round whose "
+                                      "collection reaches it (--rounds stays a cap)")
     state: Literal["auto", "reacher", "observation"] = Field(
         "auto", description="State layout: auto (Reacher: the arm's 8-number state; else the observation)")
     seed: int = Field(0, ge=0, description="Random seed (resets, random actions, fitting, the planner)")
@@ -304,6 +323,19 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
     resume: bool = Field(False, description="Continue the loop in --out after an interruption: finished rounds are "
                          "kept, the cut one is redone from its last finished phase")
 
+    def round_episodes(self) -> int:
+        """--episodes-per-round, or the episodes of about STEPS_PER_ROUND env steps at the env's time
+        limit: a refit after every 50-step episode would spend the budget on refits and evaluations."""
+        if self.episodes_per_round is not None:
+            return self.episodes_per_round
+        import gymnasium as gym
+
+        from motorlab.user_modules import split_env_id
+
+        check_env_id(self.env.id)
+        limit = gym.spec(split_env_id(self.env.id)[1]).max_episode_steps
+        return max(1, round(STEPS_PER_ROUND / limit)) if limit else 1
+
     def loop_plan(self) -> Any:
         from motorlab.control.mbrl import LoopPlan, layout_name
 
@@ -311,8 +343,9 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
         holdout_every = round(1 / self.valid_fraction) if self.valid_fraction > 0 else 0
         wrapped = {k: v for k, v in env_record(self.env).items() if k != "id"}  # its settings besides the id
         return LoopPlan(env_id=self.env.id, env=wrapped, rounds=self.rounds,
-                        episodes_per_round=self.episodes_per_round, eval_episodes=self.eval_episodes, seed=self.seed, parallel=self.parallel,
+                        episodes_per_round=self.round_episodes(), eval_episodes=self.eval_episodes, seed=self.seed, parallel=self.parallel,
                         holdout_every=holdout_every, until_return=self.until_return,
+                        until_every_episode=self.until_every_episode, max_env_steps=self.max_env_steps,
                         state=layout_name(self.env, self.state), fit=fit,
                         optimizer=self.optimizer, plan=self.plan(), scoring=self.scoring())
 
@@ -356,7 +389,7 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
         "motorlab mbrl mypkg.envs:MyArm-v0 --reward mypkg.rewards:reach --rounds 10",
         "motorlab mbrl Pusher-v5 --rounds 20 --out runs/pusher-pets --resume   # after a kill",
     )
-    what = "model-based loop on {env}: {rounds} rounds x {episodes_per_round} episodes, {ensemble} members"
+    what = "model-based loop on {env}: up to {rounds} rounds, {ensemble} members"
     headline_keys = ("final_return_mean", "final_return_std", "best_return_mean", "env_steps", "valid_mse",
                      "valid_mse_first", "plan_ms_median", "rounds", "wall_seconds")
     metrics = (Metric("final_return_mean", "return after the last round", "return", spread="final_return_std"),
@@ -370,9 +403,41 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
     key_figures = ("plots/learning_curve.png",)
     refs = (Ref("sar", ("sar",)),)
     provides = Artifact("model", "model")
+    # a recipe's `seeds = N` (or a list) runs the loop once per seed, in processes, as it does a train step
+    trains = True
 
     def check(self, settings: MbrlSettings) -> None:
         check_env_id(settings.env.id)
+
+    def scores(self, s: MbrlSummary) -> Any:
+        """The last round's evaluation, as a study reports a finished seed (NaN: a loop without evaluations)."""
+        from motorlab.stepkind import Scores
+
+        nan = float("nan")
+        return Scores(nan if s.final_return_mean is None else s.final_return_mean, s.final_return_std, None, None, 0)
+
+    def aggregate(self, summaries: list[MbrlSummary]) -> dict[str, Any]:
+        """Several seeds: each headline number's mean over the seeds (None where a seed has none), the
+        final return's std across seeds and its IQM with rliable's 95% CI, the seeds' total wall time."""
+        import statistics
+
+        from motorlab.stats import iqm_with_ci
+
+        if len(summaries) == 1:
+            return self.headline(summaries[0])
+        heads = [self.headline(s) for s in summaries]
+        out: dict[str, Any] = {"seeds": len(summaries)}
+        for key in heads[0]:
+            values = [h[key] for h in heads]
+            out[key] = None if None in values else statistics.fmean(values)
+        finals = [h["final_return_mean"] for h in heads]
+        if None not in finals:
+            out["final_return_std"] = statistics.stdev(finals)
+            if len(finals) >= 4:  # an IQM trims something only from 4 seeds; below, it is the mean above
+                out["final_return_iqm"], out["final_return_iqm_ci_low"], out["final_return_iqm_ci_high"] = \
+                    iqm_with_ci(finals)
+        out["wall_seconds"] = sum(h["wall_seconds"] for h in heads)
+        return out
 
     def describe(self, settings: MbrlSettings, copies: int = 1) -> str:
         return with_env(self.what, settings)
@@ -381,7 +446,7 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
             progress: bool = True) -> MbrlSummary:
         import shutil
 
-        from motorlab.control.mbrl import ROUND_JSON, check_resumable, run_loop
+        from motorlab.control.mbrl import ROUND_JSON, check_resumable, reached, run_loop
         from motorlab.control.mpc_episodes import planner_fault_line
         from motorlab.report.dynamics_plots import mbrl_curve
 
@@ -418,7 +483,8 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
             disagreement_mean=last.disagreement_mean, reward_source=task.reward_source,
             termination_source=task.termination_source, members=s.ensemble, probabilistic=s.probabilistic,
             propagation=s.propagation, optimizer=s.optimizer, resumed_rounds=done_before,
-            reached_return=None if s.until_return is None else bool(evals) and max(evals) >= s.until_return,
+            reached_return=None if s.until_return is None else any(
+                reached(r, s.until_return, s.until_every_episode) for r in records),
             wall_seconds=time.perf_counter() - start)
         summary = self.finish(run_dir, settings, summary, faults.log)
         if faults.planner.faulty_plans:

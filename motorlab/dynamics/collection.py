@@ -90,7 +90,7 @@ def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers
         block = slice(filled, filled + len(ids) * steps)
         out["states"][block] = layout.state(obs[:, :-1]).reshape(-1, state_dim)
         out["next_states"][block] = layout.state(obs[:, 1:]).reshape(-1, state_dim)
-        out["goals"][block] = layout.goal(obs[:, :-1]).reshape(-1, goal_dim)
+        out["goals"][block] = layout.goal(obs[:, :-1]).reshape(len(ids) * steps, goal_dim)  # goal_dim may be 0
         out["actions"][block] = actions.reshape(-1, len(low))
         out["rewards"][block] = rewards.reshape(-1)
         out["episode"][block] = np.repeat(ids, steps)

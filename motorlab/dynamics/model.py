@@ -170,8 +170,13 @@ class ForwardModel(nn.Module):
 
     @property
     def plain(self) -> bool:
-        """Deterministic state-only members: the planning fast paths apply."""
+        """Deterministic state-only members."""
         return not self.probabilistic and not self.heads
+
+    @property
+    def deterministic(self) -> bool:
+        """Deterministic members, with heads or without: the planning fast paths apply (`fast_rollout`)."""
+        return not self.probabilistic
 
     def fit_normalizers(self, states, actions, next_states, rewards=None) -> None:
         self.state_norm.fit(states)
@@ -266,9 +271,12 @@ class ForwardModel(nn.Module):
         return step
 
     @torch.no_grad()
-    def _planning_layers(self) -> tuple[list[torch.Tensor], list[torch.Tensor], list[tuple[torch.Tensor, torch.Tensor]]]:
+    def _planning_layers(self, reward: bool = False) -> tuple[list[torch.Tensor], list[torch.Tensor],
+                                                              list[tuple[torch.Tensor, torch.Tensor]]]:
         """Weights, biases and layer-norm affines with the normalizers folded into the first and last
-        layers, and tanh_layer_norm's 2x folded into the layers that feed it."""
+        layers, and tanh_layer_norm's 2x folded into the layers that feed it. The last layer keeps the
+        state delta's columns, and with `reward` the reward head's after them (reward_norm folded in as
+        delta_norm is); the other heads' columns are left out."""
         net = self.net
         w_in = torch.cat([1 / self.state_norm.std, 1 / self.action_norm.std]).float()[None, :, None]
         shift = torch.cat([self.state_norm.mean, self.action_norm.mean]).float()
@@ -276,19 +284,28 @@ class ForwardModel(nn.Module):
         scaled_shift = shift / torch.cat([self.state_norm.std, self.action_norm.std]).float()
         b0 = net.biases[0] - (scaled_shift @ net.weights[0])[:, None]
         std_d, mean_d = self.delta_norm.std.float(), self.delta_norm.mean.float()
-        w_last = net.weights[-1] * std_d  # delta = z * std + mean, folded into the output layer
-        b_last = net.biases[-1] * std_d + mean_d
+        if reward:
+            std_d = torch.cat([std_d, self.reward_norm.std.float()])
+            mean_d = torch.cat([mean_d, self.reward_norm.mean.float()])
+        cols = len(std_d)
+        w_last = net.weights[-1][..., :cols] * std_d  # delta = z * std + mean, folded into the output layer
+        b_last = net.biases[-1][..., :cols] * std_d + mean_d
         ws = [2 * w0, *(2 * w for w in net.weights[1:-1]), w_last]
         bs = [2 * b0, *(2 * b for b in net.biases[1:-1]), b_last]
         return ws, bs, [(w, b) for w, b in zip(net.ln_weights, net.ln_biases)]
+
+    def _check_fast(self, what: str, reward: bool = False) -> None:
+        if self.probabilistic:
+            raise MotorlabError(f"{what} covers deterministic models; use step_fn for probabilistic members.")
+        if reward and "reward" not in self.heads:
+            raise MotorlabError(f"{what}(reward=True) needs a model with a reward head (fit with --learn-reward).")
 
     def fast_predict(self):
         """predict() for planning: the normalizers folded into the first and last layers, the input
         concatenation split into two matmuls, no autograd. ~Half the torch calls per step, which is
         what a small-batch planner pays for (per-call overhead, not FLOPs, dominates on a CPU).
-        Deterministic state-only models (`plain`) only."""
-        if not self.plain:
-            raise MotorlabError("fast_predict covers deterministic models without heads; use step_fn.")
+        Deterministic models only (their heads are left out)."""
+        self._check_fast("fast_predict")
         ws, bs, lns = self._planning_layers()
         if self.members == 1:
             first_s, first_a, first_b, rest, norms = self._single_member(ws, bs, lns)
@@ -308,23 +325,57 @@ class ForwardModel(nn.Module):
                 return states + x.mean(0)
         return step
 
-    def fast_rollout(self):
+    def fast_rollout(self, reward: bool = False):
         """Open-loop paths for planning: states (N, S) under action sequences (N, H, A) -> (N, H+1, S),
-        fast_predict applied H times. With one member, the first layer's action part of all H steps
-        is one matmul up front, so each step is one matmul per layer. Deterministic state-only models."""
-        if not self.plain:
-            raise MotorlabError("fast_rollout covers deterministic models without heads; use step_fn.")
-        if self.members != 1:
-            return stepwise_rollout(self.fast_predict())
-        first_s, first_a, first_b, rest, norms = self._single_member(*self._planning_layers())
+        the members' mean prediction at each step (as step_fn's "mean" propagation). With `reward` (a
+        model with a reward head), (path, rewards (N, H)): the reward head's mean prediction at each
+        step comes with the path, from the same pass. The first layer's action part of all H steps is
+        one matmul up front (every member's at once), so each step is one matmul per layer; with K
+        members the layer norms' affines are folded into the layers after them. Deterministic models
+        (heads not asked for are left out)."""
+        self._check_fast("fast_rollout", reward)
+        n_s = self.state_size
+        ws, bs, lns = self._planning_layers(reward)
+        if self.members == 1:
+            first_s, first_a, first_b, rest, norms = self._single_member(ws, bs, lns)
+
+            def first(states, action_part, t):
+                return torch.addmm(action_part[:, t], states, first_s)
+
+            def others(x):
+                return _hidden_and_out(x, rest, norms)
+
+            def actions_first(actions):
+                return torch.matmul(actions, first_a).add_(first_b)  # (N, H, hidden)
+        else:
+            first_s, first_a, first_b, rest = self._members_folded(ws, bs, lns)
+            k = self.members
+
+            def actions_first(actions):  # (K, N, H, hidden)
+                n, h, a = actions.shape
+                return torch.baddbmm(first_b, actions.reshape(1, n * h, a).expand(k, -1, -1),
+                                     first_a).view(k, n, h, -1)
+
+            def first(states, action_part, t):
+                return torch.baddbmm(action_part[:, :, t], states.expand(k, -1, -1), first_s)
+
+            def others(x):
+                for w, b in rest:
+                    x = torch.baddbmm(b, F.layer_norm(torch.sigmoid(x), x.shape[-1:], eps=LN_EPS / 4), w)
+                return x.mean(0)
 
         @torch.no_grad()
-        def rollout(states: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-            action_part = torch.matmul(actions, first_a).add_(first_b)  # (N, H, hidden)
-            path = [states]
+        def rollout(states: torch.Tensor, actions: torch.Tensor):
+            action_part = actions_first(actions)
+            path, outs = [states], []
             for t in range(actions.shape[1]):
-                path.append(path[-1] + _hidden_and_out(torch.addmm(action_part[:, t], path[-1], first_s), rest, norms))
-            return torch.stack(path, 1)
+                out = others(first(path[-1], action_part, t))
+                if reward:
+                    outs.append(out)
+                    out = out[:, :n_s]
+                path.append(path[-1] + out)
+            path = torch.stack(path, 1)
+            return (path, torch.stack(outs, 1)[..., n_s]) if reward else path
         return rollout
 
     @torch.no_grad()
@@ -334,6 +385,16 @@ class ForwardModel(nn.Module):
         rest = [(w[0].clone(), b[0, 0].clone()) for w, b in zip(ws[1:], bs[1:])]
         norms = [(w[0, 0].clone(), b[0, 0].clone()) for w, b in lns]
         return ws[0][0, :n_s].clone(), ws[0][0, n_s:].clone(), bs[0][0, 0].clone(), rest, norms
+
+    @torch.no_grad()
+    def _members_folded(self, ws, bs, lns):
+        """All members' planning layers, the first split into its state and action rows, and each layer
+        norm's affine (g, beta) folded into the layer after it: (LN(x) g + beta) W + b = LN(x) (g^T W) + (beta W + b)."""
+        n_s = self.state_size
+        rest = []
+        for (w, b), (g, beta) in zip(zip(ws[1:], bs[1:]), lns):
+            rest.append(((g.transpose(1, 2) * w).contiguous(), (torch.baddbmm(b, beta, w)).contiguous()))
+        return ws[0][:, :n_s].contiguous(), ws[0][:, n_s:].contiguous(), bs[0].contiguous(), rest
 
     # ---- files -------------------------------------------------------------------
 

@@ -66,3 +66,47 @@ def write_error_table(path, by_dim: np.ndarray, labels: list[str]) -> None:
     rows = ["steps_ahead," + ",".join(f'"{x}"' for x in labels)]
     rows += [f"{h}," + ",".join(f"{v:.6g}" for v in row) for h, row in enumerate(by_dim)]
     atomic_write_text(path, "\n".join(rows) + "\n")
+
+
+ROLLOUT_ERROR_STEPS = 50  # steps ahead measured at fit time (a planner's horizon beyond reuses the last)
+ROLLOUT_ERROR_STARTS = 2000  # start rows sampled: the error of a mean needs no more
+
+
+def rollout_error(model: ForwardModel, data, rows: np.ndarray, steps: int = ROLLOUT_ERROR_STEPS,
+                  seed: int = 0) -> np.ndarray | None:
+    """The model's open-loop error on recorded episodes: (T, S), row t the root-mean-square error of
+    each state entry after t + 1 steps of feeding the model its own predictions under the recorded
+    actions, from up to ROLLOUT_ERROR_STARTS start rows among `rows` (a transition set's row
+    indices, e.g. its held-out episodes). A row's path stops at its episode's end. None when no start
+    has a next step; a step ahead no path reaches repeats the last measured one.
+
+    What the planner's termination probability reads (motorlab.control.mpc.soft_termination): how
+    far a predicted state may be from the true one t steps ahead."""
+    rows = np.asarray(rows)
+    if len(rows) == 0:
+        return None
+    starts = np.random.default_rng(seed).choice(rows, size=min(len(rows), ROLLOUT_ERROR_STARTS), replace=False)
+    # row r's successor within its episode is r + 1 (collection writes episodes row by row)
+    episode = data.episode
+    s = torch.as_tensor(data.states[starts], dtype=torch.float32)
+    index = starts.copy()
+    alive = np.ones(len(starts), bool)
+    sums = np.zeros((steps, model.state_size))
+    counts = np.zeros(steps)
+    with torch.no_grad():
+        for t in range(steps):
+            s = model.predict(s, torch.as_tensor(data.actions[index], dtype=torch.float32))
+            err = (s.numpy().astype(np.float64) - data.next_states[index]) ** 2
+            sums[t] = np.where(alive[:, None], err, 0.0).sum(0)
+            counts[t] = alive.sum()
+            nxt = np.minimum(index + 1, len(episode) - 1)
+            alive &= (~data.dones[index].astype(bool)) & (episode[nxt] == episode[index]) & (index + 1 < len(episode))
+            if not alive.any():
+                break
+            index = np.where(alive, nxt, index)
+    measured = counts > 0
+    if not measured.any():
+        return None
+    out = np.sqrt(sums[measured] / counts[measured, None])
+    out = np.concatenate([out, np.repeat(out[-1:], steps - len(out), 0)])
+    return np.nan_to_num(out, nan=1e6, posinf=1e6)  # a diverging rollout: no trust at all, and valid JSON

@@ -183,6 +183,19 @@ def humanoid_standup_v4(state, action, next_state, goal):
     return _standup(next_state, action, 14 * 6)
 
 
+CARTPOLE_LENGTH = 0.6  # motorlab.envs.cartpole_swingup's pole, hinge to tip (m)
+
+
+def cartpole_swingup(state, action, next_state, goal):
+    """CartpoleSwingup-v0 (PETS' swing-up; motorlab.envs.cartpole_swingup.reward, the same arithmetic):
+    exp(-|tip - (0, l)|^2 / l^2) - 0.01 |a|^2, the tip (x + l sin, l cos) from the observation after
+    the step, obs = (x, sin theta, cos theta, x', theta'), theta 0 upright."""
+    length = CARTPOLE_LENGTH
+    dx = next_state[..., 0] + length * next_state[..., 1]
+    dz = length * next_state[..., 2] - length
+    return torch.exp(-(dx * dx + dz * dz) / (length * length)) - 0.01 * (action * action).sum(-1)
+
+
 # Which env uses which of them (Reacher-v5: reacher_v5 and reacher_obs_v5, ...) is in the env
 # catalogue (motorlab.envs.catalog), with why InvertedDoublePendulum has none.
 

@@ -221,6 +221,13 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
     if best_state is not None:
         model.load_state_dict(best_state)
     model.cpu()
+    # how far its open-loop predictions drift, on held-out episodes where there are some (the planner's
+    # termination probability reads it)
+    from motorlab.dynamics.open_loop import rollout_error
+
+    drift = rollout_error(model, data, valid_rows if len(valid_rows) else train_rows, seed=seed)
+    if drift is not None:
+        model.meta["rollout_error"] = np.round(drift, 6).tolist()
     best_row = min(history, key=lambda r: r["valid_mse"]) if len(x_valid) else history[-1]
     result = {"valid_mse": best if len(x_valid) else None, "train_mse": history[-1]["train_mse"],
               **{k: best_row[k] for k in ("valid_nll", "valid_reward_mse", "valid_termination_accuracy")

@@ -59,6 +59,25 @@ def _route_mujoco_warnings() -> None:
 
 _route_mujoco_warnings()
 
+# Envs motorlab ships (motorlab/envs/<module>.py and its MuJoCo model): id -> (entry point, time
+# limit, the return that counts as solved). Registered when motorlab.envs is imported, which every process that makes an env does;
+# the entry point is a string, so a module's model is read only when its env is made.
+BUNDLED_ENVS = {
+    # PETS' swing-up; solved: 170 of the 200 a pole held upright from the first step would earn
+    "CartpoleSwingup-v0": ("motorlab.envs.cartpole_swingup:CartpoleSwingup", 200, 170.0),
+}
+
+
+def register_bundled() -> None:
+    """Register motorlab's own envs with Gymnasium (once: an id already registered is left as it is)."""
+    for env_id, (entry_point, steps, solved) in BUNDLED_ENVS.items():
+        if env_id not in gym.registry:
+            gym.register(env_id, entry_point=entry_point, max_episode_steps=steps, reward_threshold=solved)
+
+
+register_bundled()
+
+
 class EnvConfig(StrictModel):
     """Which env, and how it is wrapped."""
 

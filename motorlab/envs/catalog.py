@@ -37,7 +37,8 @@ __all__ = ["EnvFacts", "Planning", "SUCCESS_KEYS", "facts", "register_env", "pla
 SUCCESS_KEYS = ("solved", "success", "is_success")  # read in this order where an env declares none
 METADATA_KEY = "motorlab"  # the env class's metadata entry holding its facts
 PID_KEYS = ("kp", "ki", "kd")
-PLANNER_KEYS = ("horizon", "population", "iterations", "elites", "optimizer", "temperature", "propagation", "particles")
+PLANNER_KEYS = ("horizon", "population", "iterations", "elites", "optimizer", "temperature", "propagation", "particles",
+                "noise_beta", "termination_draws")
 _REWARDS = "motorlab.dynamics.rewards"  # the bundled planner rewards live there (a layer above)
 
 
@@ -276,4 +277,10 @@ _exact("InvertedPendulum-v4", planning=(
     _plan("observation", "inverted_pendulum_v4", "inverted_pendulum_termination", state_size=4),))
 _exact("HumanoidStandup-v5", planning=(_plan("observation", "humanoid_standup_v5", state_size=348),))
 _exact("HumanoidStandup-v4", planning=(_plan("observation", "humanoid_standup_v4", state_size=376),))
+# motorlab's own (motorlab/envs/cartpole_swingup.py): PETS' swing-up, scored on the observation after
+# the step; reward at most 1 per step (pole upright, no action), 200 steps. Solved: the registered
+# reward_threshold, 170 (the swing-up itself costs ~20-30 steps of low reward)
+_exact("CartpoleSwingup-v0", planning=(_plan("observation", "cartpole_swingup", state_size=5),),
+       obs_labels=("cart position (m)", "sin pole angle (0 upright)", "cos pole angle", "cart velocity (m/s)",
+                   "pole angular velocity (rad/s)"))
 del _pattern

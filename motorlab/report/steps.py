@@ -4,7 +4,7 @@ settings across seeds."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import Field, field_validator
 from rich.console import Console
@@ -95,6 +95,10 @@ class CompareSettings(Settings):
     groups: dict[str, list[str]] = Field(min_length=1, description="LABEL=RUN_DIR[,RUN_DIR...]: one setting, its "
                                          "seeds (a recipe: LABEL = [RUN_DIR, ...])")
     title: str = Field("Learning curves", description="Figure title")
+    curve: Literal["training", "evaluation"] = Field(
+        "training", description="What the curves show against env steps: training (the running mean of training "
+        "episodes, train runs' metrics.csv) or evaluation (each run's evaluation returns: train runs' evaluations, "
+        "model-based loops' rounds, curve.csv; a group may mix them)")
 
     @field_validator("groups", mode="before")
     @classmethod
@@ -135,23 +139,25 @@ class CompareKind(StepKind[CompareSettings, Summary]):
 
     name = "compare"
     key_figures = ("plots/learning_curves.png",)
-    refs = (Ref("groups", ("policy",)),)
+    refs = (Ref("groups", ("policy", "model")),)  # train runs; mbrl loops (their model/ stands for the loop)
     flags = {"groups": ("--group",)}
-    examples = ("motorlab compare --group SAR-RL=runs/sar-s0,runs/sar-s1 --group RL-E2E=runs/e2e-s0,runs/e2e-s1",)
+    examples = ("motorlab compare --group SAR-RL=runs/sar-s0,runs/sar-s1 --group RL-E2E=runs/e2e-s0,runs/e2e-s1",
+                "motorlab compare --curve evaluation --group PETS=runs/pets-s0,runs/pets-s1 --group SAC=runs/sac-s0")
 
     def run(self, settings: CompareSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> Summary:
-        from motorlab.report.compare import compare_curves, group_statistics
+        from motorlab.report.compare import check_runs, compare_curves, group_statistics
 
         groups = {g: [Path(d) for d in ds] for g, ds in settings.groups.items()}
+        check_runs(groups, settings.curve)  # a wrong folder is one line, before the run folder is made
         run_dir = self.start(out)
-        result = compare_curves(groups, run_dir / "plots" / "learning_curves.png", settings.title)
+        result = compare_curves(groups, run_dir / "plots" / "learning_curves.png", settings.title, settings.curve)
         summary = Summary(**{f"{label}.{k}": v for label, r in result.items() for k, v in r.items()},
                           **group_statistics(groups))
         return self.finish(run_dir, settings, summary)
 
     def describe(self, settings: CompareSettings, copies: int = 1) -> str:
-        return f"compare {', '.join(settings.groups)}"
+        return f"compare {', '.join(settings.groups)}" + (" (evaluations)" if settings.curve == "evaluation" else "")
 
     def headline(self, s: Summary) -> dict[str, Any]:
         return {k: v for k, v in s.keys().items() if "." in k}  # already "<group>.<key>"
@@ -163,6 +169,7 @@ class CompareKind(StepKind[CompareSettings, Summary]):
             return Metric(key, f"P({group} > {other}) on {metric.replace('_', ' ')}", "percent")
         labels = {"final_episode_return": ("final training return (running mean)", "return"),
                   "final_episode_success": ("final training success (last 100)", "percent"),
+                  "final_eval_return_mean": ("final evaluation return (curve)", "return"),
                   "final_return_iqm": ("evaluation return IQM", "return"),
                   "success_rate_iqm": ("evaluation success IQM", "percent")}
         if rest in labels:

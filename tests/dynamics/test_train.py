@@ -175,6 +175,51 @@ def test_fast_predict_equals_predict(members):
             torch.testing.assert_close(path[:, t + 1], model.predict(path[:, t], plans[:, t]), rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.parametrize("members", [1, 5])
+def test_fast_rollout_with_a_reward_head_equals_step_fn(members):
+    """A deterministic model with heads plans on the fast path: the same path and reward-head
+    predictions as step_fn's mean propagation, and the same returns in model_scorer (learned reward,
+    and an exact one on the head model); the termination column is left out."""
+    from motorlab.dynamics.rewards import Task
+
+    rng = np.random.default_rng(members)
+    torch.manual_seed(members)
+    model = ForwardModel(8, 2, members=members, heads=("reward", "termination"))
+    model.fit_normalizers(rng.normal(1, 3, (200, 8)), rng.uniform(-1, 1, (200, 2)),
+                          rng.normal(1, 3, (200, 8)) + rng.normal(0, 0.1, (200, 8)), rng.normal(-2, 5, 200))
+    with torch.no_grad():  # members that differ, and layer norms whose affines are not the identity
+        for p in model.parameters():
+            p.add_(0.2 * torch.randn_like(p))
+    s = torch.as_tensor(rng.normal(1, 3, (64, 8)), dtype=torch.float32)
+    plans = torch.as_tensor(rng.uniform(-1, 1, (64, 6, 2)), dtype=torch.float32)
+    step = model.step_fn("mean")
+    path, rewards = [s], []
+    for t in range(6):
+        next_states, r, _ = step(path[-1], plans[:, t])
+        path.append(next_states)
+        rewards.append(r)
+    path, rewards = torch.stack(path, 1), torch.stack(rewards, 1)
+
+    fast_path, fast_rewards = model.fast_rollout(reward=True)(s, plans)
+    assert fast_path.shape == (64, 7, 8) and fast_rewards.shape == (64, 6)
+    torch.testing.assert_close(fast_path, path, rtol=1e-5, atol=1e-4)
+    torch.testing.assert_close(fast_rewards, rewards, rtol=1e-5, atol=1e-4)
+    torch.testing.assert_close(model.fast_rollout()(s, plans), path, rtol=1e-5, atol=1e-4)
+
+    goals = torch.zeros(64, 0)
+    learned = model_scorer(model, Task(None, None, "learned", "none"))(s, plans, goals)
+    torch.testing.assert_close(learned, rewards.sum(1), rtol=1e-5, atol=1e-4)
+    exact = model_scorer(model, Task(lambda s0, a, s1, g: -s1.square().sum(-1), None, "builtin", "none"))
+    torch.testing.assert_close(exact(s, plans, goals), -path[:, 1:].square().sum((1, 2)), rtol=1e-5, atol=1e-3)
+
+
+def test_fast_rollout_refuses_what_it_does_not_cover():
+    with pytest.raises(MotorlabError, match="deterministic models"):
+        ForwardModel(4, 1, probabilistic=True, heads=("reward",)).fast_rollout(reward=True)
+    with pytest.raises(MotorlabError, match="reward head"):
+        ForwardModel(4, 1, members=2).fast_rollout(reward=True)
+
+
 def test_damaged_model_json_is_checked_against_the_weights_before_allocating(reacher_data, tmp_path):
     """A model.json whose sizes were edited (a width of 10^12 would ask torch for terabytes) is
     refused from the weights file's header, before any tensor is made."""

@@ -173,6 +173,80 @@ def test_compare_cli(pendulum_runs, tmp_path):
     assert min(returns) <= s["B.final_episode_return"] <= max(returns)
 
 
+def _fake_run(folder: Path, summary: dict, csv_name: str, header: str, rows: list[str]) -> Path:
+    """A finished run folder by hand: its summary.json and one CSV."""
+    folder.mkdir(parents=True)
+    (folder / "summary.json").write_text(json.dumps(summary))
+    (folder / csv_name).write_text("\n".join([header, *rows]) + "\n")
+    return folder
+
+
+@pytest.fixture
+def eval_runs(tmp_path) -> dict[str, Path]:
+    """A hand-made mbrl loop (curve.csv: evaluations 1, 3, 5 at 200, 400, 600 env steps, model/ inside) and a
+    train run (metrics.csv: training episodes, evaluations 2 and 4 at 300 and 900 steps), and a train run
+    that never evaluated."""
+    loop = _fake_run(tmp_path / "loop", {"final_return_mean": 5.0}, "curve.csv",
+                     "round,env_steps,episodes,eval_return_mean,eval_return_min",
+                     ["1,200,1,1.0,0.5", "2,400,2,3.0,2.0", "3,600,3,5.0,4.0"])
+    (loop / "model").mkdir()
+    (loop / "model" / "model.json").write_text("{}")
+    train = _fake_run(tmp_path / "sac", {"eval_return_mean": 4.0, "eval_success_rate": 0.0}, "metrics.csv",
+                      "timesteps,episode_return,eval_return_mean,eval_return_min",
+                      ["200,-1.0,,", "300,,2.0,1.5", "400,0.5,,", "900,,4.0,3.0"])
+    silent = _fake_run(tmp_path / "silent", {"eval_return_mean": 1.0}, "metrics.csv",
+                       "timesteps,episode_return,eval_return_mean,eval_return_min", ["200,-1.0,,", "400,0.5,,"])
+    return {"loop": loop, "train": train, "silent": silent, "empty": _fake_run(tmp_path / "empty", {}, "x.csv", "a", [])}
+
+
+def test_evaluation_curves_hold_each_runs_last_evaluation(eval_runs):
+    from motorlab.report.compare import evaluations, held
+
+    steps, values = evaluations(eval_runs["train"])  # the rows with an evaluation, against timesteps
+    np.testing.assert_array_equal(steps, [300, 900])
+    np.testing.assert_array_equal(values, [2.0, 4.0])
+    steps, values = evaluations(eval_runs["loop"] / "model")  # a recipe's "@loop": the loop's curve.csv
+    np.testing.assert_array_equal(steps, [200, 400, 600])
+    grid = np.array([0, 199, 200, 399, 400, 600, 601, 900])
+    np.testing.assert_array_equal(held(steps, values, grid), [np.nan, np.nan, 1, 1, 3, 5, np.nan, np.nan])
+
+
+def test_compare_evaluation_curves_of_mixed_folders(eval_runs, tmp_path):
+    loop, train = eval_runs["loop"], eval_runs["train"]
+    out = tmp_path / "cmp"
+    proc = run_here("compare", "--curve", "evaluation", "--group", f"PETS={loop / 'model'}", "--group",
+                    f"SAC={train}", "--group", f"both={loop},{train}", "--out", out)
+    assert_ok(proc)
+    assert_png(out / "plots" / "learning_curves.png")
+    s = read_summary(out)
+    assert s["PETS.final_eval_return_mean"] == 5.0  # its last evaluation, at 600 steps
+    assert s["SAC.final_eval_return_mean"] == 4.0
+    assert s["both.seeds"] == 2 and s["both.final_eval_return_mean"] == 4.0  # past 600 only the train run is left
+    assert s["PETS.final_return_iqm"] == 5.0  # the loop's final return is its score
+    assert s["PETS.final_return_p_better_than[SAC]"] == 1.0
+    assert "final_episode_return" not in " ".join(s)
+
+
+def test_compare_evaluation_curves_band_over_seeds(eval_runs, tmp_path):
+    from motorlab.report.compare import compare_curves
+
+    result = compare_curves({"two": [eval_runs["train"], eval_runs["train"]]}, tmp_path / "c.png", curve="evaluation")
+    assert result == {"two": {"seeds": 2, "final_eval_return_mean": 4.0}}
+    assert_png(tmp_path / "c.png")
+
+
+@pytest.mark.parametrize("folder, curve, fragments", [
+    ("loop", "training", ["model-based loop (mbrl)", "no training episodes", "--curve evaluation"]),
+    ("silent", "evaluation", ["metrics.csv holds no evaluation", "--eval-every N", "--curve training"]),
+    ("empty", "evaluation", ["neither metrics.csv (a train run) nor curve.csv (an mbrl run)"]),
+])
+def test_compare_wrong_folder_is_one_line(eval_runs, tmp_path, folder, curve, fragments):
+    out = tmp_path / "cmp"
+    proc = run_here("compare", "--curve", curve, "--group", f"A={eval_runs[folder]}", "--out", out)
+    assert_one_line_error(proc, str(eval_runs[folder]), *fragments)
+    assert not out.exists()  # refused before the run folder is made
+
+
 @pytest.mark.parametrize("group", ["A", "A=", "=runs/x"])
 def test_compare_bad_group_syntax(group, tmp_path):
     proc = run_here("compare", "--group", group, "--out", tmp_path / "cmp")
