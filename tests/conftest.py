@@ -53,7 +53,7 @@ SECONDS = {
     "tests/envs/test_spaces.py": 110, "tests/envs/test_spaces_model_based.py": 30, "tests/adversarial/test_run_folders.py": 60,
     "tests/adversarial/test_spaces_and_training.py": 40, "tests/adversarial/test_model_based.py": 12,
     "tests/adversarial/test_settings_and_urls.py": 15,
-    "tests/control/test_oracle.py": 12,
+    "tests/control/test_oracle.py": 12, "tests/control/test_planning.py": 20,
     "tests/envs/test_cartpole_swingup.py": 3, "tests/studies/test_mbrl_cartpole_recipe.py": 40,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[sar_synergies]": 85,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[your_own_body]": 45,
