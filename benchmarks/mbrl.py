@@ -99,19 +99,17 @@ import csv
 import importlib
 import json
 import os
-import platform
-import subprocess
 import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from datetime import datetime, timezone
-from importlib import metadata
 from multiprocessing import get_context
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
+from provenance import cpu_model, git_state, load, versions, write_result  # noqa: E402  (benchmarks/ is the script's folder)
 
 # name -> env id, the reward the loop plans with, the threshold, the loop's budget, the target
 # threshold "on": mean (the evaluation's mean return) or min (its worst episode); "value": a number,
@@ -362,59 +360,9 @@ def run_loop(settings: dict, out_dir: Path) -> dict:
 # ---------------------------------------------------------------------------------------- provenance
 
 
-def git_state() -> dict:
-    def git(*args: str) -> str:  # not stripped: a porcelain line starts with its status columns
-        return subprocess.run(["git", *args], cwd=HERE, capture_output=True, text=True, check=True).stdout
-
-    try:
-        changed = [line[3:] for line in git("status", "--porcelain").splitlines() if line.strip()]
-        return {"commit": git("rev-parse", "HEAD").strip(), "dirty": bool(changed), "changed_files": changed}
-    except (OSError, subprocess.CalledProcessError) as e:
-        return {"commit": None, "error": str(e)}
-
-
-def versions() -> dict:
-    out = {}
-    for pkg in ("motorlab", "torch", "mujoco", "gymnasium", "stable-baselines3", "scipy", "numpy"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = None
-    return {"python": platform.python_version(), **out}
-
-
-def cpu_model() -> str | None:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or None
-
-
-def load() -> list[float]:
-    return [round(x, 2) for x in os.getloadavg()]
-
-
 def result_path(name: str, quick: bool) -> Path:
     """benchmarks/results/mbrl-NAME.json (--quick: mbrl-NAME-quick.json)."""
     return RESULTS / f"mbrl-{name}{'-quick' if quick else ''}.json"
-
-
-def write_result(out: dict, path: Path) -> None:
-    """The JSON at `path`, through a temporary file renamed over it (a reader never sees half of it)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(out, f, indent=2)
-            f.write("\n")
-        os.chmod(tmp, 0o644)  # mkstemp's file is private
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 # ---------------------------------------------------------------------------------------- statistics

@@ -47,13 +47,9 @@ import argparse
 import datetime
 import json
 import os
-import platform
 import statistics
-import subprocess
 import sys
-import tempfile
 import time
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -61,6 +57,8 @@ import torch
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # benchmarks/user_reacher_reward.py, as a user's module on the path
+
+from provenance import cpu_model, git_state, load, versions, write_result  # noqa: E402  (benchmarks/ is the script's folder)
 
 from motorlab.control.mpc_episodes import build_policy  # noqa: E402
 from motorlab.dynamics.collection import collect_transitions  # noqa: E402
@@ -145,56 +143,6 @@ def reward_call_us(task_reward, rows: int, state_size: int, action_size: int, re
 
 
 # ---------------------------------------------------------------------------------------- provenance
-
-def git_state() -> dict:
-    def git(*args: str) -> str:
-        return subprocess.run(["git", *args], cwd=HERE, capture_output=True, text=True, check=True).stdout
-
-    try:
-        changed = [line[3:] for line in git("status", "--porcelain").splitlines() if line.strip()]
-        return {"commit": git("rev-parse", "HEAD").strip(), "dirty": bool(changed), "changed_files": changed}
-    except (OSError, subprocess.CalledProcessError) as e:
-        return {"commit": None, "error": str(e)}
-
-
-def versions() -> dict:
-    out = {"python": platform.python_version()}
-    for pkg in ("motorlab", "torch", "mujoco", "gymnasium", "numpy"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = None
-    return out
-
-
-def cpu_model() -> str | None:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or None
-
-
-def load() -> list[float]:
-    return [round(x, 2) for x in os.getloadavg()]
-
-
-def write_result(out: dict, path: Path) -> None:
-    """The JSON at `path`, through a temporary file renamed over it (a reader never sees half of it)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(out, f, indent=2)
-            f.write("\n")
-        os.chmod(tmp, 0o644)  # mkstemp's file is private
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
 
 # ---------------------------------------------------------------------------------------- main
 

@@ -1,0 +1,64 @@
+"""Where a benchmark's numbers come from: the commit, the packages, the machine and its load, and a
+result file written whole (temp file, then rename). Shared by the benchmarks that record results."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import tempfile
+from importlib import metadata
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def git_state() -> dict:
+    def git(*args: str) -> str:  # not stripped: a porcelain line starts with its status columns
+        return subprocess.run(["git", *args], cwd=HERE, capture_output=True, text=True, check=True).stdout
+
+    try:
+        changed = [line[3:] for line in git("status", "--porcelain").splitlines() if line.strip()]
+        return {"commit": git("rev-parse", "HEAD").strip(), "dirty": bool(changed), "changed_files": changed}
+    except (OSError, subprocess.CalledProcessError) as e:
+        return {"commit": None, "error": str(e)}
+
+
+def versions() -> dict:
+    out = {}
+    for pkg in ("motorlab", "torch", "mujoco", "gymnasium", "stable-baselines3", "scipy", "numpy"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return {"python": platform.python_version(), **out}
+
+
+def cpu_model() -> str | None:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or None
+
+
+def load() -> list[float]:
+    return [round(x, 2) for x in os.getloadavg()]
+
+
+def write_result(out: dict, path: Path) -> None:
+    """The JSON at `path`, through a temporary file renamed over it (a reader never sees half of it)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(out, f, indent=2)
+            f.write("\n")
+        os.chmod(tmp, 0o644)  # mkstemp's file is private
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
