@@ -80,7 +80,7 @@ def rollout_error(model: ForwardModel, data, rows: np.ndarray, steps: int = ROLL
     indices, e.g. its held-out episodes). A row's path stops at its episode's end. None when no start
     has a next step; a step ahead no path reaches repeats the last measured one.
 
-    What the planner's termination probability reads (motorlab.control.mpc.soft_termination): how
+    What the planner's termination probability reads (motorlab.control.mpc.EndProbability): how
     far a predicted state may be from the true one t steps ahead."""
     rows = np.asarray(rows)
     if len(rows) == 0:
