@@ -52,11 +52,11 @@ Measured
   fewer than half reached it. The ratio SAC / loop of the medians (motorlab.stats.steps_ratio):
   exact; a LOWER bound (SAC's budget / the loop's median) when SAC's median is censored; an upper
   bound when the loop's is; unknown when both are.
-  Targets: the loop's k >= the table's; planning time <= 50 ms per control step (the median over
-  seeds of each run's median over its rounds' evaluations). That figure is the loop's
-  plan_ms_median: PER ENV IN A BATCHED CALL of 10 envs (the call's time / 10), not one env's latency;
-  the JSON also gives the call's own time (x 10: all 10 evaluation episodes of a round run as one
-  group, so every call plans for 10 envs, also after some of them ended).
+  Targets: the loop's k >= the table's; planning time <= 50 ms per control step for ONE env: the
+  median over seeds of each run's median over its MPC collection rounds of the wall time per
+  control step (planning + the env's step + recording, one env: an upper bound of one env's
+  planning latency). The JSON also gives the evaluation's plan_ms_median, per env in a batched
+  call of 10 envs (the call's time / 10), and the call's own time (x 10).
   Also: each loop seed's final return (its last round), rounds, env steps collected, wall time; SAC's
   whole curve per seed (every evaluation's 10 returns), its training seconds per 1k steps.
 
@@ -346,7 +346,7 @@ def run_loop(settings: dict, out_dir: Path) -> dict:
     for before, row in zip(curve, curve[1:]):
         collected = row["env_steps"] - before["env_steps"]
         row["collect_ms_per_step"] = 1000 * row["collect_seconds"] / collected if collected else None
-    group = min(resolved.parallel, resolved.episodes_per_round)
+    group = min(resolved.parallel, resolved.round_episodes())
     collect_ms = [row["collect_ms_per_step"] for row in curve[1:] if row["collect_ms_per_step"] is not None]
     return {"seed": settings["seed"], "settings": {k: v for k, v in settings.items() if k != "seed"},
             "settings_resolved": resolved.model_dump(mode="json"),
@@ -389,6 +389,8 @@ def summarize(name: str, thresholds: list[float], loop: list[dict], sac: list[di
     plan_known = [p for p in plan if p is not None]
     plan_median = median(plan_known)
     calls = [None if p is None else p * EVAL_EPISODES for p in plan]
+    single = [r["collect_ms_per_step_median"] for r in loop if r["collect_envs_side_by_side"] == 1]
+    single_median = median([x for x in single if x is not None])
     k_target = ENVS[name]["target"]
     return {
         "loop": {
@@ -429,9 +431,11 @@ def summarize(name: str, thresholds: list[float], loop: list[dict], sac: list[di
             "loop_seeds": {"target": f">= {k_target} of {LOOP_SEEDS}", "k": loop_stats.solved,
                            "of": loop_stats.seeds,  # not judged on another number of seeds (--quick: 1)
                            "met": loop_stats.solved >= k_target if loop_stats.seeds == LOOP_SEEDS else None},
-            "plan_ms": {"target": f"<= {PLAN_MS_TARGET} ms per control step (per env in a batched call of "
-                                  f"{EVAL_EPISODES})", "median": plan_median,
-                        "met": None if plan_median is None else plan_median <= PLAN_MS_TARGET},
+            # judged on one env's latency (what a user's `mpc` run waits per step), not the batched per-env share
+            "plan_ms": {"target": f"<= {PLAN_MS_TARGET} ms per control step, one env (the MPC collection's wall "
+                                  "time per step: planning + the env's step, an upper bound)",
+                        "median": single_median, "per_env_in_a_batch_of_10_median": plan_median,
+                        "met": None if single_median is None else single_median <= PLAN_MS_TARGET},
         },
     }
 
