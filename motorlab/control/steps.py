@@ -67,11 +67,13 @@ class PlannerSettings(Settings):
     @model_validator(mode="before")
     @classmethod
     def _env_defaults(cls, data: Any) -> Any:
-        """The planner settings the env's catalogue entry gives (EnvFacts.planner: a user's env may
-        declare them), where these are not set; no bundled env gives any, so the defaults hold."""
+        """The planner (and, for the loop, model) settings the env's catalogue entry gives
+        (EnvFacts.planner and .model: a user's env may declare them too), where these are not set."""
         env_id = _env_id(data.get("env")) if isinstance(data, dict) else None
         if env_id is not None:
-            given = {k: v for k, v in facts(env_id).planner.items() if k in cls.model_fields and k not in data}
+            known = facts(env_id)
+            given = {k: v for k, v in {**known.model, **known.planner}.items()
+                     if k in cls.model_fields and k not in data}
             if given:
                 data = {**data, **given}
         return data
