@@ -274,10 +274,12 @@ _exact("Reacher-v4", planning=(_plan("reacher", "reacher_v4", state_size=8),
                                _plan("observation", "reacher_obs_v4", state_size=11)))
 _exact("Pusher-v5", planning=(_plan("observation", "pusher_v5", state_size=23),))
 _exact("Pusher-v4", planning=(_plan("observation", "pusher_v4", state_size=23),))
+# InvertedPendulum's planner ends an episode where the env does, and also at the end of the cart's
+# rail, where a fall follows (rewards.inverted_pendulum_rail_end says why)
 _exact("InvertedPendulum-v5", planning=(
-    _plan("observation", "inverted_pendulum_v5", "inverted_pendulum_termination", state_size=4),))
+    _plan("observation", "inverted_pendulum_v5", "inverted_pendulum_rail_end", state_size=4),))
 _exact("InvertedPendulum-v4", planning=(
-    _plan("observation", "inverted_pendulum_v4", "inverted_pendulum_termination", state_size=4),))
+    _plan("observation", "inverted_pendulum_v4", "inverted_pendulum_rail_end", state_size=4),))
 _exact("HumanoidStandup-v5", planning=(_plan("observation", "humanoid_standup_v5", state_size=348),))
 _exact("HumanoidStandup-v4", planning=(_plan("observation", "humanoid_standup_v4", state_size=376),))
 # motorlab's own (motorlab/envs/cartpole_swingup.py): PETS' swing-up, scored on the observation after

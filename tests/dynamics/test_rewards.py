@@ -11,7 +11,15 @@ import torch
 from motorlab import user_modules
 from motorlab.dynamics import rewards
 from motorlab.dynamics.collection import collect_transitions
-from motorlab.dynamics.rewards import Task, UserFunction, builtin_envs, load_function, resolve_task, reward_for
+from motorlab.dynamics.rewards import (
+    PENDULUM_RAIL_END,
+    Task,
+    UserFunction,
+    builtin_envs,
+    load_function,
+    resolve_task,
+    reward_for,
+)
 from motorlab.errors import MotorlabError
 
 ARM = "userpkg.arm:ArmReach-v0"  # tests/ is on sys.path under pytest, as in test_user_env.py
@@ -46,7 +54,10 @@ def assert_matches(task: Task, data) -> None:
         if task.termination is not None:
             done = task.termination(s, a, n, goal)
             assert done.dtype == torch.bool and done.shape == (len(s),)
-            np.testing.assert_array_equal(done.numpy(), data.terminated)
+            ends = data.terminated
+            if data.env_id.startswith("InvertedPendulum"):  # the planner also ends at the rail's end
+                ends = ends | (np.abs(data.next_states[:, 0]) > PENDULUM_RAIL_END)
+            np.testing.assert_array_equal(done.numpy(), ends)
 
 
 @pytest.mark.parametrize("env_id, episodes, terminates", [
@@ -65,6 +76,15 @@ def test_builtins_are_the_envs_own_rewards_and_terminations(env_id, episodes, te
     # an explicit --termination builtin on an env that never terminates is no termination
     assert resolve_task(env_id, "observation", data.states.shape[1], data.actions.shape[1], reward="builtin",
                         termination="builtin").termination_source == ("builtin" if terminates else "none")
+
+
+def test_the_pendulums_planner_ends_where_the_env_does_and_at_the_end_of_the_rail():
+    task = resolve_task("InvertedPendulum-v5", "observation", 4, 1)
+    #           upright, centred | pole past 0.2 rad | cart past 0.9 m, upright | NaN
+    nxt = torch.tensor([[0.0, 0.05, 0, 0], [0.0, -0.25, 0, 0], [-0.95, 0.0, 0, 0], [float("nan"), 0, 0, 0]])
+    ends = task.termination(torch.zeros(4, 4), torch.zeros(4, 1), nxt, torch.zeros(4, 0))
+    assert ends.tolist() == [False, True, True, True]
+    assert task.reward(torch.zeros(4, 4), torch.zeros(4, 1), nxt, torch.zeros(4, 0))[2] == 1  # the env's reward
 
 
 def test_pusher_v4_scores_the_state_before_the_step():

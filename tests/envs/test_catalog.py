@@ -72,7 +72,7 @@ def test_bundled_specifics():
     assert v5 == {"reacher": "motorlab.dynamics.rewards:reacher_v5", "observation":
                   "motorlab.dynamics.rewards:reacher_obs_v5"}
     assert v4["observation"].endswith("reacher_obs_v4")  # v4 scores the state before the step
-    assert facts("InvertedPendulum-v5").planning[0].termination.endswith("inverted_pendulum_termination")
+    assert facts("InvertedPendulum-v5").planning[0].termination.endswith("inverted_pendulum_rail_end")
     assert facts("FetchReach-v4").broken and not facts("AdroitHandDoor-v1").broken
     assert facts("mypkg.envs:Hopper-v5").falls  # MODULE:ID is looked up by its id
     assert facts("NoSuch-v0") == catalog.DEFAULT and facts("NoSuch-v0").planner == {}
