@@ -63,7 +63,10 @@ bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/dynamics_collect.py
 	$(VENV)/bin/python benchmarks/dynamics_fit.py
 	$(VENV)/bin/python benchmarks/mpc.py
-	$(VENV)/bin/python benchmarks/mbrl.py --sac-steps 12000
+	for env in pendulum reacher cartpole arm; do $(VENV)/bin/python benchmarks/mbrl.py $$env || exit 1; done
+	$(VENV)/bin/python benchmarks/mbrl.py pusher --keep runs/bench-pusher
+	$(VENV)/bin/python benchmarks/plan_latency.py
+	$(VENV)/bin/python benchmarks/mpc_reward.py
 	$(VENV)/bin/python benchmarks/upkie_fps.py
 	$(VENV)/bin/python benchmarks/evaluate_parallel.py --repeats 3
 	$(VENV)/bin/python benchmarks/tune.py --out runs/bench-tune
