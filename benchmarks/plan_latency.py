@@ -29,7 +29,6 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
 from mbrl import ENVS  # noqa: E402  (benchmarks/ is the script's folder)
 from provenance import cpu_model, git_state, load, versions, write_result  # noqa: E402
 
@@ -91,6 +90,9 @@ def main(argv: list[str] | None = None) -> None:
                         help="a loop setting (an MbrlSettings field) instead of its default, for experiments; "
                              "the JSON records it (e.g. --set horizon=25 --set 'hidden=[128,128]')")
     args = parser.parse_args(argv)
+    unknown = [e for e in args.envs if e not in ENVS]
+    if unknown:
+        parser.error(f"unknown env {unknown[0]!r}: give any of {', '.join(ENVS)}")
     overrides = {k: json.loads(v) if v[:1] in "[{" else v for k, v in (s.split("=", 1) for s in args.set)}
     load_start = load()
     per_env = {}

@@ -486,6 +486,12 @@ def read_metrics(run_dir: Path) -> list[dict[str, float]]:
     path = Path(run_dir) / METRICS
     if not path.is_file():
         raise MotorlabError(f"{path} is missing; this run wrote no training metrics.")
+    return read_number_rows(path)
+
+
+def read_number_rows(path: Path) -> list[dict[str, float]]:
+    """A CSV of numbers a run wrote (metrics.csv, an mbrl loop's curve.csv) as rows of floats, empty
+    values as NaN; a value that is not a number is one line saying the file is damaged."""
     rows = []
     with open(path, newline="") as f:
         for line, row in enumerate(csv.DictReader(f), start=2):

@@ -82,9 +82,11 @@ def step_target(env: gym.Env) -> gym.Env:
     return env
 
 
-def _mujoco(env, env_id: str):
+def _mujoco(env, env_id: str | None = None):
+    """The env's MjModel and MjData; one line naming the env (`env_id`, else its spec's id or class) if it has none."""
     model, data = mujoco_model_data(env)
     if model is None:
+        env_id = env_id or getattr(env.unwrapped.spec, "id", None) or type(env.unwrapped).__name__
         raise MotorlabError(f"the oracle plans on the simulator by copying its MuJoCo state, and {env_id} is not "
                             "a MuJoCo env (no MjModel at env.unwrapped.model); plan on a learned model instead "
                             f"(`motorlab mbrl {env_id}`).")
@@ -97,7 +99,7 @@ def physics_state(env) -> np.ndarray:
     Raises:
         MotorlabError: `env` is not a MuJoCo env.
     """
-    model, data = _mujoco(env, getattr(env.unwrapped.spec, "id", None) or type(env.unwrapped).__name__)
+    model, data = _mujoco(env)
     state = np.empty(mujoco.mj_stateSize(model, STATE))
     mujoco.mj_getState(model, data, state, STATE)
     return state
@@ -105,7 +107,7 @@ def physics_state(env) -> np.ndarray:
 
 def set_physics_state(env, state: np.ndarray) -> None:
     """Put a state from `physics_state` into `env`, its derived quantities (positions of bodies, ...) recomputed."""
-    model, data = _mujoco(env, getattr(env.unwrapped.spec, "id", None) or type(env.unwrapped).__name__)
+    model, data = _mujoco(env)
     mujoco.mj_setState(model, data, np.asarray(state, dtype=np.float64), STATE)
     mujoco.mj_forward(model, data)
 

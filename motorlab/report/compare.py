@@ -10,7 +10,6 @@ seed). A group may mix train and mbrl run folders.
 
 from __future__ import annotations
 
-import csv
 import warnings
 from pathlib import Path
 from typing import Any, Literal
@@ -20,7 +19,7 @@ from scipy import stats
 
 from motorlab.errors import MotorlabError
 from motorlab.report.plots import STYLE, plt, save_figure, steps_axis
-from motorlab.runs import METRICS, SUMMARY, read_json, read_metrics, require_run_dir
+from motorlab.runs import METRICS, SUMMARY, read_json, read_metrics, read_number_rows, require_run_dir
 from motorlab.stats import aggregate, trial_scores
 
 GRID_POINTS = 100
@@ -56,19 +55,6 @@ def run_folder(path: Path | str) -> Path:
     return path
 
 
-def _read_rows(path: Path) -> list[dict[str, float]]:
-    """A CSV of numbers as rows of floats (empty values as NaN)."""
-    with open(path, newline="") as f:
-        rows = []
-        for line, row in enumerate(csv.DictReader(f), start=2):
-            try:
-                rows.append({k: float(v) if v not in ("", None) else float("nan") for k, v in row.items()})
-            except (TypeError, ValueError):
-                raise MotorlabError(f"{path} line {line} holds a value that is not a number; the file is damaged: "
-                                    "re-run the step.") from None
-    return rows
-
-
 def evaluations(run: Path | str) -> tuple[np.ndarray, np.ndarray]:
     """A finished run's evaluations: (env steps, mean evaluation return), in step order. A train run's
     metrics.csv rows with eval_return_mean (against timesteps), an mbrl loop's curve.csv rows
@@ -82,7 +68,7 @@ def evaluations(run: Path | str) -> tuple[np.ndarray, np.ndarray]:
         rows, step, where = read_metrics(folder), "timesteps", METRICS
         fix = "train it with evaluations (--eval-every N, eval_every = N in a recipe)"
     elif (folder / LOOP_CURVE).is_file():
-        rows, step, where = _read_rows(folder / LOOP_CURVE), "env_steps", LOOP_CURVE
+        rows, step, where = read_number_rows(folder / LOOP_CURVE), "env_steps", LOOP_CURVE
         fix = "run the loop with evaluations (--eval-episodes N, at least 1)"
     else:
         raise MotorlabError(f"{folder} has neither {METRICS} (a train run) nor {LOOP_CURVE} (an mbrl run): give "

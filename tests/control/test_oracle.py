@@ -83,6 +83,17 @@ def test_scoring_leaves_the_controlled_env_as_it_was():
         scorer(torch.from_numpy(state)[None].float(), torch.zeros((1, 3, 2)), torch.zeros((1, 0)))
 
 
+def random_episode(env, seed: int) -> tuple[int, float]:
+    """One episode of uniformly random actions (the env and its action space seeded with `seed`): its steps and return."""
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+    steps, total, done = 0, 0.0, False
+    while not done:
+        _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+        steps, total, done = steps + 1, total + reward, terminated or truncated
+    return steps, total
+
+
 def test_the_oracle_balances_the_pendulum_that_random_actions_drop():
     cfg = EnvConfig(id=PENDULUM, kwargs={"max_episode_steps": 200})
     # The pendulum pays 1 per step upright, so candidates differ only once a fall lies within the horizon;
@@ -95,27 +106,13 @@ def test_the_oracle_balances_the_pendulum_that_random_actions_drop():
     assert settings == (20, 30, 2, 15, (0, 1))
     env = make_env(cfg, shaped=False)
     for seed in (0, 1):
-        env.reset(seed=seed)
-        env.action_space.seed(seed)
-        steps, done = 0, False
-        while not done:
-            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            steps, done = steps + 1, terminated or truncated
-        assert steps < 20
+        assert random_episode(env, seed)[0] < 20
 
 
 def test_the_oracle_reaches_far_better_than_random_actions_on_reacher():
     result = oracle_episodes(REACHER, 2, [0, 1], horizon=8, population=20, iterations=2, elites=5)
     env = make_env(EnvConfig(id=REACHER), shaped=False)
-    random_returns = []
-    for seed in (0, 1):
-        env.reset(seed=seed)
-        env.action_space.seed(seed)
-        total, done = 0.0, False
-        while not done:
-            _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
-            total, done = total + reward, terminated or truncated
-        random_returns.append(total)
+    random_returns = [random_episode(env, seed)[1] for seed in (0, 1)]
     assert result.lengths.tolist() == [50, 50]
     assert result.returns.mean() > 0.5 * np.mean(random_returns)  # less than half the distance and effort
 
