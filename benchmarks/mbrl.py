@@ -36,6 +36,12 @@ What runs
   the threshold compares the learners' mean over 10 episodes to the oracle's mean over those 3 (the
   arm's initial states differ by a few hundredths of a radian). The JSON says which.
   The arm's torch reward is first checked equal to the env's own on random steps (float64).
+  --ceiling (any env): the same oracle, but with the LOOP's planner settings (horizon, population,
+  iterations, elites as the loop resolves them for the env) on all 10 evaluation episodes of every loop
+  seed: the return the loop's planner reaches with a perfect model, which a learned model can only
+  approach. It tells a threshold the planner cannot reach from one the model misses (Reacher, seed 1:
+  ceiling -4.59 against the threshold -5.0). Reacher ~0.3 s a control step: ~7 min for 5 seeds on 2
+  processes; the pendulum's 1,000-step episodes take far longer.
 
 Measured
   Steps to threshold, per seed: the env steps collected at the first evaluation that meets the
@@ -456,6 +462,10 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                         help=f"arm: the oracle's episodes per seed (the first of its {EVAL_EPISODES} evaluation seeds)")
     parser.add_argument("--oracle-set", action="append", default=[], metavar="KEY=VALUE",
                         help="arm: an oracle_episodes setting (horizon, population, iterations, elites)")
+    parser.add_argument("--ceiling", action="store_true",
+                        help="also play the oracle (MPC on the true simulator) with the loop's own planner settings "
+                             f"on every loop seed's {EVAL_EPISODES} evaluation episodes: what the loop's planner "
+                             "reaches with a perfect model, the ceiling of a learned one")
     parser.add_argument("--jobs", type=int, default=2, help="SAC and oracle processes at once (one per core)")
     parser.add_argument("--loop-jobs", type=int, default=2,
                         help="the loop's seeds at once, each in its own process (1: one at a time, alone)")
@@ -529,6 +539,16 @@ def main(argv: list[str] | None = None) -> None:
                               lambda r: f"oracle seed {r['seed']}: mean return {r['return_mean']:.2f}, "
                                         f"{r['plan_ms_median']:.0f} ms/step, {r['wall_seconds']} s")
         walls["oracle"] = round(time.perf_counter() - t, 1)
+    ceiling = None
+    if args.ceiling:  # the loop's planner on the true simulator: its settings as the loop resolves them
+        t = time.perf_counter()
+        plan = MbrlSettings(**loop_settings(name, 0, budget, None, None, overrides)).plan()
+        ceiling_settings = {k: plan[k] for k in ("horizon", "population", "iterations", "elites")}
+        jobs = [(env["id"], s, eval_seeds(s, EVAL_EPISODES), ceiling_settings) for s in loop_seeds]
+        ceiling = in_processes(run_oracle, jobs, args.jobs,
+                               lambda r: f"ceiling seed {r['seed']}: mean return {r['return_mean']:.2f} "
+                                         f"(min {min(r['returns']):.2f}), {r['plan_ms_median']:.0f} ms/step")
+        walls["ceiling"] = round(time.perf_counter() - t, 1)
     thresholds: list[float] | None = None
     if isinstance(env["value"], float):
         thresholds = [env["value"]] * len(loop_seeds)
@@ -608,6 +628,18 @@ def main(argv: list[str] | None = None) -> None:
                          "note": f"per loop seed s, the oracle plays the first {args.oracle_episodes} of s's "
                                  f"{EVAL_EPISODES} evaluation reset seeds; the threshold compares the learners' mean "
                                  f"over all {EVAL_EPISODES} with the oracle's mean over those"}
+    if ceiling is not None:
+        by_seed = {r["seed"]: r for r in ceiling}
+        out["ceiling"] = {
+            "runs": ceiling, "settings": ceiling_settings,
+            "return_mean": [by_seed[s]["return_mean"] for s in loop_seeds],
+            "meets_threshold": [meets({"return_mean": by_seed[s]["return_mean"],
+                                       "return_min": min(by_seed[s]["returns"])}, env["on"], thresholds[s])
+                                for s in loop_seeds],
+            "note": "the oracle (motorlab.control.oracle: MPC on the true simulator) with the loop's planner "
+                    f"settings, on each loop seed's {EVAL_EPISODES} evaluation reset seeds: the return the loop's "
+                    "planner reaches with a perfect model; a learned model's loop can match it, not beat it "
+                    "(but for the planner's own randomness)"}
     if args.sac_from:
         out["sac_from"] = str(args.sac_from)
     if args.keep:

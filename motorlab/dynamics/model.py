@@ -1,7 +1,16 @@
 """Forward model: (state, action) -> next state, learned as a normalized state delta.
 
-The network is the reference notebook's MLP (10 -> 64 Tanh LayerNorm -> 64 Tanh LayerNorm
--> 8 for Reacher), optionally an ensemble of K such nets. The K members are stored as
+The network is an MLP, optionally an ensemble of K such nets, with one of two activations:
+- "tanh": the reference notebook's (10 -> 64 Tanh LayerNorm -> 64 Tanh LayerNorm -> 8 for Reacher),
+  `dynamics fit`'s default;
+- "silu": Linear -> SiLU (swish) per hidden layer, no normalization, as PETS' and mbrl-lib's
+  ensembles; the model-based loop's default. Why: a saturating tanh (with or without the layer
+  norm) fits a body's response to larger actions and faster motions poorly. On the same 3,000
+  transitions of a Reacher loop (seed 1, 200 epochs, 5 probabilistic members, [64, 64]), the
+  held-out MSE of the normalized delta was 1.42 with tanh + LayerNorm, 1.47 with tanh alone, 0.83
+  with ReLU, 0.52 with SiLU, and MPC on them returned -5.68, -5.77, -5.43, -5.18 on the same 10
+  episodes (the true simulator's MPC: -4.59): tanh's models under-predicted how far the arm swings
+  under the planner's harder actions, so it accelerated timidly and overshot. The K members are stored as
 stacked weights and run as batched matmuls (`torch.baddbmm`), so an ensemble costs one
 pass, not K. Saved as `model.safetensors` (weights, normalizer statistics) + `model.json`
 (architecture, state layout, env id, metrics): no pickle.
@@ -34,6 +43,7 @@ from motorlab.runs import atomic_write_bytes, read_json, recall_imports, write_j
 MODEL_JSON = "model.json"
 MODEL_WEIGHTS = "model.safetensors"
 FORMAT = "motorlab.forward_model/1"
+ACTIVATIONS = ("silu", "tanh")  # tanh: Linear -> Tanh -> LayerNorm; silu: Linear -> SiLU (see the module's docstring)
 
 
 class Normalizer(nn.Module):
@@ -72,23 +82,29 @@ def tanh_layer_norm(x: torch.Tensor) -> torch.Tensor:
 
 
 class EnsembleMLP(nn.Module):
-    """K independent MLPs (Linear -> Tanh -> LayerNorm per hidden layer), evaluated together.
+    """K independent MLPs (Linear -> Tanh -> LayerNorm, or Linear -> SiLU, per hidden layer), evaluated
+    together.
 
     Input (K, B, n_in) or (B, n_in) (shared by all members); output (K, B, n_out).
     """
 
-    def __init__(self, n_in: int, n_out: int, hidden: tuple[int, ...] = (64, 64), members: int = 1):
+    def __init__(self, n_in: int, n_out: int, hidden: tuple[int, ...] = (64, 64), members: int = 1,
+                 activation: str = "tanh"):
         super().__init__()
+        if activation not in ACTIVATIONS:
+            raise MotorlabError(f"unknown activation {activation!r}; choose {' or '.join(ACTIVATIONS)}.")
         sizes = (n_in, *hidden, n_out)
         self.members = members
+        self.activation = activation
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
         for a, b in zip(sizes[:-1], sizes[1:]):
             bound = 1 / math.sqrt(a)  # nn.Linear's default initialization, per member
             self.weights.append(nn.Parameter(torch.empty(members, a, b).uniform_(-bound, bound)))
             self.biases.append(nn.Parameter(torch.empty(members, 1, b).uniform_(-bound, bound)))
-        self.ln_weights = nn.ParameterList([nn.Parameter(torch.ones(members, 1, h)) for h in hidden])
-        self.ln_biases = nn.ParameterList([nn.Parameter(torch.zeros(members, 1, h)) for h in hidden])
+        normed = hidden if activation == "tanh" else ()  # only tanh's layers have a layer norm (and its affine)
+        self.ln_weights = nn.ParameterList([nn.Parameter(torch.ones(members, 1, h)) for h in normed])
+        self.ln_biases = nn.ParameterList([nn.Parameter(torch.zeros(members, 1, h)) for h in normed])
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if x.dim() == 2:
@@ -97,16 +113,28 @@ class EnsembleMLP(nn.Module):
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
             x = torch.baddbmm(b, x, w)
             if i < last:
-                x = tanh_layer_norm(x) * self.ln_weights[i] + self.ln_biases[i]
+                x = (tanh_layer_norm(x) * self.ln_weights[i] + self.ln_biases[i] if self.activation == "tanh"
+                     else F.silu(x))
         return x
 
 
 def _hidden_and_out(x: torch.Tensor, layers, norms) -> torch.Tensor:
     """The rest of a planning pass after the first layer's pre-activation x: tanh_layer_norm with
-    its 2x already folded into the weights (so layer_norm(sigmoid(.))), then the next layer."""
+    its 2x already folded into the weights (so layer_norm(sigmoid(.))), then the next layer; with
+    `norms` None (silu), SiLU, then the next layer."""
+    if norms is None:
+        for w, b in layers:
+            x = torch.addmm(b, F.silu(x), w)
+        return x
     for (w, b), (lw, lb) in zip(layers, norms):
         x = torch.addmm(b, F.layer_norm(torch.sigmoid(x), lw.shape, lw, lb, LN_EPS / 4), w)
     return x
+
+
+def _hidden(x: torch.Tensor, activation: str) -> torch.Tensor:
+    """A planning layer's activation on its pre-activation (K, N, h): tanh's as layer_norm(sigmoid(.))
+    (its 2x folded into the weights, the layer norm's affine into the next layer), or SiLU."""
+    return F.silu(x) if activation == "silu" else F.layer_norm(torch.sigmoid(x), x.shape[-1:], eps=LN_EPS / 4)
 
 
 def stepwise_rollout(predict):
@@ -144,7 +172,8 @@ class ForwardModel(nn.Module):
     """next_state = state + delta_norm.inverse(net([state_norm(s), action_norm(a)]))."""
 
     def __init__(self, state_size: int, action_size: int, hidden: tuple[int, ...] = (64, 64), members: int = 1,
-                 meta: dict[str, Any] | None = None, probabilistic: bool = False, heads: tuple[str, ...] = ()):
+                 meta: dict[str, Any] | None = None, probabilistic: bool = False, heads: tuple[str, ...] = (),
+                 activation: str = "tanh"):
         super().__init__()
         unknown = set(heads) - set(HEADS)
         if unknown:
@@ -158,7 +187,7 @@ class ForwardModel(nn.Module):
         self.reward_norm = Normalizer(1)
         self.gaussian = state_size + (1 if "reward" in self.heads else 0)  # the columns with a mean (and variance)
         n_out = self.gaussian * (2 if self.probabilistic else 1) + (1 if "termination" in self.heads else 0)
-        self.net = EnsembleMLP(state_size + action_size, n_out, self.hidden, members)
+        self.net = EnsembleMLP(state_size + action_size, n_out, self.hidden, members, activation)
         if self.probabilistic:  # PETS' learned bounds on the log-variance (normalized units), per member
             self.max_logvar = nn.Parameter(torch.full((members, 1, self.gaussian), 0.5))
             self.min_logvar = nn.Parameter(torch.full((members, 1, self.gaussian), -10.0))
@@ -167,6 +196,10 @@ class ForwardModel(nn.Module):
     @property
     def members(self) -> int:
         return self.net.members
+
+    @property
+    def activation(self) -> str:
+        return self.net.activation
 
     @property
     def plain(self) -> bool:
@@ -274,7 +307,7 @@ class ForwardModel(nn.Module):
     def _planning_layers(self, reward: bool = False) -> tuple[list[torch.Tensor], list[torch.Tensor],
                                                               list[tuple[torch.Tensor, torch.Tensor]]]:
         """Weights, biases and layer-norm affines with the normalizers folded into the first and last
-        layers, and tanh_layer_norm's 2x folded into the layers that feed it. The last layer keeps the
+        layers, and tanh_layer_norm's 2x folded into the layers that feed it (silu: no 2x, no affines). The last layer keeps the
         state delta's columns, and with `reward` the reward head's after them (reward_norm folded in as
         delta_norm is); the other heads' columns are left out."""
         net = self.net
@@ -290,6 +323,8 @@ class ForwardModel(nn.Module):
         cols = len(std_d)
         w_last = net.weights[-1][..., :cols] * std_d  # delta = z * std + mean, folded into the output layer
         b_last = net.biases[-1][..., :cols] * std_d + mean_d
+        if net.activation != "tanh":  # no 2x to fold
+            return [w0, *net.weights[1:-1], w_last], [b0, *net.biases[1:-1], b_last], []
         ws = [2 * w0, *(2 * w for w in net.weights[1:-1]), w_last]
         bs = [2 * b0, *(2 * b for b in net.biases[1:-1]), b_last]
         return ws, bs, [(w, b) for w, b in zip(net.ln_weights, net.ln_biases)]
@@ -320,8 +355,10 @@ class ForwardModel(nn.Module):
                 x = torch.cat([states, actions], -1).expand(self.members, -1, -1)
                 for i, (w, b) in enumerate(zip(ws, bs)):
                     x = torch.baddbmm(b, x, w)
-                    if i < len(lns):
-                        x = F.layer_norm(torch.sigmoid(x), x.shape[-1:], eps=LN_EPS / 4) * lns[i][0] + lns[i][1]
+                    if i < len(ws) - 1:
+                        x = _hidden(x, self.activation)
+                        if lns:
+                            x = x * lns[i][0] + lns[i][1]
                 return states + x.mean(0)
         return step
 
@@ -361,7 +398,7 @@ class ForwardModel(nn.Module):
 
             def others(x):
                 for w, b in rest:
-                    x = torch.baddbmm(b, F.layer_norm(torch.sigmoid(x), x.shape[-1:], eps=LN_EPS / 4), w)
+                    x = torch.baddbmm(b, _hidden(x, self.activation), w)
                 return x.mean(0)
 
         @torch.no_grad()
@@ -383,7 +420,7 @@ class ForwardModel(nn.Module):
         """Member 0's planning layers as 2-d tensors: the first layer split into its state and action rows."""
         n_s = self.state_size
         rest = [(w[0].clone(), b[0, 0].clone()) for w, b in zip(ws[1:], bs[1:])]
-        norms = [(w[0, 0].clone(), b[0, 0].clone()) for w, b in lns]
+        norms = [(w[0, 0].clone(), b[0, 0].clone()) for w, b in lns] if self.activation == "tanh" else None
         return ws[0][0, :n_s].clone(), ws[0][0, n_s:].clone(), bs[0][0, 0].clone(), rest, norms
 
     @torch.no_grad()
@@ -391,6 +428,9 @@ class ForwardModel(nn.Module):
         """All members' planning layers, the first split into its state and action rows, and each layer
         norm's affine (g, beta) folded into the layer after it: (LN(x) g + beta) W + b = LN(x) (g^T W) + (beta W + b)."""
         n_s = self.state_size
+        if self.activation != "tanh":  # no layer norm: nothing to fold
+            return (ws[0][:, :n_s].contiguous(), ws[0][:, n_s:].contiguous(), bs[0].contiguous(),
+                    [(w.contiguous(), b.contiguous()) for w, b in zip(ws[1:], bs[1:])])
         rest = []
         for (w, b), (g, beta) in zip(zip(ws[1:], bs[1:]), lns):
             rest.append(((g.transpose(1, 2) * w).contiguous(), (torch.baddbmm(b, beta, w)).contiguous()))
@@ -408,7 +448,8 @@ class ForwardModel(nn.Module):
         write_json(folder / MODEL_JSON, {
             "format": FORMAT, "architecture": {
                 "state_size": self.state_size, "action_size": self.action_size, "hidden": list(self.hidden),
-                "members": self.members, "activation": "tanh", "layer_norm": True,
+                "members": self.members, "activation": self.activation,
+                "layer_norm": self.activation == "tanh",
                 "probabilistic": self.probabilistic, "heads": list(self.heads),
                 "output": "normalized state delta" + (", reward" if "reward" in self.heads else "")
                           + (" (Gaussian: mean, log-variance)" if self.probabilistic else "")
@@ -465,9 +506,13 @@ def load_model(path: Path, env_id: str | None = None, state_layout: str | None =
         if min(sizes[0], sizes[1], sizes[3], *sizes[2]) < 1:
             raise ValueError("architecture: sizes must be positive")
         # models written before probabilistic members and heads existed have neither
-        options = {"probabilistic": bool(arch.get("probabilistic", False)), "heads": tuple(arch.get("heads", ()))}
+        # ... and models written before the activation was a choice are tanh + layer norm
+        options = {"probabilistic": bool(arch.get("probabilistic", False)), "heads": tuple(arch.get("heads", ())),
+                   "activation": arch.get("activation", "tanh")}
         if not set(options["heads"]) <= set(HEADS):
             raise ValueError(f"architecture: heads {list(options['heads'])}")
+        if options["activation"] not in ACTIVATIONS:
+            raise ValueError(f"architecture: activation {options['activation']!r}")
     except (KeyError, TypeError, ValueError, AttributeError) as e:
         raise MotorlabError(f"{folder / MODEL_JSON} is not a motorlab forward model (bad or missing {e}); "
                             "re-run `motorlab dynamics fit`.") from None

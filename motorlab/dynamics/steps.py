@@ -125,7 +125,11 @@ class ModelSettings(Settings):
 
     epochs: int = Field(50, gt=0, description="Passes over the training data (the most, with --patience)")
     hidden: list[int] = Field(default_factory=lambda: [64, 64], min_length=1,
-                              description="Hidden layer widths (Tanh + LayerNorm each)")
+                              description="Hidden layer widths")
+    # tanh: the reference notebook's, which benchmarks/mpc.py's Reacher pipeline was tuned on; the loop
+    # (mbrl) defaults to silu, measured better there (motorlab.dynamics.model's docstring)
+    activation: Literal["tanh", "silu"] = Field("tanh", description="The hidden layers': tanh (Tanh + LayerNorm, "
+                                                "the reference notebook's) or silu (SiLU, PETS' and mbrl-lib's)")
     ensemble: int = Field(1, gt=0, description="Members K, trained together as one batched net")
     probabilistic: bool = Field(False, description="Gaussian members trained by negative log-likelihood, with "
                                 "learned bounds on their variance (PETS), instead of deterministic ones")
@@ -153,7 +157,8 @@ class ModelSettings(Settings):
 
     def fit_args(self) -> dict[str, Any]:
         """fit_model's keyword arguments for these settings."""
-        return dict(epochs=self.epochs, hidden=tuple(self.hidden), ensemble=self.ensemble, lr=self.lr,
+        return dict(epochs=self.epochs, hidden=tuple(self.hidden), activation=self.activation,
+                    ensemble=self.ensemble, lr=self.lr,
                     batch_size=self.batch_size, valid_fraction=self.valid_fraction, patience=self.patience,
                     probabilistic=self.probabilistic, heads=self.heads(), device=self.device, checked=True)
 
