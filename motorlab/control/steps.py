@@ -301,11 +301,6 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
     # (final-return IQM: Pusher -48.3 vs -56.2, InvertedPendulum 263.5 vs 135.0, the arm -4.55 vs
     # -11.7), at ~1.9x the planning time; `dynamics fit` and `mpc` stay deterministic (Reacher: one
     # deterministic member plans exactly and fast, benchmarks/mpc.py).
-    # SiLU, as PETS' and mbrl-lib's ensembles: on Reacher (loop seeds 1 and 3, 3,000 env steps, 10
-    # evaluation episodes) the final return was -5.27 and -4.67 against tanh + LayerNorm's -5.87 and -5.90,
-    # and a plan took 16-20 ms per env against 26-32 (motorlab.dynamics.model's docstring has the fits)
-    activation: Literal["tanh", "silu"] = Field("silu", description="The hidden layers': silu (SiLU, PETS' and "
-                                                "mbrl-lib's) or tanh (Tanh + LayerNorm, the reference notebook's)")
     ensemble: int = Field(5, gt=0, description="Members K, trained together as one batched net")
     probabilistic: bool = Field(True, description="Gaussian members trained by negative log-likelihood, with "
                                 "learned bounds on their variance (PETS); --no-probabilistic: deterministic ones")

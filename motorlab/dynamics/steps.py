@@ -126,10 +126,11 @@ class ModelSettings(Settings):
     epochs: int = Field(50, gt=0, description="Passes over the training data (the most, with --patience)")
     hidden: list[int] = Field(default_factory=lambda: [64, 64], min_length=1,
                               description="Hidden layer widths")
-    # tanh: the reference notebook's, which benchmarks/mpc.py's Reacher pipeline was tuned on; the loop
-    # (mbrl) defaults to silu, measured better there (motorlab.dynamics.model's docstring)
-    activation: Literal["tanh", "silu"] = Field("tanh", description="The hidden layers': tanh (Tanh + LayerNorm, "
-                                                "the reference notebook's) or silu (SiLU, PETS' and mbrl-lib's)")
+    # silu: measured better than the reference notebook's tanh + LayerNorm with little data (the loop
+    # on Reacher) and as good with plenty (motorlab.dynamics.model's docstring has the numbers)
+    nonlinearity: Literal["silu", "tanh"] = Field("silu", description="The hidden layers': silu (SiLU, PETS' and "
+                                                  "mbrl-lib's) or tanh (Tanh + LayerNorm, the reference "
+                                                  "notebook's)")
     ensemble: int = Field(1, gt=0, description="Members K, trained together as one batched net")
     probabilistic: bool = Field(False, description="Gaussian members trained by negative log-likelihood, with "
                                 "learned bounds on their variance (PETS), instead of deterministic ones")
@@ -157,7 +158,7 @@ class ModelSettings(Settings):
 
     def fit_args(self) -> dict[str, Any]:
         """fit_model's keyword arguments for these settings."""
-        return dict(epochs=self.epochs, hidden=tuple(self.hidden), activation=self.activation,
+        return dict(epochs=self.epochs, hidden=tuple(self.hidden), nonlinearity=self.nonlinearity,
                     ensemble=self.ensemble, lr=self.lr,
                     batch_size=self.batch_size, valid_fraction=self.valid_fraction, patience=self.patience,
                     probabilistic=self.probabilistic, heads=self.heads(), device=self.device, checked=True)

@@ -106,7 +106,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
               progress: bool = True, checked: bool = False, probabilistic: bool = False,
               heads: tuple[str, ...] = (), init: ForwardModel | None = None,
               valid_episodes: np.ndarray | None = None, device: str = "cpu",
-              activation: str = "tanh") -> tuple[ForwardModel, dict[str, Any]]:
+              nonlinearity: str = "tanh") -> tuple[ForwardModel, dict[str, Any]]:
     """Train a normalized-delta forward model.
 
     Args:
@@ -126,7 +126,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
         valid_episodes: the held-out episode indices (instead of a `valid_fraction` draw), e.g. the
             same ones round after round of a model-based loop.
         device: where training runs ("cpu", "cuda", "auto").
-        activation: the hidden layers' ("tanh": Tanh + LayerNorm, "silu"; see motorlab.dynamics.model).
+        nonlinearity: the hidden layers' ("tanh": Tanh + LayerNorm, "silu"; see motorlab.dynamics.model).
 
     Returns:
         The model (best weights when validating, on the CPU) and its metrics.
@@ -150,7 +150,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
     if "env" in data.meta:  # the env settings the transitions were collected under (wrappers, disturbances)
         meta["env"] = data.meta["env"]
     model = ForwardModel(data.states.shape[1], data.actions.shape[1], hidden, ensemble, meta=meta,
-                         probabilistic=probabilistic, heads=heads, activation=activation)
+                         probabilistic=probabilistic, heads=heads, nonlinearity=nonlinearity)
     if init is not None:
         model.load_state_dict(init.state_dict())
     model.fit_normalizers(data.states[train_rows], data.actions[train_rows], data.next_states[train_rows],

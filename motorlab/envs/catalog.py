@@ -39,7 +39,7 @@ METADATA_KEY = "motorlab"  # the env class's metadata entry holding its facts
 PID_KEYS = ("kp", "ki", "kd")
 PLANNER_KEYS = ("horizon", "population", "iterations", "elites", "optimizer", "temperature", "propagation", "particles",
                 "noise_beta", "termination_draws")
-MODEL_KEYS = ("hidden", "activation", "epochs", "ensemble", "batch_size", "lr")  # the model-based loop's forward model
+MODEL_KEYS = ("hidden", "nonlinearity", "epochs", "ensemble", "batch_size", "lr")  # the model-based loop's forward model
 _REWARDS = "motorlab.dynamics.rewards"  # the bundled planner rewards live there (a layer above)
 
 
@@ -290,10 +290,10 @@ _exact("HumanoidStandup-v4", planning=(_plan("observation", "humanoid_standup_v4
 # env steps with [128, 128] and horizon 25, at 1,800 with [64, 64] and horizon 25; with the defaults
 # (seed 0) it was 39 at 3,000. Three CEM iterations (warm-started) keep one env's plan ~40 ms
 # (benchmarks/plan_latency.py; [128, 128] at 5 iterations: ~67 ms). Measured with tanh + LayerNorm
-# layers (5 of 5 seeds, benchmarks/results/mbrl-cartpole.json), kept until the loop's SiLU default is
+# layers (5 of 5 seeds, benchmarks/results/mbrl-cartpole.json), kept until the SiLU default is
 # measured here too.
 _exact("CartpoleSwingup-v0", planning=(_plan("observation", "cartpole_swingup", state_size=5),),
-       planner={"horizon": 25, "iterations": 3}, model={"hidden": [128, 128], "activation": "tanh"},
+       planner={"horizon": 25, "iterations": 3}, model={"hidden": [128, 128], "nonlinearity": "tanh"},
        obs_labels=("cart position (m)", "sin pole angle (0 upright)", "cos pole angle", "cart velocity (m/s)",
                    "pole angular velocity (rad/s)"))
 del _pattern

@@ -127,20 +127,20 @@ def test_tiny_fit_lowers_the_loss_and_saves_identically(reacher_data, tmp_path):
 
 
 def test_a_silu_model_fits_saves_and_loads_as_silu(reacher_data, tmp_path):
-    """activation="silu": SiLU hidden layers without layer norms (no layer-norm weights stored); it
-    learns, and a saved model loads back with the same activation and predictions. A model.json
-    written before the activation was recorded loads as tanh + layer norm."""
+    """nonlinearity="silu": SiLU hidden layers without layer norms (no layer-norm weights stored); it
+    learns, and a saved model loads back with the same nonlinearity and predictions. A model.json
+    written before the nonlinearity was recorded loads as tanh + layer norm."""
     model, result = fit_model(reacher_data, epochs=4, ensemble=2, batch_size=500, progress=False,
-                              activation="silu")
+                              nonlinearity="silu")
     history = [r["valid_mse"] for r in result["history"]]
     assert history[-1] < history[0]
-    assert model.activation == "silu" and not any("ln_" in k for k in model.state_dict())
+    assert model.nonlinearity == "silu" and not any("ln_" in k for k in model.state_dict())
     model.save(tmp_path)
-    assert json.loads((tmp_path / "model.json").read_text())["architecture"]["activation"] == "silu"
+    assert json.loads((tmp_path / "model.json").read_text())["architecture"]["nonlinearity"] == "silu"
     back = load_model(tmp_path)
     s = torch.as_tensor(reacher_data.states[:64], dtype=torch.float32)
     a = torch.as_tensor(reacher_data.actions[:64], dtype=torch.float32)
-    assert back.activation == "silu" and torch.equal(model.predict(s, a), back.predict(s, a))
+    assert back.nonlinearity == "silu" and torch.equal(model.predict(s, a), back.predict(s, a))
     with torch.no_grad():  # the net is Linear -> SiLU -> Linear -> SiLU -> Linear, by hand
         x = back.inputs(s, a).expand(2, -1, -1)
         w, b = back.net.weights, back.net.biases
@@ -149,12 +149,12 @@ def test_a_silu_model_fits_saves_and_loads_as_silu(reacher_data, tmp_path):
     old, _ = fit_model(reacher_data, epochs=1, progress=False)
     old.save(tmp_path / "old")
     meta = json.loads((tmp_path / "old" / "model.json").read_text())
-    del meta["architecture"]["activation"]
+    del meta["architecture"]["nonlinearity"]
     (tmp_path / "old" / "model.json").write_text(json.dumps(meta))
-    assert load_model(tmp_path / "old").activation == "tanh"
-    meta["architecture"]["activation"] = "gelu"
+    assert load_model(tmp_path / "old").nonlinearity == "tanh"
+    meta["architecture"]["nonlinearity"] = "gelu"
     (tmp_path / "old" / "model.json").write_text(json.dumps(meta))
-    with pytest.raises(MotorlabError, match="activation 'gelu'"):
+    with pytest.raises(MotorlabError, match="nonlinearity 'gelu'"):
         load_model(tmp_path / "old")
 
 
@@ -191,12 +191,12 @@ def test_reacher_reward_in_torch_matches_the_env(reacher_data):
     np.testing.assert_allclose(r.numpy(), d.rewards, atol=1e-12)
 
 
-@pytest.mark.parametrize("activation", ["tanh", "silu"])
+@pytest.mark.parametrize("nonlinearity", ["tanh", "silu"])
 @pytest.mark.parametrize("members", [1, 3])
-def test_fast_predict_equals_predict(members, activation):
+def test_fast_predict_equals_predict(members, nonlinearity):
     """The planner's folded-normalizer model computes the same next states, step by step and over a horizon."""
     rng = np.random.default_rng(0)
-    model = ForwardModel(8, 2, members=members, activation=activation)
+    model = ForwardModel(8, 2, members=members, nonlinearity=nonlinearity)
     model.fit_normalizers(rng.normal(1, 3, (200, 8)), rng.uniform(-1, 1, (200, 2)), rng.normal(1, 3, (200, 8))
                           + rng.normal(0, 0.1, (200, 8)))
     s = torch.as_tensor(rng.normal(1, 3, (64, 8)), dtype=torch.float32)
@@ -211,9 +211,9 @@ def test_fast_predict_equals_predict(members, activation):
             torch.testing.assert_close(path[:, t + 1], model.predict(path[:, t], plans[:, t]), rtol=1e-5, atol=1e-5)
 
 
-@pytest.mark.parametrize("activation", ["tanh", "silu"])
+@pytest.mark.parametrize("nonlinearity", ["tanh", "silu"])
 @pytest.mark.parametrize("members", [1, 5])
-def test_fast_rollout_with_a_reward_head_equals_step_fn(members, activation):
+def test_fast_rollout_with_a_reward_head_equals_step_fn(members, nonlinearity):
     """A deterministic model with heads plans on the fast path: the same path and reward-head
     predictions as step_fn's mean propagation, and the same returns in model_scorer (learned reward,
     and an exact one on the head model); the termination column is left out."""
@@ -221,7 +221,7 @@ def test_fast_rollout_with_a_reward_head_equals_step_fn(members, activation):
 
     rng = np.random.default_rng(members)
     torch.manual_seed(members)
-    model = ForwardModel(8, 2, members=members, heads=("reward", "termination"), activation=activation)
+    model = ForwardModel(8, 2, members=members, heads=("reward", "termination"), nonlinearity=nonlinearity)
     model.fit_normalizers(rng.normal(1, 3, (200, 8)), rng.uniform(-1, 1, (200, 2)),
                           rng.normal(1, 3, (200, 8)) + rng.normal(0, 0.1, (200, 8)), rng.normal(-2, 5, 200))
     with torch.no_grad():  # members that differ, and layer norms whose affines are not the identity
