@@ -58,7 +58,8 @@ def maze(tmp_path_factory):
     """10 random episodes of the point maze (3000 transitions) and a model fit on them."""
     root = tmp_path_factory.mktemp("maze")
     collect = run_kind(DYNAMICS_COLLECT, root / "data", env=MAZE, episodes=10, workers=1)
-    fit = run_kind(DYNAMICS_FIT, root / "model", transitions=str(root / "data"), epochs=15)
+    fit = run_kind(DYNAMICS_FIT, root / "model", transitions=str(root / "data"), epochs=50)  # the default: SiLU
+    # layers need ~100 gradient steps (2 a epoch here); at 15 epochs the held-out MSE was 0.65, at 50 0.10
     return root, collect, fit
 
 
