@@ -76,7 +76,8 @@ def latency(name: str, steps: int, overrides: dict[str, str]) -> dict:
             "ms_p90": round(float(np.percentile(times, 90)), 2), "steps": len(times),
             "met": ms <= TARGET_MS,
             "settings": {**plan.plan, **{k: v for k, v in plan.scoring.items() if k != "device"},
-                         "hidden": list(plan.fit["hidden"]), "nonlinearity": plan.fit["nonlinearity"], "ensemble": plan.fit["ensemble"],
+                         "hidden": list(plan.fit["hidden"]), "nonlinearity": plan.fit["nonlinearity"],
+                         "ensemble": plan.fit["ensemble"],
                          "probabilistic": plan.fit["probabilistic"], "state": plan.state}}
 
 

@@ -6,17 +6,18 @@ The network is an MLP, optionally an ensemble of K such nets, with one of two no
 - "tanh": the reference notebook's (10 -> 64 Tanh LayerNorm -> 64 Tanh LayerNorm -> 8 for Reacher),
   motorlab's only choice before SiLU was measured (model.json files without "nonlinearity" are it).
 Why SiLU: a saturating tanh (with or without the layer norm) fits a body's response to larger
-actions and faster motions poorly. On the same 3,000
-  transitions of a Reacher loop (seed 1, 200 epochs, 5 probabilistic members, [64, 64]), the
-  held-out MSE of the normalized delta was 1.42 with tanh + LayerNorm, 1.47 with tanh alone, 0.83
-  with ReLU, 0.52 with SiLU, and MPC on them returned -5.68, -5.77, -5.43, -5.18 on the same 10
-  episodes (the true simulator's MPC: -4.59): tanh's models under-predicted how far the arm swings
-  under the planner's harder actions, so it accelerated timidly and overshot. With plenty of data
-  they plan alike: on 20,000 random Reacher episodes (benchmarks/mpc.py's pipeline, deterministic,
-  one member) MPC returned -3.66 (tanh) and -3.68 (SiLU) over 50 episodes, SiLU's held-out error
-  0.0023 against 0.0031, its fit 90 s against 133 and its plan 5.0 ms against 6.2. The K members are stored as
-stacked weights and run as batched matmuls (`torch.baddbmm`), so an ensemble costs one
-pass, not K. Saved as `model.safetensors` (weights, normalizer statistics) + `model.json`
+actions and faster motions poorly. On the same 3,000 transitions of a Reacher loop (seed 1, 200
+epochs, 5 probabilistic members, [64, 64]), the held-out MSE of the normalized delta was 1.42 with
+tanh + LayerNorm, 1.47 with tanh alone, 0.83 with ReLU, 0.52 with SiLU, and MPC on them returned
+-5.68, -5.77, -5.43, -5.18 on the same 10 episodes (the true simulator's MPC: -4.59): tanh's models
+under-predicted how far the arm swings under the planner's harder actions, so it accelerated
+timidly and overshot. With plenty of data they plan alike: on 20,000 random Reacher episodes
+(benchmarks/mpc.py's pipeline, deterministic, one member) MPC returned -3.66 (tanh) and -3.68
+(SiLU) over 50 episodes, SiLU's held-out error 0.0023 against 0.0031, its fit 90 s against 133 and
+its plan 5.0 ms against 6.2.
+
+The K members are stored as stacked weights and run as batched matmuls (`torch.baddbmm`), so an
+ensemble costs one pass, not K. Saved as `model.safetensors` (weights, normalizer statistics) + `model.json`
 (architecture, state layout, env id, metrics): no pickle.
 
 Two options make it the model of PETS (Chua et al. 2018) and of mbrl-lib:
@@ -311,8 +312,8 @@ class ForwardModel(nn.Module):
     def _planning_layers(self, reward: bool = False) -> tuple[list[torch.Tensor], list[torch.Tensor],
                                                               list[tuple[torch.Tensor, torch.Tensor]]]:
         """Weights, biases and layer-norm affines with the normalizers folded into the first and last
-        layers, and tanh_layer_norm's 2x folded into the layers that feed it (silu: no 2x, no affines). The last layer keeps the
-        state delta's columns, and with `reward` the reward head's after them (reward_norm folded in as
+        layers, and tanh_layer_norm's 2x folded into the layers that feed it (silu: no 2x, no affines).
+        The last layer keeps the state delta's columns, and with `reward` the reward head's after them (reward_norm folded in as
         delta_norm is); the other heads' columns are left out."""
         net = self.net
         w_in = torch.cat([1 / self.state_norm.std, 1 / self.action_norm.std]).float()[None, :, None]
@@ -432,12 +433,11 @@ class ForwardModel(nn.Module):
         """All members' planning layers, the first split into its state and action rows, and each layer
         norm's affine (g, beta) folded into the layer after it: (LN(x) g + beta) W + b = LN(x) (g^T W) + (beta W + b)."""
         n_s = self.state_size
-        if self.nonlinearity != "tanh":  # no layer norm: nothing to fold
-            return (ws[0][:, :n_s].contiguous(), ws[0][:, n_s:].contiguous(), bs[0].contiguous(),
-                    [(w.contiguous(), b.contiguous()) for w, b in zip(ws[1:], bs[1:])])
-        rest = []
-        for (w, b), (g, beta) in zip(zip(ws[1:], bs[1:]), lns):
-            rest.append(((g.transpose(1, 2) * w).contiguous(), (torch.baddbmm(b, beta, w)).contiguous()))
+        if lns:
+            rest = [((g.transpose(1, 2) * w).contiguous(), torch.baddbmm(b, beta, w).contiguous())
+                    for (w, b), (g, beta) in zip(zip(ws[1:], bs[1:]), lns)]
+        else:  # silu: no layer norm, nothing to fold
+            rest = [(w.contiguous(), b.contiguous()) for w, b in zip(ws[1:], bs[1:])]
         return ws[0][:, :n_s].contiguous(), ws[0][:, n_s:].contiguous(), bs[0].contiguous(), rest
 
     # ---- files -------------------------------------------------------------------

@@ -240,10 +240,11 @@ def test_fast_rollout_with_a_reward_head_equals_step_fn(members, nonlinearity):
     fast_path, fast_rewards = model.fast_rollout(reward=True)(s, plans)
     assert fast_path.shape == (64, 7, 8) and fast_rewards.shape == (64, 6)
     # float32 sums in another order (the normalizers folded in) over 6 steps: SiLU's unbounded
-    # outputs on these perturbed weights reach ~10, so a relative tolerance of 1e-4
-    torch.testing.assert_close(fast_path, path, rtol=1e-4, atol=1e-4)
-    torch.testing.assert_close(fast_rewards, rewards, rtol=1e-4, atol=1e-4)
-    torch.testing.assert_close(model.fast_rollout()(s, plans), path, rtol=1e-4, atol=1e-4)
+    # outputs on these perturbed weights reach ~10, so it gets a relative tolerance of 1e-4 (tanh 1e-5)
+    rtol = 1e-4 if nonlinearity == "silu" else 1e-5
+    torch.testing.assert_close(fast_path, path, rtol=rtol, atol=1e-4)
+    torch.testing.assert_close(fast_rewards, rewards, rtol=rtol, atol=1e-4)
+    torch.testing.assert_close(model.fast_rollout()(s, plans), path, rtol=rtol, atol=1e-4)
 
     goals = torch.zeros(64, 0)
     learned = model_scorer(model, Task(None, None, "learned", "none"))(s, plans, goals)
