@@ -49,6 +49,7 @@ MODEL_JSON = "model.json"
 MODEL_WEIGHTS = "model.safetensors"
 FORMAT = "motorlab.forward_model/1"
 NONLINEARITIES = ("silu", "tanh")  # tanh: Linear -> Tanh -> LayerNorm; silu: Linear -> SiLU (see the module's docstring)
+DEFAULT_NONLINEARITY = "silu"  # the Python API's default, as the CLI's (dynamics.steps.ModelSettings)
 
 
 class Normalizer(nn.Module):
@@ -94,7 +95,7 @@ class EnsembleMLP(nn.Module):
     """
 
     def __init__(self, n_in: int, n_out: int, hidden: tuple[int, ...] = (64, 64), members: int = 1,
-                 nonlinearity: str = "tanh"):
+                 nonlinearity: str = DEFAULT_NONLINEARITY):
         super().__init__()
         if nonlinearity not in NONLINEARITIES:
             raise MotorlabError(f"unknown nonlinearity {nonlinearity!r}; choose {' or '.join(NONLINEARITIES)}.")
@@ -178,7 +179,7 @@ class ForwardModel(nn.Module):
 
     def __init__(self, state_size: int, action_size: int, hidden: tuple[int, ...] = (64, 64), members: int = 1,
                  meta: dict[str, Any] | None = None, probabilistic: bool = False, heads: tuple[str, ...] = (),
-                 nonlinearity: str = "tanh"):
+                 nonlinearity: str = DEFAULT_NONLINEARITY):
         super().__init__()
         unknown = set(heads) - set(HEADS)
         if unknown:

@@ -24,7 +24,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from torch.nn import functional as F
 
 from motorlab import trackers
-from motorlab.dynamics.model import ForwardModel
+from motorlab.dynamics.model import DEFAULT_NONLINEARITY, ForwardModel
 from motorlab.dynamics.transitions import Transitions
 from motorlab.errors import MotorlabError
 from motorlab.runs import MetricsWriter
@@ -106,7 +106,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
               progress: bool = True, checked: bool = False, probabilistic: bool = False,
               heads: tuple[str, ...] = (), init: ForwardModel | None = None,
               valid_episodes: np.ndarray | None = None, device: str = "cpu",
-              nonlinearity: str = "tanh") -> tuple[ForwardModel, dict[str, Any]]:
+              nonlinearity: str = DEFAULT_NONLINEARITY) -> tuple[ForwardModel, dict[str, Any]]:
     """Train a normalized-delta forward model.
 
     Args:
@@ -126,7 +126,8 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
         valid_episodes: the held-out episode indices (instead of a `valid_fraction` draw), e.g. the
             same ones round after round of a model-based loop.
         device: where training runs ("cpu", "cuda", "auto").
-        nonlinearity: the hidden layers' ("tanh": Tanh + LayerNorm, "silu"; see motorlab.dynamics.model).
+        nonlinearity: the hidden layers' ("silu", the default, as `dynamics fit`'s; "tanh": Tanh + LayerNorm;
+            see motorlab.dynamics.model).
 
     Returns:
         The model (best weights when validating, on the CPU) and its metrics.

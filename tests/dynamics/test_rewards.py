@@ -80,8 +80,8 @@ def test_builtins_are_the_envs_own_rewards_and_terminations(env_id, episodes, te
 
 def test_the_pendulums_planner_ends_where_the_env_does_and_at_the_end_of_the_rail():
     task = resolve_task("InvertedPendulum-v5", "observation", 4, 1)
-    #           upright, centred | pole past 0.2 rad | cart past 0.9 m, upright | NaN
-    nxt = torch.tensor([[0.0, 0.05, 0, 0], [0.0, -0.25, 0, 0], [-0.95, 0.0, 0, 0], [float("nan"), 0, 0, 0]])
+    #           upright, centred | pole past 0.2 rad | cart past 0.5 m, upright | NaN
+    nxt = torch.tensor([[0.0, 0.05, 0, 0], [0.0, -0.25, 0, 0], [-0.55, 0.0, 0, 0], [float("nan"), 0, 0, 0]])
     ends = task.termination(torch.zeros(4, 4), torch.zeros(4, 1), nxt, torch.zeros(4, 0))
     assert ends.tolist() == [False, True, True, True]
     assert task.reward(torch.zeros(4, 4), torch.zeros(4, 1), nxt, torch.zeros(4, 0))[2] == 1  # the env's reward
