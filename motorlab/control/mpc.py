@@ -143,9 +143,29 @@ class EndProbability:
         return ends.to(next_state.dtype).mean(0)
 
 
+def end_spread(model, drift, margin: float) -> np.ndarray:
+    """The spread (T, S) of EndProbability's draws t steps ahead: the model's measured open-loop error
+    `drift`, at least `margin` x its typical one-step change of each entry x sqrt(t + 1).
+
+    Why a floor: an accurate model's error is tiny (InvertedPendulum's loop models: ~0.003 rad 15
+    steps ahead), so the draws only penalize a plan that all but crosses the end, and the planner
+    lets the pole lean to the edge of its 0.2 rad and parks the cart at the end of its range, where
+    what lies beyond the horizon is already a fall. A spread like a random walk of half a typical
+    step's change keeps plans in the middle of what the termination allows."""
+    drift = np.asarray(drift, dtype=np.float64)
+    if margin <= 0:
+        return drift
+    typical = getattr(getattr(model, "delta_norm", None), "std", None)
+    if typical is None:  # not a ForwardModel (e.g. a bare predict function): no scale to take
+        return drift
+    typical = np.asarray(typical.detach().cpu(), dtype=np.float64)[:drift.shape[1]]
+    floor = margin * typical[None] * np.sqrt(np.arange(1, len(drift) + 1))[:, None]
+    return np.maximum(drift, floor)
+
+
 def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", particles: int | None = None,
                  generator: torch.Generator | None = None, faults: PlannerFaults | None = None,
-                 termination_draws: int = 0) -> Scorer:
+                 termination_draws: int = 0, termination_margin: float = 0.0) -> Scorer:
     """Return of each action sequence under the forward model and a task (reward, termination;
     see motorlab.dynamics.rewards.Task; a None reward or a "learned" termination use the model's heads)
     or a bare torch reward (state, action, next_state, goal) -> (...,).
@@ -161,7 +181,9 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
 
     `termination_draws` > 0 scores a yes/no termination as a probability of ending (`EndProbability`,
     where the model measured its open-loop error): each step's reward counts with the chance that
-    the episode is still running.
+    the episode is still running. `termination_margin` > 0 widens the draws' spread t steps ahead to
+    at least margin x the typical one-step change of each entry (the model's delta normalizer's std)
+    x sqrt(t + 1) (`end_spread`).
     """
     if particles is None:  # one rollout per candidate, or under TS one particle per member
         particles = model.members if propagation == "ts" else 1
@@ -174,7 +196,7 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
     end_fn, end_source = getattr(task, "termination", None), getattr(task, "termination_source", "none")
     drift = getattr(model, "meta", {}).get("rollout_error")
     if end_fn is not None and termination_draws and drift is not None:
-        end_fn = EndProbability(end_fn, drift, termination_draws)
+        end_fn = EndProbability(end_fn, end_spread(model, drift, termination_margin), termination_draws)
     learned_reward = reward_fn is None
     learned_end = end_fn is None and end_source == "learned"
     deterministic = getattr(model, "deterministic", getattr(model, "plain", True))

@@ -63,6 +63,13 @@ class PlannerSettings(Settings):
                                    "judged on this many states around each predicted one, spread by the model's "
                                    "measured open-loop error, so candidates nearer the boundary score lower "
                                    "(0: on the predicted state alone, a yes/no end)")
+    # 0.5: InvertedPendulum's loop models were accurate to ~0.003 rad 15 steps ahead, so the draws spread
+    # no wider and the plans let the pole lean to ~0.19 rad and the cart park at the rail's end, where a
+    # catch was no longer possible; with this floor the failed evaluation episodes balanced (the tutorial)
+    termination_margin: float = Field(0.5, ge=0, description="With --termination-draws: the draws spread at "
+                                      "least this many typical one-step changes of each state entry (the fit "
+                                      "data's std) times sqrt(steps ahead), so plans keep a margin from the end "
+                                      "even where the model is sure (0: the model's measured error alone)")
 
     @model_validator(mode="before")
     @classmethod
@@ -89,7 +96,8 @@ class PlannerSettings(Settings):
     def scoring(self) -> dict[str, Any]:
         """How candidates are scored (build_policy's keyword arguments besides the optimizer's)."""
         return dict(reward=self.reward, termination=self.termination, propagation=self.propagation,
-                    particles=self.particles, device=self.device, termination_draws=self.termination_draws)
+                    particles=self.particles, device=self.device, termination_draws=self.termination_draws,
+                    termination_margin=self.termination_margin)
 
 
 def _env_id(env: Any) -> str | None:

@@ -38,7 +38,7 @@ SUCCESS_KEYS = ("solved", "success", "is_success")  # read in this order where a
 METADATA_KEY = "motorlab"  # the env class's metadata entry holding its facts
 PID_KEYS = ("kp", "ki", "kd")
 PLANNER_KEYS = ("horizon", "population", "iterations", "elites", "optimizer", "temperature", "propagation", "particles",
-                "noise_beta", "termination_draws")
+                "noise_beta", "termination_draws", "termination_margin")
 MODEL_KEYS = ("hidden", "nonlinearity", "epochs", "ensemble", "batch_size", "lr")  # the model-based loop's forward model
 _REWARDS = "motorlab.dynamics.rewards"  # the bundled planner rewards live there (a layer above)
 
