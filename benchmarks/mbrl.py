@@ -100,6 +100,11 @@ at the start and the end.
 --keep DIR: the loop's run folders (DIR/loop-seedN) and DIR/runs.json (every run, every curve, the
 oracle's returns); --sac-from DIR/runs.json takes SAC's runs (and the arm's oracle, which SAC's early
 stop used) from such a file, with their settings, instead of running them again.
+--resume (with --keep DIR): a loop seed whose folder DIR/loop-seedN exists continues it with the
+loop's own --resume (same settings, or it refuses); a finished one is read back in seconds, its wall
+time the sum of its rounds' recorded times. So a benchmark that does not fit one session (pusher:
+~20 min a loop seed) splits: --loop-seeds 2 --keep DIR, then --loop-seeds 5 --keep DIR --resume
+--sac-from DIR/runs.json. The JSON lists the seeds read back (loop_resumed_seeds).
 """
 
 from __future__ import annotations
@@ -335,9 +340,23 @@ def run_loop(settings: dict, out_dir: Path) -> dict:
 
     torch.set_num_threads(1)
 
-    resolved = MbrlSettings(**settings)
+    given = out_dir / "benchmark_settings.json"  # what this script gave the loop (the stopping rule included)
+    resumed = given.is_file()  # --resume: a kept folder of an earlier invocation
+    if resumed and json.loads(given.read_text()) != json.loads(json.dumps(settings)):
+        raise SystemExit(f"{out_dir} was run with other benchmark settings ({given}): choose another --keep")
+    resolved = MbrlSettings(**settings, resume=resumed)
     started = time.perf_counter()
-    summary = MBRL.run(resolved, out=out_dir, progress=False)
+    if (out_dir / "summary.json").is_file():  # finished in an earlier invocation: read back, not run again
+        from types import SimpleNamespace
+
+        from motorlab.control.mbrl import check_resumable
+
+        check_resumable(out_dir, resolved.loop_plan(), resume=True)  # the loop's own settings, unchanged
+        summary = SimpleNamespace(**json.loads((out_dir / "summary.json").read_text()))
+    else:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        given.write_text(json.dumps(settings))
+        summary = MBRL.run(resolved, out=out_dir, progress=False)
     wall = time.perf_counter() - started
 
     def num(x: str | None) -> float | None:  # an empty cell: not measured (e.g. no evaluation that round)
@@ -362,7 +381,11 @@ def run_loop(settings: dict, out_dir: Path) -> dict:
             "settings_resolved": resolved.model_dump(mode="json"),
             "collect_ms_per_step_median": median(collect_ms), "collect_envs_side_by_side": group,
             "curve": curve, "rounds": len(curve), "env_steps": int(summary.env_steps),
-            "plan_ms_per_env_median": summary.plan_ms_median, "wall_seconds": round(wall, 1),
+            "plan_ms_per_env_median": summary.plan_ms_median,
+            # a resumed run's rounds were run before (its curve keeps their times): its wall is theirs
+            "wall_seconds": round(sum(sum(row[k] or 0 for k in ("collect_seconds", "fit_seconds", "eval_seconds"))
+                                      for row in curve) if resumed else wall, 1),
+            "resumed": resumed,
             "reward_source": summary.reward_source, "termination_source": summary.termination_source,
             "reached_return": summary.reached_return}
 
@@ -474,12 +497,18 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--loop-jobs", type=int, default=2,
                         help="the loop's seeds at once, each in its own process (1: one at a time, alone)")
     parser.add_argument("--keep", type=Path, default=None, help="keep the loop's run folders and runs.json here")
+    parser.add_argument("--resume", action="store_true",
+                        help="with --keep: a loop seed whose folder is already there continues it (a finished one is "
+                             "read back, not run again), so the loop's seeds can be split over invocations that each "
+                             "fit a session (e.g. --loop-seeds 2, then 5 with --sac-from); its settings must match")
     parser.add_argument("--sac-from", type=Path, default=None,
                         help="reuse SAC's runs (and the arm's oracle) from an earlier run's runs.json")
     parser.add_argument("--quick", action="store_true", help="a smoke run: " + json.dumps({**QUICK, **QUICK_LOOP}))
     parser.add_argument("--loop-set", action="append", default=[], metavar="KEY=VALUE",
                         help="a loop setting (an MbrlSettings field), for experiments, e.g. --loop-set horizon=20")
     args = parser.parse_args(argv)
+    if args.resume and not args.keep:
+        parser.error("--resume continues the loop folders of --keep DIR: give --keep")
     if args.quick:
         for k, v in QUICK.items():
             setattr(args, k, v)
@@ -519,8 +548,9 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(f"the loop lacks MbrlSettings.{', '.join(lacking)} (a budget of env steps; a threshold "
                          "on every evaluation episode), which this benchmark needs")
     loop_seeds, sac_seeds = list(range(args.loop_seeds)), list(range(args.sac_seeds))
-    if not set(sac_seeds) <= set(loop_seeds):
-        raise SystemExit("SAC seed s uses loop seed s's threshold and evaluation seeds: --sac-seeds <= --loop-seeds")
+    if env["value"] == "oracle" and not set(sac_seeds) <= set(loop_seeds):
+        raise SystemExit("SAC seed s uses loop seed s's oracle threshold: --sac-seeds <= --loop-seeds")
+    seeds = max(len(loop_seeds), len(sac_seeds))  # thresholds per seed index, the loop's and SAC's
     budget = QUICK_LOOP["budget"] if args.quick else env["budget"]
     overrides = dict(item.split("=", 1) for item in args.loop_set)  # pydantic reads "true", "5" into their types
     oracle_settings = {k: float(v) if "." in v else int(v) for k, v in (i.split("=", 1) for i in args.oracle_set)}
@@ -555,7 +585,7 @@ def main(argv: list[str] | None = None) -> None:
         walls["ceiling"] = round(time.perf_counter() - t, 1)
     thresholds: list[float] | None = None
     if isinstance(env["value"], float):
-        thresholds = [env["value"]] * len(loop_seeds)
+        thresholds = [env["value"]] * seeds
     elif env["value"] == "oracle":
         by_seed = {o["seed"]: o for o in oracle}
         thresholds = [oracle_threshold(by_seed[s]["return_mean"]) for s in loop_seeds]
@@ -576,7 +606,7 @@ def main(argv: list[str] | None = None) -> None:
 
         if any(r["stopped_early"] for r in sac):
             raise SystemExit("the threshold is SAC's final return, but a SAC run stopped early")
-        thresholds = [iqm_with_ci([r["curve"][-1]["return_mean"] for r in sac])[0]] * len(loop_seeds)
+        thresholds = [iqm_with_ci([r["curve"][-1]["return_mean"] for r in sac])[0]] * seeds
     for r in sac:  # a reused run that stopped early at another threshold cannot say when it would meet this one
         if r["stopped_early"] and first_hit(r["curve"], env["on"], thresholds[r["seed"]]) is None:
             raise SystemExit(f"SAC seed {r['seed']} stopped early (at {r['stop']}) before meeting this threshold "
@@ -588,6 +618,10 @@ def main(argv: list[str] | None = None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
         root.mkdir(parents=True, exist_ok=True)
+        kept = [s for s in loop_seeds if (root / f"loop-seed{s}" / "loop.json").is_file()]
+        if kept and not args.resume:
+            raise SystemExit(f"{root} already holds loop seed(s) {kept}: pass --resume to continue (or read back) "
+                             "them, or choose another --keep")
         rounds = QUICK_LOOP["rounds"] if args.quick else None
         jobs = [(loop_settings(name, s, budget, rounds, thresholds[s], overrides), root / f"loop-seed{s}")
                 for s in loop_seeds]
@@ -646,6 +680,8 @@ def main(argv: list[str] | None = None) -> None:
                     "(but for the planner's own randomness)"}
     if args.sac_from:
         out["sac_from"] = str(args.sac_from)
+    if args.resume:
+        out["loop_resumed_seeds"] = [r["seed"] for r in loop if r["resumed"]]
     if args.keep:
         saved = {"env": name, "settings": {"sac_steps": args.sac_steps, "eval_every": args.eval_every,
                                            "eval_episodes": EVAL_EPISODES},
