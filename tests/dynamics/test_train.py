@@ -13,8 +13,8 @@ from torch.nn import functional as F
 from motorlab.control.mpc import CEMPlanner, EvoTorchCEM, MPPIPlanner, model_scorer
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import DEFAULT_NONLINEARITY, ForwardModel, Normalizer, load_model
-from motorlab.dynamics.steps import ModelSettings
 from motorlab.dynamics.rewards import reacher_v5
+from motorlab.dynamics.steps import ModelSettings
 from motorlab.dynamics.train import fit_model, normalized_mse, split_episodes
 from motorlab.dynamics.transitions import load_transitions
 from motorlab.errors import MotorlabError
