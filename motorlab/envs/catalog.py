@@ -283,7 +283,8 @@ _exact("Pusher-v4", planning=(_plan("observation", "pusher_v4", state_size=23),)
 # as wide as the 0.2 rad the pole may lean within a 15-step horizon. On the same model (seed 1 at
 # 1,680 env steps) TS kept 3 evaluation episodes up 102-204 steps, mean propagation 1,000 and 1,000.
 # From scratch (seeds 1, 2): TS's loop means 241 at 1,680 steps and 284 at 589; mean propagation's 941
-# at 820 and 855 at 637. Measured with SiLU members (benchmarks/results/mbrl-pendulum.json).
+# at 820 and 855 at 637 (SiLU members, exploratory runs; the full benchmark,
+# benchmarks/results/mbrl-pendulum.json, still reaches 0 of 5 seeds: docs/tutorials/model-based.md).
 _PENDULUM_PLANNER = {"propagation": "mean"}
 _exact("InvertedPendulum-v5", planner=_PENDULUM_PLANNER, planning=(
     _plan("observation", "inverted_pendulum_v5", "inverted_pendulum_rail_end", state_size=4),))
