@@ -124,6 +124,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
+# in each kept loop folder: what this script gave the loop (the stopping rule included); --resume reads it
+LOOP_GIVEN = "benchmark_settings.json"
 from provenance import cpu_model, git_state, load, versions, write_result  # noqa: E402  (benchmarks/ is the script's folder)
 
 # name -> env id, the reward the loop plans with, the threshold, the loop's budget, the target
@@ -340,7 +342,7 @@ def run_loop(settings: dict, out_dir: Path) -> dict:
 
     torch.set_num_threads(1)
 
-    given = out_dir / "benchmark_settings.json"  # what this script gave the loop (the stopping rule included)
+    given = out_dir / LOOP_GIVEN
     resumed = given.is_file()  # --resume: a kept folder of an earlier invocation
     if resumed and json.loads(given.read_text()) != json.loads(json.dumps(settings)):
         raise SystemExit(f"{out_dir} was run with other benchmark settings ({given}): choose another --keep")
@@ -618,7 +620,7 @@ def main(argv: list[str] | None = None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
         root.mkdir(parents=True, exist_ok=True)
-        kept = [s for s in loop_seeds if (root / f"loop-seed{s}" / "loop.json").is_file()]
+        kept = [s for s in loop_seeds if (root / f"loop-seed{s}" / LOOP_GIVEN).is_file()]
         if kept and not args.resume:
             raise SystemExit(f"{root} already holds loop seed(s) {kept}: pass --resume to continue (or read back) "
                              "them, or choose another --keep")
