@@ -114,6 +114,7 @@ class LoopPlan:
     rounds: int
     episodes_per_round: int
     eval_episodes: int
+    collect_steps: int | None  # collected episodes end (truncated) after this many steps (None: the time limit)
     seed: int
     parallel: int
     holdout_every: int
@@ -146,6 +147,16 @@ def env_config(plan: LoopPlan) -> EnvConfig:
     return EnvConfig.model_validate({"id": plan.env_id, **plan.env})
 
 
+def collect_config(plan: LoopPlan) -> EnvConfig:
+    """The env the loop collects from: env_config's, its episodes cut after collect_steps (Gymnasium's
+    TimeLimit, through gymnasium.make's max_episode_steps: the episode ends as truncated)."""
+    cfg = env_config(plan)
+    if plan.collect_steps is None:
+        return cfg
+    limit = min(plan.collect_steps, cfg.kwargs.get("max_episode_steps", plan.collect_steps))
+    return cfg.model_copy(update={"kwargs": {**cfg.kwargs, "max_episode_steps": limit}})
+
+
 def _planner(plan: LoopPlan, model: ForwardModel, r: int):
     env = make_env(env_config(plan), shaped=False)
     try:
@@ -164,13 +175,13 @@ def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | N
     base = plan.seed * SEED_STRIDE + first_episode
     n = plan.episodes_per_round
     if model is None:
-        data = collect_transitions(env_config(plan), n, "random", workers=1, seed=base, state=plan.state,
+        data = collect_transitions(collect_config(plan), n, "random", workers=1, seed=base, state=plan.state,
                                    progress=False)
         data.episode = data.episode + first_episode
         return data, PhaseFaults([f"round {r + 1} collect: {line}" for line in data.meta["fault_log"]],
                                  data.meta["numerical_faults"])
     policy = _planner(plan, model, r)
-    result = run_episodes(env_config(plan), policy, n, base, min(plan.parallel, n), progress=progress,
+    result = run_episodes(collect_config(plan), policy, n, base, min(plan.parallel, n), progress=progress,
                           seeds=[base + i for i in range(n)], record=True)
     faults = PhaseFaults.of(result, f"round {r + 1} collect", policy.task.reward_source, f"rounds/{r - 1:02d}/model")
     # an episode whose simulation diverged is no transition of the dynamics: it is left out

@@ -74,12 +74,12 @@ class PlannerSettings(Settings):
     @model_validator(mode="before")
     @classmethod
     def _env_defaults(cls, data: Any) -> Any:
-        """The planner (and, for the loop, model) settings the env's catalogue entry gives
-        (EnvFacts.planner and .model: a user's env may declare them too), where these are not set."""
+        """The planner (and, for the loop, model and round) settings the env's catalogue entry gives
+        (EnvFacts.planner, .model and .loop: a user's env may declare them too), where these are not set."""
         env_id = _env_id(data.get("env")) if isinstance(data, dict) else None
         if env_id is not None:
             known = facts(env_id)
-            given = {k: v for k, v in {**known.model, **known.planner}.items()
+            given = {k: v for k, v in {**known.loop, **known.model, **known.planner}.items()
                      if k in cls.model_fields and k not in data}
             if given:
                 data = {**data, **given}
@@ -302,6 +302,12 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
         None, gt=0, description="Episodes collected each round before the model is refit (default: about "
         f"{STEPS_PER_ROUND} env steps' worth at the env's time limit: 4 of Reacher's 50-step episodes, 1 of 200 "
         "steps or more)")
+    # A refit every collect_steps env steps, as mbrl-lib's freq_train_model refits mid-episode: once the
+    # pendulum balanced, one 1,000-step episode a round spent half its 2,000-step budget on one model
+    collect_steps: int | None = Field(
+        None, gt=0, description="Cut each collected episode after this many env steps (it ends as truncated), so "
+        "the model is refit at least that often even where an episode lasts long (default: the env's time limit; "
+        "evaluation episodes always run to it)")
     eval_episodes: int = Field(3, ge=0, description="MPC episodes evaluating each round's model (fixed reset seeds; "
                                "not added to the data)")
     # PETS by default: in benchmarks/mbrl.py (3 seeds, same budgets) probabilistic members with TS-inf
@@ -355,7 +361,7 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
         wrapped = {k: v for k, v in env_record(self.env).items() if k != "id"}  # its settings besides the id
         return LoopPlan(env_id=self.env.id, env=wrapped, rounds=self.rounds,
                         episodes_per_round=self.round_episodes(), eval_episodes=self.eval_episodes, seed=self.seed, parallel=self.parallel,
-                        holdout_every=holdout_every, until_return=self.until_return,
+                        collect_steps=self.collect_steps, holdout_every=holdout_every, until_return=self.until_return,
                         until_every_episode=self.until_every_episode, max_env_steps=self.max_env_steps,
                         state=layout_name(self.env, self.state), fit=fit,
                         optimizer=self.optimizer, plan=self.plan(), scoring=self.scoring())

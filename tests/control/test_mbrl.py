@@ -398,3 +398,31 @@ def test_config_toml_and_loop_json_written_before_still_load(tmp_path):
     check_resumable(tmp_path, plan, resume=True)  # the same settings: no complaint
     with pytest.raises(MotorlabError, match="history"):
         check_resumable(tmp_path, MBRL.make(env=IP, rounds=6, history=2).loop_plan(), resume=True)
+
+
+def test_collect_steps_cuts_collected_episodes_and_the_catalogue_sets_it_for_the_pendulum(tmp_path):
+    """--collect-steps ends each collected episode (truncated, not terminated) after that many steps, so
+    the model is refit that often; evaluation episodes still run to the time limit. The pendulum's
+    catalogue entry cuts at 200, and the user's setting wins."""
+    from motorlab.control.steps import MBRL
+    from motorlab.dynamics.transitions import load_transitions
+
+    assert MBRL.make(env=IP).collect_steps == 200 and MBRL.make(env=IP, collect_steps=50).collect_steps == 50
+    assert MBRL.make(env="Reacher-v5").collect_steps is None
+    cut = 6  # random pendulum episodes mostly last longer (~5-30 steps), so some are cut, some fall first
+    s = run_kind(MBRL, tmp_path / "run", rounds=2, episodes_per_round=6, eval_episodes=1, collect_steps=cut,
+                 ensemble=2, epochs=5, seed=3, **TINY_PLAN, env=IP)
+    lengths, ends = [], []
+    for r in range(2):
+        data = load_transitions(tmp_path / "run" / "rounds" / f"{r:02d}" / "transitions.npz")
+        for e in np.unique(data.episode):
+            rows = data.episode == e
+            lengths.append(int(rows.sum()))
+            ends.append((bool(data.terminated[rows][-1]), bool(data.dones[rows][-1])))  # (terminated, ended)
+    assert max(lengths) == cut and s["env_steps"] == sum(lengths) <= 2 * 6 * cut
+    assert all(ended for _, ended in ends)
+    # an episode that did not fall was cut at exactly `cut` steps; falls stay falls
+    assert all(n == cut for n, (terminated, _) in zip(lengths, ends) if not terminated)
+    assert any(not terminated for terminated, _ in ends) and any(terminated for terminated, _ in ends)
+    record = json.loads((tmp_path / "run" / "rounds" / "01" / "round.json").read_text())["record"]
+    assert record["eval_return_mean"] > cut  # the evaluation episode was not cut
