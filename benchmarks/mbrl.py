@@ -557,6 +557,7 @@ def main(argv: list[str] | None = None) -> None:
     overrides = dict(item.split("=", 1) for item in args.loop_set)  # pydantic reads "true", "5" into their types
     oracle_settings = {k: float(v) if "." in v else int(v) for k, v in (i.split("=", 1) for i in args.oracle_set)}
     started, load_start = time.perf_counter(), load()
+    git_start = git_state()  # what ran: the code the run's processes load as they start
     walls: dict[str, float | None] = {}
     say(f"{name} ({env['id']}): threshold {env['threshold']}; loop budget {budget:,} env steps, seeds {loop_seeds}; "
         f"SAC cap {args.sac_steps:,}, seeds {sac_seeds}")
@@ -658,7 +659,7 @@ def main(argv: list[str] | None = None) -> None:
         },
         "reward_check": reward_check,
         "wall_seconds": {"total": round(wall, 1), **walls}, "wall_target_seconds": WALL_TARGET_S,
-        "git": git_state(), "versions": versions(),
+        "git": git_state(at_start=git_start), "versions": versions(),
         "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "load_average_start": load_start,
                     "load_average_end": load()},
     }
