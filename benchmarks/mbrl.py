@@ -99,7 +99,8 @@ thresholds, every per-seed number, the statistics, the targets and whether each 
 at the start and the end.
 --keep DIR: the loop's run folders (DIR/loop-seedN) and DIR/runs.json (every run, every curve, the
 oracle's returns); --sac-from DIR/runs.json takes SAC's runs (and the arm's oracle, which SAC's early
-stop used) from such a file, with their settings, instead of running them again.
+stop used) from such a file, with their settings, instead of running them again. --loop-seeds 0 --keep
+DIR runs SAC alone into DIR/runs.json (no result file: there is no loop to judge).
 --resume (with --keep DIR): a loop seed whose folder DIR/loop-seedN exists continues it with the
 loop's own --resume (same settings, or it refuses); a finished one is read back in seconds, its wall
 time the sum of its rounds' recorded times. So a benchmark that does not fit one session (pusher:
@@ -511,6 +512,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.resume and not args.keep:
         parser.error("--resume continues the loop folders of --keep DIR: give --keep")
+    if args.loop_seeds == 0 and not args.keep:
+        parser.error("--loop-seeds 0 runs SAC alone, for a later --sac-from DIR/runs.json: give --keep DIR")
     if args.quick:
         for k, v in QUICK.items():
             setattr(args, k, v)
@@ -536,6 +539,18 @@ def reused(args, name: str) -> tuple[list[dict], list[dict] | None]:
     return [runs[s] for s in range(args.sac_seeds)], oracle
 
 
+def write_runs(args, name: str, sac: list[dict], oracle: list[dict] | None, loop: list[dict]) -> Path:
+    """--keep DIR/runs.json: every run, for --sac-from (written whole: temp file, then rename)."""
+    saved = {"env": name, "settings": {"sac_steps": args.sac_steps, "eval_every": args.eval_every,
+                                       "eval_episodes": EVAL_EPISODES},
+             "sac": sac, "oracle": oracle, "loop": loop}
+    path = args.keep / "runs.json"
+    partial = path.with_suffix(".json.partial")
+    partial.write_text(json.dumps(saved))
+    partial.replace(path)
+    return path
+
+
 def main(argv: list[str] | None = None) -> None:
     args = parse(argv)
     name, env = args.env, ENVS[args.env]
@@ -557,6 +572,7 @@ def main(argv: list[str] | None = None) -> None:
     overrides = dict(item.split("=", 1) for item in args.loop_set)  # pydantic reads "true", "5" into their types
     oracle_settings = {k: float(v) if "." in v else int(v) for k, v in (i.split("=", 1) for i in args.oracle_set)}
     started, load_start = time.perf_counter(), load()
+    git_start = git_state()  # what ran: the code the run's processes load as they start
     walls: dict[str, float | None] = {}
     say(f"{name} ({env['id']}): threshold {env['threshold']}; loop budget {budget:,} env steps, seeds {loop_seeds}; "
         f"SAC cap {args.sac_steps:,}, seeds {sac_seeds}")
@@ -614,6 +630,11 @@ def main(argv: list[str] | None = None) -> None:
             raise SystemExit(f"SAC seed {r['seed']} stopped early (at {r['stop']}) before meeting this threshold "
                              f"({thresholds[r['seed']]:.4g}): run SAC again (or with --sac-full)")
     say("thresholds per seed: " + ", ".join(f"{x:.4g}" for x in thresholds))
+    if not loop_seeds:  # SAC alone (pusher's 3 seeds to 30k take ~20 min): its runs for a later --sac-from
+        args.keep.mkdir(parents=True, exist_ok=True)
+        write_runs(args, name, sac, oracle, [])
+        say(f"SAC's runs in {args.keep / 'runs.json'}: run the loop with --sac-from {args.keep / 'runs.json'}")
+        return
 
     # 3. the loop, --loop-jobs seeds at a time (each plans on one torch thread)
     t = time.perf_counter()
@@ -658,7 +679,7 @@ def main(argv: list[str] | None = None) -> None:
         },
         "reward_check": reward_check,
         "wall_seconds": {"total": round(wall, 1), **walls}, "wall_target_seconds": WALL_TARGET_S,
-        "git": git_state(), "versions": versions(),
+        "git": git_state(at_start=git_start), "versions": versions(),
         "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "load_average_start": load_start,
                     "load_average_end": load()},
     }
@@ -685,11 +706,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.resume:
         out["loop_resumed_seeds"] = [r["seed"] for r in loop if r["resumed"]]
     if args.keep:
-        saved = {"env": name, "settings": {"sac_steps": args.sac_steps, "eval_every": args.eval_every,
-                                           "eval_episodes": EVAL_EPISODES},
-                 "sac": sac, "oracle": oracle, "loop": loop}
-        (args.keep / "runs.json").write_text(json.dumps(saved))
-        out["runs"] = str(args.keep / "runs.json")
+        out["runs"] = str(write_runs(args, name, sac, oracle, loop))
     out["result_file"] = str(result_path(name, args.quick).relative_to(HERE.parent))
     write_result(out, result_path(name, args.quick))
     print(json.dumps(out, indent=2))

@@ -161,6 +161,7 @@ def main() -> None:
         parser.error(f"unknown groups {sorted(unknown)}; choose from {', '.join(GROUPS)}")
 
     load_start = load()
+    git_start = git_state()  # what ran: the code the run's processes load as they start
     started = time.perf_counter()
     torch.set_num_threads(1)
     data = collect_transitions(ENV_ID, args.episodes, seed=args.seed, state="observation", workers=1,
@@ -208,7 +209,7 @@ def main() -> None:
         "groups": results, "targets": TARGETS,
         "meets_targets": all(all(r["meets"].values()) for r in results.values()),
         "wall_seconds": round(time.perf_counter() - started, 1),
-        "git": git_state(), "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "git": git_state(at_start=git_start), "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "versions": versions(),
         "cpu": {"model": cpu_model(), "cores": os.cpu_count(),
                 "load_average": {"start": load_start, "end": load()}},

@@ -96,6 +96,7 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"unknown env {unknown[0]!r}: give any of {', '.join(ENVS)}")
     overrides = {k: json.loads(v) if v[:1] in "[{" else v for k, v in (s.split("=", 1) for s in args.set)}
     load_start = load()
+    git_start = git_state()  # what ran: the code the run's processes load as they start
     per_env = {}
     for name in args.envs or list(ENVS):
         per_env[name] = latency(name, args.steps, overrides)
@@ -103,7 +104,7 @@ def main(argv: list[str] | None = None) -> None:
     out = {"benchmark": "plan_latency", "target_ms": TARGET_MS,
            "basis": "one env, one torch thread, MPCPolicy.act per control step at the loop's defaults",
            "set": overrides, "envs": per_env, "all_met": all(r["met"] for r in per_env.values()),
-           "git": git_state(), "versions": versions(),
+           "git": git_state(at_start=git_start), "versions": versions(),
            "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "load_average_start": load_start,
                        "load_average_end": load()}}
     write_result(out, HERE / "results" / "plan_latency.json")

@@ -14,15 +14,21 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 
 
-def git_state() -> dict:
+def git_state(at_start: dict | None = None) -> dict:
+    """The commit and the files changed beside it. Given `at_start` (this, read when the run began), it
+    is returned, with `changed_during_run`: a run's processes load its code as they start, so the tree
+    at its end need not be what ran (an edit or a commit made meanwhile)."""
     def git(*args: str) -> str:  # not stripped: a porcelain line starts with its status columns
         return subprocess.run(["git", *args], cwd=HERE, capture_output=True, text=True, check=True).stdout
 
     try:
         changed = [line[3:] for line in git("status", "--porcelain").splitlines() if line.strip()]
-        return {"commit": git("rev-parse", "HEAD").strip(), "dirty": bool(changed), "changed_files": changed}
+        now = {"commit": git("rev-parse", "HEAD").strip(), "dirty": bool(changed), "changed_files": changed}
     except (OSError, subprocess.CalledProcessError) as e:
-        return {"commit": None, "error": str(e)}
+        now = {"commit": None, "error": str(e)}
+    if at_start is None:
+        return now
+    return {**at_start, "changed_during_run": now != at_start, **({"at_end": now} if now != at_start else {})}
 
 
 def versions() -> dict:
