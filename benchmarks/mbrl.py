@@ -87,6 +87,9 @@ work, load 2-4; the loop's part depends on its defaults, which are being tuned):
   --ceiling 30.5 min (the ceiling 7.3, SAC 16.1, the loop 7.0: every seed stops at 1,400-2,600 steps
   but one), the arm 19.6 min (oracle 2.3, SAC 6.1, the loop 11.1). The loop plans ~35% faster with
   SiLU layers than with tanh + LayerNorm (Reacher: 15-20 ms per env in the evaluation's batch of 10).
+  The pendulum with its episodes cut at 200 steps (2026-11-28, SAC reused): 58.6 min, the machine
+  shared with single-threaded oracle runs for most of it; loop seeds 17-33 min each (a seed that
+  balances pays 10 x 1,000 evaluation steps a round, ~2-4 min). Over the 40 min target.
 Full size = the defaults (5 loop seeds, 3 SAC seeds, the budgets above); e.g.
     .venv/bin/python benchmarks/mbrl.py reacher --keep runs/bench-reacher
 --quick: a smoke run (1 loop seed, 1 SAC seed to 2k steps evaluated every 500, the loop's budget 300
