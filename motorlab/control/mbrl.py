@@ -41,7 +41,7 @@ from motorlab.dynamics.model import MODEL_JSON, ForwardModel, load_model
 from motorlab.dynamics.state import env_layout
 from motorlab.dynamics.train import evaluate_rows, fit_model
 from motorlab.dynamics.transitions import TRANSITIONS, Transitions, concatenate, load_transitions
-from motorlab.envs import EnvConfig, make_env
+from motorlab.envs import EnvConfig, env_record, make_env
 from motorlab.errors import MotorlabError
 from motorlab.runs import MetricsWriter, read_json, write_json
 
@@ -178,6 +178,8 @@ def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | N
         data = collect_transitions(collect_config(plan), n, "random", workers=1, seed=base, state=plan.state,
                                    progress=False)
         data.episode = data.episode + first_episode
+        # the cut is how the loop collects, not the env the model learns: models and plans record the env
+        data.meta["env"] = env_record(env_config(plan))
         return data, PhaseFaults([f"round {r + 1} collect: {line}" for line in data.meta["fault_log"]],
                                  data.meta["numerical_faults"])
     policy = _planner(plan, model, r)

@@ -426,3 +426,5 @@ def test_collect_steps_cuts_collected_episodes_and_the_catalogue_sets_it_for_the
     assert any(not terminated for terminated, _ in ends) and any(terminated for terminated, _ in ends)
     record = json.loads((tmp_path / "run" / "rounds" / "01" / "round.json").read_text())["record"]
     assert record["eval_return_mean"] > cut  # the evaluation episode was not cut
+    # the cut is the loop's way of collecting, not the env: the model records the env as given
+    assert json.loads((tmp_path / "run" / "model" / "model.json").read_text())["env"] == {"id": IP}
