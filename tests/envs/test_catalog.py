@@ -97,17 +97,18 @@ def test_register_env_exact_and_pattern():
 def test_the_loop_takes_an_envs_model_and_planner_defaults_and_the_user_overrides_them():
     from motorlab.control.steps import MbrlSettings
 
-    register_env("Pendulum-v1", model={"hidden": [32, 32, 32], "epochs": 7}, planner={"horizon": 9})
+    register_env("Pendulum-v1", model={"hidden": [32, 32, 32], "epochs": 7}, planner={"horizon": 9},
+                 loop={"collect_steps": 50})
     plain = MbrlSettings(env="Pendulum-v1")
-    assert (plain.hidden, plain.epochs, plain.horizon) == ([32, 32, 32], 7, 9)
-    given = MbrlSettings(env="Pendulum-v1", hidden=[16], horizon=3)
-    assert (given.hidden, given.epochs, given.horizon) == ([16], 7, 3)
+    assert (plain.hidden, plain.epochs, plain.horizon, plain.collect_steps) == ([32, 32, 32], 7, 9, 50)
+    given = MbrlSettings(env="Pendulum-v1", hidden=[16], horizon=3, collect_steps=20)
+    assert (given.hidden, given.epochs, given.horizon, given.collect_steps) == ([16], 7, 3, 20)
 
 
 @pytest.mark.parametrize("facts_, fragment", [
     ({"fall": True}, "unknown env fact 'fall'"), ({"success_mode": "last"}, "any or final"),
     ({"pid_gains": {"kx": [1]}}, "kp, ki and kd"), ({"planner": {"horizn": 3}}, "did you mean horizon"),
-    ({"model": {"hiden": [8]}}, "did you mean hidden"),
+    ({"model": {"hiden": [8]}}, "did you mean hidden"), ({"loop": {"collect_step": 8}}, "did you mean collect_steps"),
     ({"max_return": "best"}, "time_limit"),
 ])
 def test_register_env_refuses_wrong_facts_in_one_line(facts_, fragment):
