@@ -548,9 +548,7 @@ def write_runs(args, name: str, sac: list[dict], oracle: list[dict] | None, loop
                                        "eval_episodes": EVAL_EPISODES},
              "sac": sac, "oracle": oracle, "loop": loop}
     path = args.keep / "runs.json"
-    partial = path.with_suffix(".json.partial")
-    partial.write_text(json.dumps(saved))
-    partial.replace(path)
+    write_result(saved, path)
     return path
 
 
@@ -634,7 +632,6 @@ def main(argv: list[str] | None = None) -> None:
                              f"({thresholds[r['seed']]:.4g}): run SAC again (or with --sac-full)")
     say("thresholds per seed: " + ", ".join(f"{x:.4g}" for x in thresholds))
     if not loop_seeds:  # SAC alone (pusher's 3 seeds to 30k take ~20 min): its runs for a later --sac-from
-        args.keep.mkdir(parents=True, exist_ok=True)
         write_runs(args, name, sac, oracle, [])
         say(f"SAC's runs in {args.keep / 'runs.json'}: run the loop with --sac-from {args.keep / 'runs.json'}")
         return
