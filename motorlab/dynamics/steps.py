@@ -141,6 +141,9 @@ class ModelSettings(Settings):
     batch_size: int = Field(2000, gt=0, description="Rows per gradient step")
     valid_fraction: float = Field(0.1, ge=0, lt=1, description="Share of episodes held out for valid_mse")
     patience: int | None = Field(None, gt=0, description="Early stopping: epochs without a better valid_mse")
+    keep_weights: Literal["best", "last"] = Field(
+        "best", description="The weights the fit keeps: best (the epoch with the lowest valid_mse) or last (the "
+        "final epoch's; valid_mse is still reported)")
     device: str = Field("auto", description="Where the model trains (and plans): auto (a GPU where torch sees "
                         "one, else the CPU), cpu, cuda, cuda:N")
 
@@ -161,6 +164,7 @@ class ModelSettings(Settings):
         return dict(epochs=self.epochs, hidden=tuple(self.hidden), nonlinearity=self.nonlinearity,
                     ensemble=self.ensemble, lr=self.lr,
                     batch_size=self.batch_size, valid_fraction=self.valid_fraction, patience=self.patience,
+                    keep_weights=self.keep_weights,
                     probabilistic=self.probabilistic, heads=self.heads(), device=self.device, checked=True)
 
 

@@ -86,6 +86,9 @@ def normalized_mse(model: ForwardModel, x: torch.Tensor, y: torch.Tensor, batch:
                          batch)["valid_mse"]
 
 
+KEEP_WEIGHTS = ("best", "last")
+
+
 def check_settings(epochs: int, hidden: tuple[int, ...], ensemble: int, lr: float, batch_size: int,
                    valid_fraction: float, patience: int | None) -> None:
     """Raise MotorlabError for settings fit_model cannot use (before any file is touched)."""
@@ -106,7 +109,8 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
               progress: bool = True, checked: bool = False, probabilistic: bool = False,
               heads: tuple[str, ...] = (), init: ForwardModel | None = None,
               valid_episodes: np.ndarray | None = None, device: str = "cpu",
-              nonlinearity: str = DEFAULT_NONLINEARITY) -> tuple[ForwardModel, dict[str, Any]]:
+              nonlinearity: str = DEFAULT_NONLINEARITY,
+              keep_weights: str = "best") -> tuple[ForwardModel, dict[str, Any]]:
     """Train a normalized-delta forward model.
 
     Args:
@@ -128,6 +132,8 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
         device: where training runs ("cpu", "cuda", "auto").
         nonlinearity: the hidden layers' ("silu", the default, as `dynamics fit`'s; "tanh": Tanh + LayerNorm;
             see motorlab.dynamics.model).
+        keep_weights: "best": the epoch's with the lowest valid_mse (where there are held-out rows);
+            "last": the final epoch's (valid_mse is still measured and reported).
 
     Returns:
         The model (best weights when validating, on the CPU) and its metrics.
@@ -136,6 +142,8 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
 
     if not checked:
         check_settings(epochs, hidden, ensemble, lr, batch_size, valid_fraction, patience)
+    if keep_weights not in KEEP_WEIGHTS:
+        raise MotorlabError(f"keep_weights {keep_weights!r}: use {' or '.join(KEEP_WEIGHTS)}.")
     if threads:
         torch.set_num_threads(threads)
     torch.manual_seed(seed)
@@ -212,7 +220,8 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
                         writer.add_scalar(f"dynamics/{k}", v, epoch)
             bar.update(task, advance=1, valid=f"{valid_mse:.2e}")
             if len(x_valid) and valid_mse < best:
-                best, best_state, since_best = valid_mse, copy.deepcopy(model.state_dict()), 0
+                best, since_best = valid_mse, 0
+                best_state = copy.deepcopy(model.state_dict()) if keep_weights == "best" else None
             else:
                 since_best += 1
             if patience is not None and since_best >= patience:
@@ -232,10 +241,11 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
     if drift is not None:
         model.meta["rollout_error"] = np.round(drift, 6).tolist()
     best_row = min(history, key=lambda r: r["valid_mse"]) if len(x_valid) else history[-1]
-    result = {"valid_mse": best if len(x_valid) else None, "train_mse": history[-1]["train_mse"],
-              **{k: best_row[k] for k in ("valid_nll", "valid_reward_mse", "valid_termination_accuracy")
-                 if k in best_row},
-              "epochs_run": len(history), "best_epoch": best_row["epoch"],
+    kept_row = best_row if keep_weights == "best" else history[-1]  # the held-out numbers of the weights kept
+    result = {"valid_mse": kept_row["valid_mse"] if len(x_valid) else None, "train_mse": history[-1]["train_mse"],
+              **{k: kept_row[k] for k in ("valid_nll", "valid_reward_mse", "valid_termination_accuracy")
+                 if k in kept_row},
+              "epochs_run": len(history), "best_epoch": best_row["epoch"], "kept_epoch": kept_row["epoch"],
               "train_rows": int(len(x_train)), "valid_rows": int(len(x_valid)), "train_seconds": seconds,
               "history": history}
     return model, result

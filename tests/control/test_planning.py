@@ -114,14 +114,15 @@ def _steps_up(model, draws: int, seeds=range(10, 16), cap: int = 300, margin: fl
 def test_planning_on_the_probability_of_ending_keeps_the_pendulum_up_longer(ip_fit):
     """Same model, same seeds, same optimizer: only how a predicted fall is scored differs. With a
     yes/no end every candidate that survives the horizon scores the same, and CEM drifts among them;
-    with the draws spread only by the model's error, among all that stay clear of the end by that error."""
+    with the draws, among those that stay clear of the end by the model's error, at least half a
+    typical step's change x sqrt(t + 1) t steps ahead (the default margin, 0.5)."""
     _, model = ip_fit
-    plain, aware = _steps_up(model, 0), _steps_up(model, 16)
-    assert np.mean(aware) > 1.15 * np.mean(plain), (plain, aware)
-    # a floor of half a typical step's change under the draws' spread keeps the pole further from the end
-    # (measured: plain 68.3, draws 79.2, with the margin 130.2 steps up on average)
-    margin = _steps_up(model, 16, margin=0.5)
-    assert np.mean(margin) > 1.3 * np.mean(aware), (aware, margin)
+    plain, aware = _steps_up(model, 0), _steps_up(model, 16, margin=0.5)
+    assert np.mean(aware) > 1.5 * np.mean(plain), (plain, aware)
+    # the margin does most of it: spread by the model's (robust) error alone, the draws barely reach
+    # past a predicted path (measured: plain 68.3, draws 77.0, with the margin 130.2 steps up on average)
+    unfloored = _steps_up(model, 16)
+    assert np.mean(plain) < np.mean(unfloored) < np.mean(aware) / 1.3, (plain, unfloored, aware)
 
 
 # ---- the loop's stopping rules ----------------------------------------------------------------------
