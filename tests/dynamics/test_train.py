@@ -127,6 +127,33 @@ def test_tiny_fit_lowers_the_loss_and_saves_identically(reacher_data, tmp_path):
         load_model(tmp_path)
 
 
+def test_a_fit_keeps_the_best_epochs_weights_or_the_last():
+    """40 pendulum episodes, every 4th held out: the held-out error is lowest at epoch 24 of 30 here."""
+    data = collect_transitions("InvertedPendulum-v5", 40, seed=4, workers=1, progress=False)
+    fit = dict(epochs=30, hidden=(128, 128), batch_size=16, progress=False, valid_episodes=np.arange(0, 40, 4))
+    best, kept_best = fit_model(data, keep_weights="best", **fit)
+    last, kept_last = fit_model(data, keep_weights="last", **fit)
+    history = [r["valid_mse"] for r in kept_last["history"]]
+    assert history == [r["valid_mse"] for r in kept_best["history"]]  # the same training, only the weights kept differ
+    assert kept_best["best_epoch"] == kept_last["best_epoch"] == 1 + int(np.argmin(history)) < 30
+    assert kept_best["kept_epoch"] == kept_best["best_epoch"] and kept_best["valid_mse"] == min(history)
+    assert kept_last["kept_epoch"] == 30 and kept_last["valid_mse"] == history[-1] > min(history)
+    s, a = (torch.as_tensor(x[:50], dtype=torch.float32) for x in (data.states, data.actions))
+    assert not torch.allclose(best.predict(s, a), last.predict(s, a))
+    with pytest.raises(MotorlabError, match="keep_weights 'lowest'"):
+        fit_model(data, keep_weights="lowest", **fit)
+
+
+def test_dynamics_fit_keeps_the_best_epoch_and_the_loop_the_last():
+    from motorlab.control.steps import MbrlSettings
+    from motorlab.dynamics.steps import DynamicsFitSettings
+
+    assert DynamicsFitSettings.model_fields["keep_weights"].default == "best"
+    assert MbrlSettings.model_fields["keep_weights"].default == "last"
+    assert MbrlSettings(env="InvertedPendulum-v5").loop_plan().fit["keep_weights"] == "last"
+    assert MbrlSettings(env="InvertedPendulum-v5", keep_weights="best").loop_plan().fit["keep_weights"] == "best"
+
+
 def test_a_silu_model_fits_saves_and_loads_as_silu(reacher_data, tmp_path):
     """nonlinearity="silu" (the Python API's default, as the CLI's): SiLU hidden layers without layer norms (no layer-norm weights stored); it
     learns, and a saved model loads back with the same nonlinearity and predictions. A model.json
