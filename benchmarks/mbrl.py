@@ -621,11 +621,11 @@ def main(argv: list[str] | None = None) -> None:
     else:
         say(f"SAC's runs taken from {args.sac_from} (cap {args.sac_steps:,} env steps)")
     if thresholds is None:  # pusher: SAC's IQM over seeds of its final mean return
-        from motorlab.stats import iqm_with_ci
+        from motorlab.intervals import across_seeds
 
         if any(r["stopped_early"] for r in sac):
             raise SystemExit("the threshold is SAC's final return, but a SAC run stopped early")
-        thresholds = [iqm_with_ci([r["curve"][-1]["return_mean"] for r in sac])[0]] * seeds
+        thresholds = [across_seeds([r["curve"][-1]["return_mean"] for r in sac]).value] * seeds  # 3 seeds: the mean
     for r in sac:  # a reused run that stopped early at another threshold cannot say when it would meet this one
         if r["stopped_early"] and first_hit(r["curve"], env["on"], thresholds[r["seed"]]) is None:
             raise SystemExit(f"SAC seed {r['seed']} stopped early (at {r['stop']}) before meeting this threshold "

@@ -63,23 +63,30 @@ def seed_values(study: Path, step: str, key: str) -> list[float]:
 
 
 def arm(values: list[float]) -> dict:
-    """Per-seed values with their IQM and 95% CI (rliable, stratified bootstrap)."""
-    from motorlab.stats import iqm_with_ci
+    """Per-seed values over seeds (motorlab.intervals): the IQM from 4 seeds (else the mean), a 95%
+    stratified-bootstrap CI from 3 seeds (else none, and why)."""
+    from motorlab.intervals import across_seeds
 
-    iqm, low, high = iqm_with_ci(values)
-    return {"per_seed": [round(v, 2) for v in values], "iqm": round(iqm, 2), "ci95": [round(low, 2), round(high, 2)]}
+    summary = across_seeds(values)
+    return {"per_seed": [round(v, 2) for v in values], "statistic": summary.statistic, "value": round(summary.value, 2),
+            "ci95": [round(x, 2) for x in summary.ci] if summary.ci else None, "ci_method": summary.method}
 
 
 def ratio(a: dict, b: dict) -> float | None:
     """SAR-RL's IQM over RL-E2E's; None unless both are positive (a ratio of negative returns
     reads backwards: -45 / -8 = 5.8 for the worse arm). The difference is reported beside it."""
-    return round(a["iqm"] / b["iqm"], 3) if a["iqm"] > 0 and b["iqm"] > 0 else None
+    return round(a["value"] / b["value"], 3) if a["value"] > 0 and b["value"] > 0 else None
 
 
 def compared(a: dict, b: dict) -> dict:
-    """How SAR-RL (a) stands against RL-E2E (b): ratio, difference, and which IQM is higher."""
-    return {"ratio_sar_over_e2e_iqm": ratio(a, b), "difference_sar_minus_e2e_iqm": round(a["iqm"] - b["iqm"], 2),
-            "higher_iqm": "sar_rl" if a["iqm"] > b["iqm"] else "rl_e2e" if b["iqm"] > a["iqm"] else "tie"}
+    """How SAR-RL (a) stands against RL-E2E (b): ratio, difference, which is higher, and P(SAR-RL >
+    RL-E2E) over their seeds (rliable's probability of improvement; its interval from 3 seeds a side)."""
+    from motorlab.intervals import p_better
+
+    better = p_better(a["per_seed"], b["per_seed"])
+    return {"ratio_sar_over_e2e": ratio(a, b), "difference_sar_minus_e2e": round(a["value"] - b["value"], 2),
+            "higher": "sar_rl" if a["value"] > b["value"] else "rl_e2e" if b["value"] > a["value"] else "tie",
+            "p_sar_better": better.to_json()}
 
 
 def main() -> None:

@@ -1,7 +1,7 @@
-"""Statistics across seeds with rliable (Agarwal et al., 2021): interquartile mean (IQM) with
-95% stratified-bootstrap confidence intervals, probability of improvement between settings,
-and performance profiles. Bootstraps use a fixed random state, so the same runs give the
-same numbers.
+"""Statistics across seeds: each metric per setting (motorlab.intervals: the IQM only from 4
+seeds, a 95% stratified-bootstrap interval only from 3), the probability of improvement between
+settings, and performance profiles (rliable, Agarwal et al., 2021). Bootstraps use a fixed random
+state, so the same runs give the same numbers.
 
 Steps to a threshold across seeds (`steps_to_threshold`, `steps_ratio`): a seed that never
 reached the threshold within its budget is right-censored at that budget, and the seeds'
@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
+
+from motorlab.intervals import MIN_SEEDS_FOR_INTERVAL, across_seeds, p_better
 
 REPS = 2000  # bootstrap resamples; rliable's CIs settle well before this for a handful of seeds
 CONFIDENCE = 0.95
@@ -70,43 +72,32 @@ def _fixed_global_rng():
         np.random.set_state(state)
 
 
-def _one_run_each(values: dict[str, Any]) -> bool:
-    """Every setting has one run: its bootstrap resamples are all that run, the interval a point."""
-    return all(len(a) == 1 for v in values.values() for a in (v if isinstance(v, tuple) else (v,)))
-
-
-def _interval(values: dict[str, np.ndarray], func) -> tuple[dict, dict]:
-    from rliable import library as rly
-
-    if _one_run_each(values):  # the bootstrap's exact answer, without its 2,000 resamples
-        point = {k: np.asarray(func(*v) if isinstance(v, tuple) else func(v)) for k, v in values.items()}
-        return point, {k: np.stack([p, p]) for k, p in point.items()}
-    with _fixed_global_rng():
-        return rly.get_interval_estimates(values, func, reps=REPS, confidence_interval_size=CONFIDENCE,
-                                          random_state=np.random.RandomState(0))
-
-
-def iqm_with_ci(values: list[float]) -> tuple[float, float, float]:
-    """IQM of one setting's per-seed values and its 95% stratified-bootstrap CI (low, high)."""
-    from rliable import metrics as rm
-
-    point, ci = _interval({"seeds": np.array([[v] for v in values])},
-                          lambda x: np.array([rm.aggregate_iqm(x), rm.aggregate_mean(x)]))
-    return float(point["seeds"][0]), float(ci["seeds"][0, 0]), float(ci["seeds"][1, 0])
+def _steps_entry(runs: list[Score]) -> dict[str, Any]:
+    """Steps to success over seeds: k of n solved and the Kaplan-Meier median, each unsolved seed
+    censored at its budget (its recorded value), never counted as if it had solved there."""
+    budget = max(v for v, _ in runs)
+    result = steps_to_threshold([None if censored else int(v) for v, censored in runs],
+                                [int(v) if censored else int(budget) for v, censored in runs])
+    return {"values": [v for v, _ in runs], "censored": [c for _, c in runs], "solved": result.solved,
+            "unsolved": result.seeds - result.solved, "median": result.median, "median_above": result.median_above,
+            "text": result.text}
 
 
 def aggregate(scores: dict[str, list[dict[str, Score]]]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """IQM, mean and CI of each metric per setting; probability of improvement for each pair
-    of settings; performance profiles of returns and success rates.
+    """Each metric per setting over its seeds (motorlab.intervals): the mean, the IQM from 4 seeds,
+    a 95% interval from 3 seeds where it has a width; steps to success as k of n solved with the
+    Kaplan-Meier median (unsolved seeds censored at their budgets); the probability that one
+    setting beats another, with its interval from 3 seeds a side; performance profiles of returns
+    and success rates.
 
     Args:
         scores: setting label -> one dict of trial_scores per finished seed.
 
     Returns:
-        (flat summary keys "<setting>.<metric>_iqm" etc., details for plots and aggregate.json)
+        (flat summary keys "<setting>.<metric>_mean", "_iqm" (4+ seeds), "_mean_ci_low"/"_iqm_ci_low"
+        and "_high" (whichever statistic the interval is of), "steps_to_success_solved", "_median";
+        details for plots and aggregate.json, each entry with the words that say what it is)
     """
-    from rliable import metrics as rm
-
     flat: dict[str, Any] = {}
     details: dict[str, Any] = {"metrics": {}, "probability_of_improvement": {}, "profiles": {}}
     # a study's steps in their recipe order; within each: return, success, steps
@@ -115,26 +106,30 @@ def aggregate(scores: dict[str, list[dict[str, Score]]]) -> tuple[dict[str, Any]
     names = sorted(seen, key=lambda m: (steps.index(m.rpartition(".")[0]), list(DIRECTION).index(_base(m))))
     per_metric: dict[str, dict[str, np.ndarray]] = {}
     for metric in names:
-        values = {s: np.array([[r[metric][0]] for r in runs if metric in r]) for s, runs in scores.items()}
-        values = {s: v for s, v in values.items() if len(v)}
+        runs = {s: [r[metric] for r in rs if metric in r] for s, rs in scores.items()}
+        runs = {s: v for s, v in runs.items() if v}
+        values = {s: np.array([[v] for v, _ in rs]) for s, rs in runs.items()}
         per_metric[metric] = values
-        point, ci = _interval(values, lambda x: np.array([rm.aggregate_iqm(x), rm.aggregate_mean(x)]))
         details["metrics"][metric] = {}
-        for s, v in values.items():
-            entry = {"values": v[:, 0].tolist(), "iqm": float(point[s][0]), "mean": float(point[s][1]),
-                     "iqm_ci": [float(ci[s][0, 0]), float(ci[s][1, 0])]}
-            flat.update({f"{s}.{metric}_iqm": entry["iqm"], f"{s}.{metric}_iqm_ci_low": entry["iqm_ci"][0],
-                         f"{s}.{metric}_iqm_ci_high": entry["iqm_ci"][1], f"{s}.{metric}_mean": entry["mean"]})
+        for s, rs in runs.items():
             if _base(metric) == "steps_to_success":
-                entry["unsolved"] = sum(r[metric][1] for r in scores[s] if metric in r)
-                flat[f"{s}.{metric}_unsolved"] = entry["unsolved"]
+                entry = _steps_entry(rs)
+                flat.update({f"{s}.{metric}_solved": entry["solved"], f"{s}.{metric}_unsolved": entry["unsolved"],
+                             f"{s}.{metric}_median": entry["median"]})
+            else:
+                summary = across_seeds([v for v, _ in rs])
+                key = "iqm" if summary.statistic == "IQM" else "mean"
+                entry = {**summary.to_json(), "mean": float(np.mean([v for v, _ in rs]))}
+                flat[f"{s}.{metric}_mean"] = entry["mean"]
+                if key == "iqm":
+                    flat[f"{s}.{metric}_iqm"] = summary.value
+                if summary.ci:
+                    flat[f"{s}.{metric}_{key}_ci_low"], flat[f"{s}.{metric}_{key}_ci_high"] = summary.ci
             details["metrics"][metric][s] = entry
-        sign = 1.0 if DIRECTION[_base(metric)] else -1.0  # P(A better), whichever way "better" points
         for a, b in itertools.combinations(values, 2):
-            p, pci = _interval({"pair": (sign * values[a], sign * values[b])}, rm.probability_of_improvement)
-            entry = {"a": a, "b": b, "p": float(p["pair"]), "ci": [float(x) for x in np.ravel(pci["pair"])]}
-            details["probability_of_improvement"].setdefault(metric, []).append(entry)
-            flat[f"{a}.{metric}_p_better_than[{b}]"] = entry["p"]
+            better = p_better(values[a], values[b], higher_is_better=DIRECTION[_base(metric)])
+            details["probability_of_improvement"].setdefault(metric, []).append({"a": a, "b": b, **better.to_json()})
+            flat[f"{a}.{metric}_p_better_than[{b}]"] = better.p
     for metric, values in per_metric.items():
         if _base(metric) in PROFILED and values:
             details["profiles"][metric] = _profile(values)
@@ -145,15 +140,16 @@ def aggregate(scores: dict[str, list[dict[str, Score]]]) -> tuple[dict[str, Any]
 
 def _profile(values: dict[str, np.ndarray]) -> dict[str, Any]:
     """Fraction of runs scoring above tau, for taus across the observed range (rliable's score
-    distribution), with its bootstrap band."""
+    distribution), with its bootstrap band where every setting has 3 seeds or more."""
     from rliable import library as rly
 
     every = np.concatenate([v[:, 0] for v in values.values()])
     lo, hi = float(every.min()), float(every.max())
     taus = np.linspace(lo - 1e-9, hi + 1e-9 if hi > lo else lo + 1.0, 51)
+    banded = min(len(v) for v in values.values()) >= MIN_SEEDS_FOR_INTERVAL  # else no band, as no interval
     with _fixed_global_rng():
-        point, ci = rly.create_performance_profile(values, taus, reps=1 if _one_run_each(values) else REPS)
-    if _one_run_each(values):
+        point, ci = rly.create_performance_profile(values, taus, reps=REPS if banded else 1)
+    if not banded:
         ci = {s: np.stack([p, p]) for s, p in point.items()}
     return {"tau": taus.tolist(), **{s: {"fraction": point[s].tolist(), "low": ci[s][0].tolist(),
                                          "high": ci[s][1].tolist()} for s in values}}

@@ -43,10 +43,10 @@ from motorlab.command import Command, Tracked
 from motorlab.envs import early_end_label, fold_env
 from motorlab.errors import MotorlabError
 from motorlab.faults import write_faults_log
+from motorlab.intervals import across_seeds
 from motorlab.report.results import Metric, Number, RunResults, write_run_results
 from motorlab.runs import prepare_run_dir, read_text_file, write_config, write_summary
 from motorlab.settings import Settings, Summary
-from motorlab.stats import iqm_with_ci
 
 
 @dataclass(frozen=True)
@@ -312,20 +312,31 @@ def _strings(value: Any) -> list[str]:
 
 def seeds_headline(all_scores: list[Scores]) -> dict[str, Any]:
     """The headline of a train or evaluate step run for several seeds: the mean over seeds (std
-    across seeds) and rliable's IQM of the return with its 95% bootstrap CI."""
+    across seeds), and from 4 seeds rliable's IQM of the return (below, it trims nothing: it is the
+    mean), with a 95% bootstrap CI from 3 seeds where it has a width (`iqm_keys`)."""
     means = [s.return_mean for s in all_scores]
-    iqm, low, high = iqm_with_ci(means)
-    return {
+    out = {
         "seeds": len(all_scores),
         "return_mean": statistics.fmean(means),
         "return_std": statistics.stdev(means),
         "return_min": min(s.return_min for s in all_scores),
-        "return_iqm": iqm,
-        "return_iqm_ci_low": low,
-        "return_iqm_ci_high": high,
         "success_rate": statistics.fmean(s.success_rate for s in all_scores),
         "episodes": sum(s.episodes for s in all_scores),
     }
+    return {**out, **iqm_keys("return", means)}
+
+
+def iqm_keys(name: str, values: list[float]) -> dict[str, float]:
+    """Over seeds (motorlab.intervals): from MIN_SEEDS_FOR_IQM seeds "<name>_iqm" with
+    "<name>_iqm_ci_low" and "_high"; with 3 seeds (the IQM would be the mean) "<name>_mean_ci_low"
+    and "_high", the interval of the headline's "<name>_mean"; an interval only where it has a
+    width; nothing below 3 seeds."""
+    summary = across_seeds(values)
+    statistic = "iqm" if summary.statistic == "IQM" else "mean"
+    out = {f"{name}_iqm": summary.value} if statistic == "iqm" else {}
+    if summary.ci:
+        out.update({f"{name}_{statistic}_ci_low": summary.ci[0], f"{name}_{statistic}_ci_high": summary.ci[1]})
+    return out
 
 
 # Numbers of the kinds that evaluate a policy (train, evaluate): the same labels everywhere.

@@ -182,8 +182,8 @@ class Study(Result):
         results = read_study_results(self.path) if self.findings else None
         if results is None:
             return super()._rows()
-        return [(f"{f.label} ({f.step})", f.text + (f"  IQM {f.iqm} [{f.ci}]" if f.iqm else ""))
-                for f in results.findings]
+        return [(f"{f.label} ({f.step})", f.text + (f"  {_over_seeds(f)}" if f.aggregate else "")
+                 + (f"  episodes: {f.pooled}" if f.pooled else "")) for f in results.findings]
 
     def _repr_html_(self) -> str:
         table = html.escape(self.table)
@@ -265,3 +265,8 @@ def _short(value: Any) -> str:
     if isinstance(value, float):
         return f"{value:,.4g}"
     return str(value)
+
+
+def _over_seeds(f) -> str:
+    """E.g. "IQM 61% [52%, 70%] (95% stratified-bootstrap CI over 5 seeds)"."""
+    return f"{f.aggregate}{' ' + f.ci if f.ci else ''} ({f.ci_method})"

@@ -444,10 +444,11 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
 
     def aggregate(self, summaries: list[MbrlSummary]) -> dict[str, Any]:
         """Several seeds: each headline number's mean over the seeds (None where a seed has none), the
-        final return's std across seeds and its IQM with rliable's 95% CI, the seeds' total wall time."""
+        final return's std across seeds and from 4 seeds its IQM with rliable's 95% CI, the seeds' total
+        wall time."""
         import statistics
 
-        from motorlab.stats import iqm_with_ci
+        from motorlab.stepkind import iqm_keys
 
         if len(summaries) == 1:
             return self.headline(summaries[0])
@@ -459,9 +460,7 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
         finals = [h["final_return_mean"] for h in heads]
         if None not in finals:
             out["final_return_std"] = statistics.stdev(finals)
-            if len(finals) >= 4:  # an IQM trims something only from 4 seeds; below, it is the mean above
-                out["final_return_iqm"], out["final_return_iqm_ci_low"], out["final_return_iqm_ci_high"] = \
-                    iqm_with_ci(finals)
+            out.update(iqm_keys("final_return", finals))  # the IQM from 4 seeds; an interval from 3
         out["wall_seconds"] = sum(h["wall_seconds"] for h in heads)
         return out
 

@@ -29,6 +29,7 @@ from typing import Any
 
 from motorlab.environment import describe
 from motorlab.errors import MotorlabError
+from motorlab.intervals import across_seeds
 from motorlab.report.plots import figure_caption
 from motorlab.report.results import Finding, Number, StepResults, read_run_results, read_study_results
 from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, is_complete, read_json
@@ -234,8 +235,9 @@ class _Collector:
                                      objective, summary["best_value"], seeds, summary.get("best_seed_values") or []))
         if summary.get("fresh_values"):
             findings.append(_finding(f"{objective}, the best settings on fresh seeds", "fresh", objective,
-                                     summary["fresh_iqm"], [f"seed{s}" for s in summary["fresh_seeds"]],
-                                     summary["fresh_values"], (summary["fresh_iqm_ci_low"], summary["fresh_iqm_ci_high"])))
+                                     summary.get("fresh_value", summary.get("fresh_iqm")),
+                                     [f"seed{s}" for s in summary["fresh_seeds"]],
+                                     summary["fresh_values"]))
         runs = []
         for label, folder in ((f"trial-{best}", path / "trials" / str(best)), ("fresh", path / "fresh")):
             if best is not None and folder.is_dir():
@@ -270,11 +272,17 @@ def _video_captions(path: Path, summary: dict[str, Any]) -> dict[str, str]:
             for i, (v, r) in enumerate(zip(videos, returns))}
 
 
-def _finding(label: str, step: str, key: str, iqm: float, seeds: list[str], values: list[float],
-             ci: tuple[float, float] | None = None) -> Finding:
-    """A tuning number: the IQM over seeds (with its CI where known) and each seed's value."""
-    return Finding(label=label, step=step, key=key, text=fmt(iqm), value=iqm, seeds=seeds,
-                   values=[fmt(v) for v in values], iqm=fmt(iqm), ci=f"[{fmt(ci[0])}, {fmt(ci[1])}]" if ci else "")
+def _finding(label: str, step: str, key: str, value: float, seeds: list[str], values: list[float]) -> Finding:
+    """A tuning number over seeds (the search's value, or the fresh seeds'), each seed's value, and
+    what the seeds give together (motorlab.intervals: an interval only from 3 seeds on)."""
+    together = {}
+    if len(values) > 1:
+        summary = across_seeds(values)
+        together = {"aggregate": f"{summary.statistic} {fmt(summary.value)}",
+                    "ci": f"[{fmt(summary.ci[0])}, {fmt(summary.ci[1])}]" if summary.ci else None,
+                    "ci_method": summary.method}
+    return Finding(label=label, step=step, key=key, text=fmt(value), value=value, seeds=seeds,
+                   values=[fmt(v) for v in values], **together)
 
 
 def _parsed(text: str) -> Any:

@@ -2,7 +2,7 @@
 
 A step kind names its headline numbers as `Metric`s (summary key, label, unit). A finished run
 gets `results.json` beside its summary.json: those numbers formatted (`Number`). A study's
-`results.json` holds its findings (the few numbers the recipe is about, with seeds, IQM and CI)
+`results.json` holds its findings (the few numbers the recipe is about, with seeds and intervals)
 and each step's numbers. `table.txt` and `report.html` show these; summary.json keeps every
 number for programs.
 
@@ -148,7 +148,10 @@ class StepResults:
 @dataclass(frozen=True)
 class Finding:
     """One number a study is about: the value (a single run's, or the mean over seeds) and, with
-    several seeds, each seed's value and rliable's IQM with its 95% bootstrap CI."""
+    several seeds, each seed's value and what they give together (motorlab.intervals): "IQM 61%"
+    (4 seeds or more) or "mean 20%", a 95% interval only where the seeds allow one (3 or more), and
+    `ci_method`, what the interval is or why there is none ("n = 2: too few seeds for an interval").
+    A success rate also gets `pooled`: its episodes pooled over the seeds, with a Wilson interval."""
 
     label: str
     step: str
@@ -157,8 +160,17 @@ class Finding:
     value: Any
     seeds: list[str] = field(default_factory=list)
     values: list[Any] = field(default_factory=list)
-    iqm: str | None = None
+    aggregate: str | None = None
     ci: str | None = None
+    ci_method: str | None = None
+    # a success rate: every episode of every seed pooled, with its Wilson interval (and what it is)
+    pooled: str | None = None
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> Finding:
+        """A results.json finding. An older file's "iqm" and "ci" are dropped: they were written
+        for any number of seeds, so from 1-2 seeds their "CI" was the seeds' own range or a point."""
+        return cls(**{k: v for k, v in data.items() if k not in ("iqm", "ci") or "ci_method" in data})
 
     @property
     def spread_text(self) -> str:
@@ -205,7 +217,7 @@ def read_run_results(run_dir: Path) -> RunResults | None:
 def read_study_results(study_dir: Path) -> StudyResults | None:
     data = _load(Path(study_dir) / RESULTS)
     try:
-        return StudyResults([Finding(**f) for f in data["findings"]],
+        return StudyResults([Finding.from_json(f) for f in data["findings"]],
                             [StepResults(**{**s, "numbers": _numbers(s["numbers"])}) for s in data["steps"]]
                             ) if data else None
     except (KeyError, TypeError):

@@ -171,7 +171,9 @@ class CompareKind(StepKind[CompareSettings, Summary]):
                   "final_episode_success": ("final training success (last 100)", "percent"),
                   "final_eval_return_mean": ("final evaluation return (curve)", "return"),
                   "final_return_iqm": ("evaluation return IQM", "return"),
-                  "success_rate_iqm": ("evaluation success IQM", "percent")}
+                  "final_return_mean": ("evaluation return, mean over seeds", "return"),
+                  "success_rate_iqm": ("evaluation success IQM", "percent"),
+                  "success_rate_mean": ("evaluation success, mean over seeds", "percent")}
         if rest in labels:
             return Metric(key, f"{group}: {labels[rest][0]}", labels[rest][1])
         return super().metric(key)

@@ -30,9 +30,12 @@ def interval_estimates(metrics: dict[str, dict[str, Any]], path: Path, title: st
             for y, s in enumerate(settings):
                 e = metrics[metric][s]
                 color = f"C{y % 10}"
-                ax.plot(e["iqm_ci"], [y, y], lw=8, alpha=0.35, color=color, solid_capstyle="butt")
+                if e.get("ci"):  # an interval only from 3 seeds (motorlab.intervals)
+                    ax.plot(e["ci"], [y, y], lw=8, alpha=0.35, color=color, solid_capstyle="butt")
                 ax.plot(e["values"], [y] * len(e["values"]), "|", ms=12, color=color, alpha=0.8)
-                ax.plot(e["iqm"], y, "o", color=color, ms=6)
+                centre = e.get("value", e.get("median"))  # steps to success: the Kaplan-Meier median
+                if centre is not None:
+                    ax.plot(centre, y, "o", color=color, ms=6)
             ax.set_yticks(range(len(settings)), settings, fontsize=8)
             ax.set_ylim(-0.6, len(settings) - 0.4)
             ax.invert_yaxis()
@@ -42,9 +45,11 @@ def interval_estimates(metrics: dict[str, dict[str, Any]], path: Path, title: st
             elif metric.endswith("success_rate"):
                 ax.set_xlim(-0.02, 1.02)
                 ax.xaxis.set_major_formatter(PercentFormatter(1.0))
-        fig.suptitle(f"{title}: IQM (dot) with 95% bootstrap CI (bar); ticks are single seeds", fontsize=10)
-        return save_figure(fig, path, "Each setting's interquartile mean over seeds (dot) with its 95% bootstrap "
-                                      "confidence interval (bar); ticks are single seeds.")
+        fig.suptitle(f"{title}: IQM or mean (dot), 95% bootstrap CI (bar); ticks are single seeds", fontsize=10)
+        return save_figure(fig, path, "Each setting over its seeds (dot): the interquartile mean from 4 seeds, "
+                                      "else the mean; steps to success: the Kaplan-Meier median, unsolved seeds "
+                                      "censored at their budgets. Bar: the 95% bootstrap confidence interval, "
+                                      "drawn only from 3 seeds. Ticks are single seeds.")
 
 
 def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) -> Path | None:
@@ -53,7 +58,8 @@ def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) 
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(7, 0.45 * len(rows) + 1.6))
         for y, (_, p) in enumerate(rows):
-            ax.plot(p["ci"], [y, y], lw=8, alpha=0.35, color="C0", solid_capstyle="butt")
+            if p.get("ci"):  # from 3 seeds a side
+                ax.plot(p["ci"], [y, y], lw=8, alpha=0.35, color="C0", solid_capstyle="butt")
             ax.plot(p["p"], y, "o", color="C0")
         ax.axvline(0.5, color="gray", ls="--", lw=1)
         ax.set_yticks(range(len(rows)), [r for r, _ in rows], fontsize=8)
@@ -62,7 +68,8 @@ def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) 
         ax.set_xlabel("probability that A is better than B (fewer steps for steps to success)")
         ax.set_title(f"{title}: probability of improvement", fontsize=10)
         return save_figure(fig, path, "Probability that setting A beats setting B on a random pair of seeds, with "
-                                      "its 95% confidence interval; 0.5 is a coin flip.")
+                                      "its 95% confidence interval where both have 3 seeds or more; 0.5 is a coin "
+                                      "flip.")
 
 
 def performance_profiles(profiles: dict[str, dict[str, Any]], path: Path, title: str) -> Path | None:

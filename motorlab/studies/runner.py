@@ -2,8 +2,8 @@
 
     <study>/<step>/            one folder per step (steps run for several seeds: <step>/seed<k>/)
     <study>/table.txt          the printed table: each step's numbers, labelled, in their units
-    <study>/results.json       the findings (the numbers the recipe is about, with seeds, IQM and
-                               CI) and each step's numbers as shown (motorlab.report.results)
+    <study>/results.json       the findings (the numbers the recipe is about, with seeds and
+                               intervals) and each step's numbers as shown (motorlab.report.results)
     <study>/summary.json       "<step>.<key>" headline numbers, for programs
     <study>/plots/*.png        returns and steps-to-success of the steps that have them
     <study>/report.html        all of it in one self-contained page (motorlab report)
@@ -26,6 +26,7 @@ import os
 import threading
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +34,7 @@ from rich.console import Console
 
 from motorlab import jobs, launcher, trackers
 from motorlab.errors import MotorlabError
+from motorlab.intervals import PooledRate, across_seeds, pooled_rate
 from motorlab.launcher import trial
 from motorlab.recipes import FindingSpec, Recipe, Step, refs_in
 from motorlab.report.html import build_report
@@ -63,7 +65,7 @@ from motorlab.runs import (
     write_toml,
 )
 from motorlab.settings import Settings, Summary
-from motorlab.stats import iqm_with_ci
+from motorlab.stats import steps_to_threshold
 from motorlab.studies.schedule import Overlaps, run_overlapped
 
 STEP_FILE = "recipe_step.toml"  # what the study asked of a step, for resuming
@@ -396,13 +398,43 @@ def _findings(recipe: Recipe, results: dict[str, _Outcome], console: Console) ->
         if len(per_seed) > 1:
             seeds, values = [s for s, _ in per_seed], [v for _, v in per_seed]
             shown = [metric.text(v, {}) if v is not None else "not reached" for v in values]
-            iqm = ci = None
-            if all(isinstance(v, (int, float)) for v in values):
-                point, low, high = iqm_with_ci(values)
-                iqm, ci = metric.text(point, {}), metric.interval(low, high)
-            finding = dataclasses.replace(finding, seeds=seeds, values=shown, iqm=iqm, ci=ci)
+            together: dict[str, Any] = {}
+            if spec.key == "steps_to_success":
+                together = _censored_steps(step, outcome)
+            elif all(isinstance(v, (int, float)) for v in values):
+                summary = across_seeds(values)  # the IQM from 4 seeds, an interval from 3
+                together = {"aggregate": f"{summary.statistic} {metric.text(summary.value, {})}",
+                            "ci": metric.interval(*summary.ci) if summary.ci else None, "ci_method": summary.method}
+            finding = dataclasses.replace(finding, seeds=seeds, values=shown, **together)
+        if pooled := _pooled_success(step, outcome, spec.key):
+            finding = dataclasses.replace(finding, pooled=pooled.text(partial(metric.text, values={})))
         findings.append(finding)
     return findings
+
+
+def _censored_steps(step: Step, outcome: _Outcome) -> dict[str, Any]:
+    """Steps to success over seeds: "k of n seeds" and the Kaplan-Meier median, a seed that never
+    solved censored at the steps it was allowed (its run's timesteps), never counted as a value."""
+    heads = [step.kind.headline(s) for _, s in outcome.runs]
+    steps = [h.get("steps_to_success") for h in heads]
+    if not all(isinstance(h.get("timesteps"), int) and h["timesteps"] > 0 for h in heads):
+        return {}
+    reached = steps_to_threshold(steps, [max(h["timesteps"], s or 0) for h, s in zip(heads, steps)])
+    return {"aggregate": reached.text, "ci": None, "ci_method": "unsolved seeds censored at their budgets"}
+
+
+def _pooled_success(step: Step, outcome: _Outcome, key: str) -> PooledRate | None:
+    """A success rate's episodes pooled over the step's runs, with their Wilson interval: where
+    each run's headline says how many episodes its rate is of (None otherwise)."""
+    if key != "success_rate":
+        return None
+    counts = [(h.get("success_rate"), h.get("episodes")) for h in (step.kind.headline(s) for _, s in outcome.runs)]
+    if not counts or not all(isinstance(r, (int, float)) and isinstance(n, int) and n > 0 for r, n in counts):
+        return None
+    successes = [round(r * n) for r, n in counts]
+    if any(abs(k - r * n) > 1e-6 * n for k, (r, n) in zip(successes, counts)):
+        return None  # not a share of whole episodes (e.g. a rate averaged some other way)
+    return pooled_rate(successes, [n for _, n in counts])
 
 
 def _figures(recipe: Recipe, results: dict[str, dict[str, Any]], study_dir: Path) -> None:

@@ -4,7 +4,7 @@ statistics across seeds.
     <sweep>/<setting>/seed<k>/   one run folder per trial (a study folder when TARGET is a recipe)
     <sweep>/logs/<setting>-seed<k>.log   each trial's output
     <sweep>/recipes/             the recipe variant each trial ran (recipe targets)
-    <sweep>/summary.json         "<setting>.<metric>_iqm", "_iqm_ci_low", "_iqm_ci_high", "_mean", ...
+    <sweep>/summary.json         "<setting>.<metric>_mean", "_iqm" (4+ seeds), "_iqm_ci_low"/"_mean_ci_low", ...
     <sweep>/aggregate.json       per-seed values, probability of improvement, performance profiles
     <sweep>/plots/*.png, table.txt, report.html
     <sweep>/ray/                 Ray Tune's own records (ray backend)
@@ -153,7 +153,8 @@ def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[st
     flat, details = aggregate(scores) if scores else ({}, {"metrics": {}, "probability_of_improvement": {},
                                                             "profiles": {}})
     summary = {"sweep": target, "description": f"{len(labels)} settings × {len(trials) // max(1, len(labels))} "
-               "seeds; IQM and 95% stratified-bootstrap CIs (rliable)", "steps": labels, "trials": len(trials),
+               "seeds; IQM from 4 seeds (else the mean), 95% stratified-bootstrap CIs from 3 (rliable)",
+               "steps": labels, "trials": len(trials),
                "finished": len(done), "failed": len(trials) - len(done), "wall_seconds": round(wall, 2), **flat}
     write_json(sweep_dir / "aggregate.json", {"runs": {s: [t["run_dir"] for t in done if t["setting"] == s]
                                                        for s in labels}, **details})
@@ -174,7 +175,7 @@ def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[st
     return summary
 
 
-COLUMNS = ["setting", "metric", "seeds", "IQM", "95% CI", "mean", "per seed"]
+COLUMNS = ["setting", "metric", "seeds", "over seeds", "95% CI", "mean", "per seed"]
 
 
 def _rows(metrics: dict[str, dict[str, Any]]) -> list[list[str]]:
@@ -187,7 +188,12 @@ def _rows(metrics: dict[str, dict[str, Any]]) -> list[list[str]]:
     for metric, per_setting in metrics.items():
         for s, e in per_setting.items():
             seeds = str(len(e["values"])) + (f" ({e['unsolved']} unsolved)" if e.get("unsolved") else "")
-            rows.append([s, metric, seeds, f(e["iqm"], metric), f"[{f(e['iqm_ci'][0], metric)}, "
-                         f"{f(e['iqm_ci'][1], metric)}]", f(e["mean"], metric),
-                         " ".join(f(v, metric) for v in e["values"])])
+            per_seed = " ".join(f(v, metric) + (" (censored)" if c else "")
+                                for v, c in zip(e["values"], e.get("censored", [False] * len(e["values"]))))
+            if "statistic" not in e:  # steps to success: k of n, the censored median; no mean of budgets
+                rows.append([s, metric, seeds, e["text"], "", "", per_seed])
+                continue
+            ci = f"[{f(e['ci'][0], metric)}, {f(e['ci'][1], metric)}]" if e["ci"] else e["method"]
+            rows.append([s, metric, seeds, f"{e['statistic']} {f(e['value'], metric)}", ci, f(e["mean"], metric),
+                         per_seed])
     return rows

@@ -15,6 +15,7 @@ import optuna
 import tomli_w
 from optuna.trial import FrozenTrial, TrialState
 
+from motorlab.intervals import SeedsSummary
 from motorlab.rl.config import TrainConfig
 from motorlab.runs import atomic_write_text, write_summary
 from motorlab.tuning.space import Dist
@@ -26,8 +27,13 @@ class Fresh:
 
     seeds: list[int]
     values: list[float]
-    iqm: float
-    ci: tuple[float, float]
+    summary: SeedsSummary  # the IQM from 4 seeds (else the mean), an interval from 3
+
+    def to_summary(self) -> dict[str, Any]:
+        """summary.json's fresh_* keys (fresh_ci None below 3 seeds; fresh_ci_method says why)."""
+        s = self.summary
+        return {"fresh_seeds": self.seeds, "fresh_values": self.values, "fresh_value": s.value,
+                "fresh_statistic": s.statistic, "fresh_ci": list(s.ci) if s.ci else None, "fresh_ci_method": s.method}
 
 
 def shown_trials(study: optuna.Study) -> list[FrozenTrial]:
@@ -67,7 +73,7 @@ def table_rows(trials: list[FrozenTrial], space: dict[str, Dist], best: FrozenTr
                      f"{t.user_attrs.get('env_steps', 0):,}"])
     if best is not None and fresh is not None:
         rows.append([f"{best.number} on fresh seeds", "complete", f"seeds {fresh.seeds[0]}..{fresh.seeds[-1]}",
-                     f"{number(fresh.iqm)} [{number(fresh.ci[0])}, {number(fresh.ci[1])}]",
+                     fresh.summary.text(number),
                      " ".join(map(number, fresh.values)), ""])
     return rows
 

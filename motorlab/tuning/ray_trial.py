@@ -25,8 +25,8 @@ from typing import Any
 from ray import tune
 
 from motorlab.errors import MotorlabError
+from motorlab.intervals import across_seeds
 from motorlab.runs import SUMMARY, read_json
-from motorlab.stats import iqm_with_ci
 from motorlab.tuning.objective import Objective, Reporter, budget_of, steps_run, trial_horizon
 from motorlab.tuning.trials import SeedRuns, run_dirs
 
@@ -95,7 +95,7 @@ class SeedTrial(tune.Trainable):
             per_seed = [self.objective.value(read_json(d / SUMMARY)) for d in self.dirs]
         except MotorlabError as e:
             return self._failed(str(e), fatal=True)  # no such number: every trial would fail alike
-        value = iqm_with_ci(per_seed)[0]
+        value = across_seeds(per_seed).value  # the IQM from 4 seeds, else the mean
         final = {"value": value, "seed_values": per_seed}
         numbers = [*self.reporter.reached(), *self.reporter.filled(trial_horizon(self.dirs))]
         return [*(self._result(step, v, **final) for step, v in numbers),

@@ -35,8 +35,8 @@ from optuna.trial import FrozenTrial, TrialState
 from sqlalchemy.exc import IntegrityError, OperationalError
 
 from motorlab.errors import MotorlabError, mask_url, redact
+from motorlab.intervals import across_seeds
 from motorlab.runs import SUMMARY, read_json
-from motorlab.stats import iqm_with_ci
 from motorlab.tuning.objective import Objective, Reporter, budget_of, steps_run, trial_horizon
 from motorlab.tuning.outputs import number
 from motorlab.tuning.space import Dist
@@ -270,7 +270,7 @@ class Search:
         self.counters.failures_in_a_row = 0
         per_seed = [self.spec.objective.value(read_json(d / SUMMARY)) for d in dirs]
         _report(trial, reporter.filled(trial_horizon(dirs)))
-        value = iqm_with_ci(per_seed)[0]
+        value = across_seeds(per_seed).value  # the IQM from 4 seeds, else the mean
         trial.set_user_attr("seed_values", per_seed)
         trial.set_user_attr("env_steps", sum(steps_run(d) for d in dirs))
         self.counters.done.append(trial.number)

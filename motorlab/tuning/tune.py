@@ -24,6 +24,7 @@ from rich.console import Console
 
 from motorlab import launcher, trackers
 from motorlab.errors import MotorlabError, mask_url
+from motorlab.intervals import across_seeds
 from motorlab.launcher import is_finished
 from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
@@ -37,7 +38,6 @@ from motorlab.runs import (
     run_path,
     write_config,
 )
-from motorlab.stats import iqm_with_ci
 from motorlab.sweeps.sweep import MAX_SEEDS
 from motorlab.tuning import outputs
 from motorlab.tuning.objective import Objective, steps_run
@@ -148,8 +148,7 @@ def fresh_evaluation(spec: TuneSpec, planner: Planner, settings: dict[str, str],
             if failed := group.failures():
                 raise MotorlabError(f"the re-evaluation on fresh seeds failed: {failed[0]}")
     values = [spec.objective.value(read_json(Path(t["run_dir"]) / SUMMARY)) for t in runs]
-    iqm, low, high = iqm_with_ci(values)
-    return outputs.Fresh(seeds, values, iqm, (low, high))
+    return outputs.Fresh(seeds, values, across_seeds(values))
 
 
 
@@ -188,8 +187,7 @@ def write_results(spec: TuneSpec, study: optuna.Study, planner: Planner, console
         "env_steps_saved_by_pruning": saved, "wall_seconds": round(wall, 2),
     }
     if fresh is not None:
-        summary.update({"fresh_seeds": fresh.seeds, "fresh_values": fresh.values, "fresh_iqm": fresh.iqm,
-                        "fresh_iqm_ci_low": fresh.ci[0], "fresh_iqm_ci_high": fresh.ci[1]})
+        summary.update(fresh.to_summary())
     outputs.write_tune_summary(spec.out, summary)
     build_report([spec.out], spec.out / "report.html")
     summary["tune_dir"] = str(spec.out)

@@ -155,7 +155,8 @@ def test_study_report_opens_cleanly_and_shows_the_summary_numbers(study, browser
     # the pendulum has no success flag: a success is the maximum return, and the label says so
     assert labels["success (return ≥ 1000)"] == "100%" and labels["falls"] == "0/2"
     assert labels["return"] == "1,000.0 ± 0.0"
-    assert {label for label, *_ in numbers["ppo"]} >= {"return", "return IQM", "success (return ≥ 1000)", "seeds",
+    assert "return IQM" not in {label for label, *_ in numbers["ppo"]}  # 2 seeds: an IQM would trim nothing
+    assert {label for label, *_ in numbers["ppo"]} >= {"return", "success (return ≥ 1000)", "seeds",
                                                       "trained for (all seeds)"}
 
     runs = {"pid": study / "pid", "ppo/seed0": study / "ppo" / "seed0", "ppo/seed1": study / "ppo" / "seed1",
@@ -176,8 +177,14 @@ def test_study_report_opens_with_its_findings(study, browser):
     assert [(step, key) for step, key, *_ in findings] == [("pid", "success_rate"), ("ppo", "success_rate"),
                                                            ("ppo-eval", "success_rate")]
     pid, ppo = findings[0], findings[1]
-    assert pid[2:] == ["pid: success", "100%", "one run", "–"]
-    assert ppo[4].startswith("seed0 ") and ", seed1 " in ppo[4] and ppo[5].count("%") == 3  # IQM [low, high]
+    # one run: no interval over seeds, but its episodes give one (Wilson's, never [100%, 100%])
+    assert pid[2:5] == ["pid: success", "100%", "one run"]
+    assert pid[5].startswith("episodes: 100% [") and "95% Wilson interval over" in pid[5], pid[5]
+    assert "pooled from 1 seed(s)" in pid[5] and "100%, 100%]" not in pid[5]
+    # two seeds: their mean, named so, with no interval over seeds; the pooled episodes' interval
+    assert ppo[4].startswith("seed0 ") and ", seed1 " in ppo[4]
+    assert ppo[5].startswith("mean ") and "(n = 2: too few seeds for an interval)" in ppo[5], ppo[5]
+    assert "episodes: " in ppo[5] and "pooled from 2 seed(s)" in ppo[5], ppo[5]
     first = page.evaluate("Array.from(document.querySelectorAll('h3, table.steps, figure')).map(e => e.tagName)")
     assert first[0] == "H3" and first.index("TABLE") > first.index("FIGURE")  # findings, figures, then the steps
 

@@ -35,16 +35,32 @@ def test_report_opens_with_the_recipes_findings_all_filled(bundled, browser):  #
     _check_page(opened)  # no errors, nothing online, every image decoded and captioned
     rows = opened.page.eval_on_selector_all("table.findings tbody tr", """rows => rows.map(r => [r.dataset.step,
         r.dataset.key, r.querySelector('th').textContent, r.querySelector('td.value').textContent,
-        r.querySelectorAll('td')[2].textContent])""")
+        r.querySelectorAll('td')[1].textContent, r.querySelectorAll('td')[2].textContent])""")
     specs = load_recipe(name).findings
     assert specs and [(step, key, label) for step, key, label, *_ in rows] == [(f.step, f.key, f.label)
                                                                                  for f in specs]
     summary = read_summary(out)
-    for step, key, label, value, iqm in rows:
+    several = 0
+    for step, key, label, value, per_seed, over_seeds in rows:
         assert value.strip() and value != "–" and f"{step}.{key}" in summary, label
-        seeds = len(load_recipe(name).steps[summary["steps"].index(step)].seeds or [])
-        if seeds > 1 or step == "zeroshot":  # several seeds: their IQM and its CI
-            assert "[" in iqm and "]" in iqm, label
+        seeds = 0 if per_seed == "one run" else len(per_seed.split(", "))
+        several += seeds > 1
+        if seeds >= 3:  # an interval and what it is, or that the seeds agree
+            assert ("[" in over_seeds and "95% stratified-bootstrap CI over" in over_seeds
+                    or "seeds agree" in over_seeds), label
+        elif seeds == 2:  # no interval: the bootstrap of 2 seeds is only their range
+            assert "n = 2: too few seeds for an interval" in over_seeds and "[" not in over_seeds, label
+            assert over_seeds.startswith("mean "), label  # the IQM of 2 trims nothing: named the mean
+        assert_no_zero_width_interval(over_seeds, label)
+    assert several or name == "reacher-quick"  # sar-hand-quick's findings are over its 2 seeds
+
+
+def assert_no_zero_width_interval(text: str, label: str) -> None:
+    """No "[x, x]" shown as a 95% CI (the bootstrap of one seed, or of equal seeds)."""
+    import re
+
+    for low, high in re.findall(r"\[([^,\]]+), ([^\]]+)\]", text):
+        assert low.strip() != high.strip(), (label, text)
 
 
 def test_every_step_shows_its_numbers(bundled, browser):  # noqa: F811

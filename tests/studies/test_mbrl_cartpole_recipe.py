@@ -52,7 +52,7 @@ def test_scaled_study_compares_evaluation_curves(tmp_path):
     assert curves["PETS loop.final_eval_return_mean"] == pytest.approx(np.mean([v for _, v in pets]))
     assert curves["SAC.final_eval_return_mean"] == pytest.approx(np.mean([v for _, v in sac]))
     # the loop's final return is its score: rliable compares it with SAC's
-    assert curves["PETS loop.final_return_iqm"] == pytest.approx(
+    assert curves["PETS loop.final_return_mean"] == pytest.approx(
         np.mean([read_summary(d)["final_return_mean"] for d in loops]))
     assert "PETS loop.final_return_p_better_than[SAC]" in curves
     study = read_summary(out)

@@ -44,7 +44,7 @@ def local_sweep(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("sweep") / "local"
     proc = run_cli("sweep", TINY, "--seeds", "2", *GRID, "--out", out)
     assert_ok(proc)
-    assert "IQM" in proc.stdout and str(out) in proc.stdout
+    assert "across seeds" in proc.stdout and str(out) in proc.stdout
     return out
 
 
@@ -65,25 +65,35 @@ def test_local_sweep_aggregates_with_rliable(local_sweep):
         per_seed = [read_summary(local_sweep / setting / f"seed{s}")["eval_return_mean"] for s in (0, 1)]
         entry = details["metrics"]["final_return"][setting]
         assert entry["values"] == pytest.approx(per_seed)
-        # two seeds: the IQM trims nothing, so it is their mean; the CI spans the seeds
-        assert summary[f"{setting}.final_return_iqm"] == pytest.approx(np.mean(per_seed))
-        assert summary[f"{setting}.final_return_iqm_ci_low"] == pytest.approx(min(per_seed))
-        assert summary[f"{setting}.final_return_iqm_ci_high"] == pytest.approx(max(per_seed))
+        # two seeds: their mean, named so; no IQM (it would trim nothing) and no interval (a bootstrap of
+        # two seeds is only their range), and the details say why
+        assert summary[f"{setting}.final_return_mean"] == pytest.approx(np.mean(per_seed))
+        assert not any(k.startswith(f"{setting}.") and ("_iqm" in k or "_ci_" in k) for k in summary), summary
+        assert entry["statistic"] == "mean" and entry["ci"] is None
+        assert entry["method"] == "n = 2: too few seeds for an interval"
         assert summary[f"{setting}.seeds"] == 2
-        assert 0 <= summary[f"{setting}.success_rate_iqm"] <= 1
-        assert summary[f"{setting}.steps_to_success_unsolved"] == 2  # 256 steps never solve it: censored
+        assert 0 <= summary[f"{setting}.success_rate_mean"] <= 1
+        # 256 steps never solve it: both censored at the budget, never a value, and no median
+        assert summary[f"{setting}.steps_to_success_unsolved"] == 2
+        assert summary[f"{setting}.steps_to_success_solved"] == 0
+        assert summary[f"{setting}.steps_to_success_median"] is None
+        assert details["metrics"]["steps_to_success"][setting]["text"] == "0 of 2 seeds; median > 256 (budget)"
     p = summary["lr=3e-4.final_return_p_better_than[lr=1e-3]"]
     a = details["metrics"]["final_return"]["lr=3e-4"]["values"]
     b = details["metrics"]["final_return"]["lr=1e-3"]["values"]
     assert p == pytest.approx(np.mean([(x > y) + 0.5 * (x == y) for x in a for y in b]))
+    pair = details["probability_of_improvement"]["final_return"][0]
+    assert pair["ci"] is None and "too few" in pair["method"]  # 2 seeds a side: no interval
     assert set(details["profiles"]) == {"final_return", "success_rate"}
     fractions = details["profiles"]["final_return"]["lr=3e-4"]["fraction"]
     assert fractions[0] == 1.0 and fractions[-1] == 0.0 and all(np.diff(fractions) <= 0)
     for name in ("iqm.png", "improvement.png", "profiles.png"):
         assert_png(local_sweep / "plots" / name)
     assert "lr=3e-4" in (local_sweep / "table.txt").read_text()
+    table = (local_sweep / "table.txt").read_text()
+    assert "mean " in table and "n = 2: too few seeds for an interval" in table
     html = (local_sweep / "report.html").read_text()
-    assert 'data-key="lr=3e-4.final_return_iqm"' in html
+    assert 'data-key="lr=3e-4.final_return_mean"' in html
 
 
 def test_interrupted_sweep_resumes_without_rerunning_finished_trials(tmp_path):
@@ -182,9 +192,17 @@ def test_stats_iqm_improvement_and_direction(monkeypatch):
     flat, details = aggregate(runs)
     assert flat["a.final_return_iqm"] == pytest.approx(4.5)  # mean of the middle half: 3, 4, 5, 6
     assert flat["a.final_return_iqm_ci_low"] <= 4.5 <= flat["a.final_return_iqm_ci_high"]
+    assert flat["a.final_return_mean"] == pytest.approx(4.5)
     assert flat["a.final_return_p_better_than[b]"] == 1.0
+    pair = details["probability_of_improvement"]["final_return"][0]
+    assert pair["p"] == 1.0 and pair["ci"] is not None and "over 8 and 8 seeds" in pair["method"]
     assert flat["a.steps_to_success_p_better_than[b]"] == 1.0  # fewer steps is better
-    assert flat["b.steps_to_success_unsolved"] == 4
+    # steps: 4 of b's 8 seeds censored at 500; the median is Kaplan-Meier's, never a mean of budgets
+    assert flat["b.steps_to_success_unsolved"] == 4 and flat["b.steps_to_success_solved"] == 4
+    assert flat["b.steps_to_success_median"] == 500.0  # half solved at 500: the KM CDF reaches 0.5 there
+    assert flat["a.steps_to_success_median"] == 100.0
+    assert not any(k.startswith(("a.steps_to_success_", "b.steps_to_success_")) and k.endswith(("_iqm", "_mean"))
+                   for k in flat)
     assert aggregate(runs)[0] == flat  # a fixed bootstrap state: the same numbers every time
     assert details["metrics"]["final_return"]["b"]["values"] == list(range(-8, 0))
 
@@ -229,7 +247,7 @@ def test_recipe_sweep_runs_whole_studies_with_the_setting_applied(tmp_path):
     config = (study / "fast" / "config.toml").read_text()
     assert "timesteps = 200" in config and "seed = 1" in config  # one seed per trial, not the recipe's 3
     summary = read_summary(out)
-    assert summary["fast.timesteps=200.fast.final_return_iqm"] == pytest.approx(
+    assert summary["fast.timesteps=200.fast.final_return_mean"] == pytest.approx(
         np.mean([read_summary(out / "fast.timesteps=200" / f"seed{s}")["fast.return_mean"] for s in (0, 1)]))
     assert "fast.timesteps=300.pid.final_return_mean" in summary
 
@@ -256,8 +274,13 @@ def test_study_with_seeds_trains_them_in_parallel_and_evaluates_each(tmp_path):
     summary = read_summary(out)
     returns = [read_summary(evals / f"seed{s}")["return_mean"] for s in range(3)]
     assert summary["on-delay.seeds"] == 3 and summary["on-delay.return_mean"] == pytest.approx(np.mean(returns))
-    assert summary["on-delay.return_iqm_ci_low"] <= summary["on-delay.return_iqm"] <= summary["on-delay.return_iqm_ci_high"]
-    assert summary["fast.seeds"] == 3 and "fast.return_iqm" in summary
+    # 3 seeds: no IQM (it would be the mean); the mean's 95% interval where the seeds differ at all
+    if len(set(returns)) > 1:
+        assert (summary["on-delay.return_mean_ci_low"] <= summary["on-delay.return_mean"]
+                <= summary["on-delay.return_mean_ci_high"])
+    else:
+        assert "on-delay.return_mean_ci_low" not in summary
+    assert summary["fast.seeds"] == 3 and "fast.return_iqm" not in summary and "on-delay.return_iqm" not in summary
 
     again = run_cli("run", recipe, "--out", out, "--resume")  # resumes: every seed kept
     assert_ok(again)

@@ -38,8 +38,8 @@ def test_ray_backend_searches_on_a_cluster_and_asha_stops_a_hopeless_trial(ray_a
     seeds interrupted, long before their 1500-step budget."""
     import optuna
 
+    from motorlab.intervals import across_seeds
     from motorlab.runs import last_timesteps
-    from motorlab.stats import iqm_with_ci
     from motorlab.tuning.objective import Objective
     from tests.helpers import assert_ok
 
@@ -68,11 +68,11 @@ def test_ray_backend_searches_on_a_cluster_and_asha_stops_a_hopeless_trial(ray_a
         assert t.user_attrs["settings"]["solve_return"] == t.params["solve_return"]
         assert t.intermediate_values and all(step % 100 == 0 for step in t.intermediate_values)
         for step, value in t.intermediate_values.items():  # the IQM over the seeds at that step
-            assert value == pytest.approx(iqm_with_ci([objective.progress(d, step) for d in dirs])[0])
+            assert value == pytest.approx(across_seeds([objective.progress(d, step) for d in dirs]).value)
         if t.state == optuna.trial.TrialState.COMPLETE:
             per_seed = [json.loads((d / "summary.json").read_text())["steps_to_success"] for d in dirs]
             assert t.user_attrs["seed_values"] == pytest.approx(per_seed)
-            assert t.value == pytest.approx(iqm_with_ci(per_seed)[0])
+            assert t.value == pytest.approx(across_seeds(per_seed).value)
     # the hopeless trial: stopped at step 300, its seeds interrupted (Ctrl-C, not killed), unfinished
     assert max(hopeless.intermediate_values) == 300
     hopeless_dirs = [out / "trials" / "1" / f"seed{s}" for s in (0, 1)]

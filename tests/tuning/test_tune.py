@@ -77,7 +77,7 @@ def _check_report(out, summary) -> None:
             findings = page.eval_on_selector_all("table.findings tbody tr", "rs => rs.map(r => [r.dataset.step, "
                                                  "Number(r.querySelector('td.value').dataset.value)])")
             assert findings == [[f"trial-{summary['best_trial']}", pytest.approx(summary["best_value"])],
-                                ["fresh", pytest.approx(summary["fresh_iqm"])]]
+                                ["fresh", pytest.approx(summary["fresh_value"])]]
             rows = page.eval_on_selector_all("table.study tbody tr", "rs => rs.length")
             assert rows == sum(summary["n_trials"].values())
             broken = page.evaluate("() => Array.from(document.querySelectorAll('a[href^=\"#\"]'))"
