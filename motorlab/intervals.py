@@ -36,7 +36,7 @@ def too_few_seeds(n: int) -> str:
 
 
 @contextlib.contextmanager
-def _quiet_fixed_rng():
+def fixed_rng():
     """rliable draws parts of its bootstrap from NumPy's global generator: seed it for the call (the
     same runs give the same interval), then put it back; arch warns about degenerate resamples."""
     state = np.random.get_state()
@@ -100,7 +100,7 @@ def across_seeds(values: list[float] | tuple[float, ...] | np.ndarray) -> SeedsS
     value = float(func(x[:, None]))
     ci = None
     if len(x) >= MIN_SEEDS_FOR_INTERVAL:
-        with _quiet_fixed_rng():
+        with fixed_rng():
             _, intervals = rly.get_interval_estimates({"s": x[:, None]}, lambda s: np.array([func(s)]), reps=REPS,
                                                       confidence_interval_size=CONFIDENCE,
                                                       random_state=np.random.RandomState(0))
@@ -211,7 +211,7 @@ def p_better(a: list[float] | np.ndarray, b: list[float] | np.ndarray, higher_is
     p = float(rm.probability_of_improvement(x, y))
     ci = None
     if min(len(x), len(y)) >= MIN_SEEDS_FOR_INTERVAL:
-        with _quiet_fixed_rng():
+        with fixed_rng():
             _, intervals = rly.get_interval_estimates({"pair": (x, y)}, rm.probability_of_improvement, reps=REPS,
                                                       confidence_interval_size=CONFIDENCE,
                                                       random_state=np.random.RandomState(0))

@@ -9,18 +9,15 @@ median is the Kaplan-Meier median (scipy.stats.ecdf on scipy.stats.CensoredData)
 
 from __future__ import annotations
 
-import contextlib
 import itertools
-import warnings
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 
-from motorlab.intervals import MIN_SEEDS_FOR_INTERVAL, across_seeds, p_better
+from motorlab.intervals import MIN_SEEDS_FOR_INTERVAL, across_seeds, fixed_rng, p_better
 
 REPS = 2000  # bootstrap resamples; rliable's CIs settle well before this for a handful of seeds
-CONFIDENCE = 0.95
 # metric -> higher is better; a study's metrics are "<step>.<metric>"
 DIRECTION = {"final_return": True, "success_rate": True, "steps_to_success": False}
 PROFILED = ("final_return", "success_rate")
@@ -56,20 +53,6 @@ def trial_scores(summary: dict[str, Any]) -> dict[str, Score]:
         return {f"{step}.{m}": v for step in summary["steps"]
                 for m, v in _scores_of(summary, f"{step}.", "").items()}
     return _scores_of(summary, "", "eval_")
-
-
-@contextlib.contextmanager
-def _fixed_global_rng():
-    """Parts of rliable draw from NumPy's global generator (np.random.choice in its
-    independent-samples bootstrap and profiles): seed it for the call, then put it back."""
-    state = np.random.get_state()
-    np.random.seed(0)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # arch warns about degenerate resamples with one or two seeds
-            yield
-    finally:
-        np.random.set_state(state)
 
 
 def _steps_entry(runs: list[Score]) -> dict[str, Any]:
@@ -147,7 +130,7 @@ def _profile(values: dict[str, np.ndarray]) -> dict[str, Any]:
     lo, hi = float(every.min()), float(every.max())
     taus = np.linspace(lo - 1e-9, hi + 1e-9 if hi > lo else lo + 1.0, 51)
     banded = min(len(v) for v in values.values()) >= MIN_SEEDS_FOR_INTERVAL  # else no band, as no interval
-    with _fixed_global_rng():
+    with fixed_rng():
         point, ci = rly.create_performance_profile(values, taus, reps=REPS if banded else 1)
     if not banded:
         ci = {s: np.stack([p, p]) for s, p in point.items()}

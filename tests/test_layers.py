@@ -21,7 +21,8 @@ PACKAGE = Path(motorlab.__file__).parent
 (API, WORKER, CLI, COMMANDS, STUDIES, KIND_REGISTRY, STEP_KINDS, STEPKIND, FEATURES, DOMAIN, ROLLOUTS_AND_MODELS,
  POLICIES, ALGORITHMS, CONTROLLERS, REPORT, ENVS, SYNERGY_SPACE, GROUND) = range(17, -1, -1)
 GROUND_FLOOR = {"motorlab.runs", "motorlab.errors", "motorlab.faults", "motorlab.environment", "motorlab.extras",
-                "motorlab.settings", "motorlab.user_modules", "motorlab", "motorlab.command", "motorlab.jobs"}
+                "motorlab.settings", "motorlab.user_modules", "motorlab", "motorlab.command", "motorlab.jobs",
+                "motorlab.intervals"}
 # Packages by prefix, below the step kinds (a step-kind module in one of them is a step kind)
 PACKAGES = {"motorlab.evaluation.figures": FEATURES, "motorlab.evaluation.videos": FEATURES,
             "motorlab.evaluation.activations": DOMAIN, "motorlab.evaluation": ROLLOUTS_AND_MODELS,

@@ -48,9 +48,12 @@ def test_report_opens_with_the_recipes_findings_all_filled(bundled, browser):  #
         if seeds >= 3:  # an interval and what it is, or that the seeds agree
             assert ("[" in over_seeds and "95% stratified-bootstrap CI over" in over_seeds
                     or "seeds agree" in over_seeds), label
-        elif seeds == 2:  # no interval: the bootstrap of 2 seeds is only their range
-            assert "n = 2: too few seeds for an interval" in over_seeds and "[" not in over_seeds, label
-            assert over_seeds.startswith("mean "), label  # the IQM of 2 trims nothing: named the mean
+        elif seeds == 2:  # no interval over seeds: the bootstrap of 2 seeds is only their range
+            across, _, pooled = over_seeds.partition("episodes: ")
+            assert "n = 2: too few seeds for an interval" in across and "[" not in across, label
+            assert across.startswith("mean "), label  # the IQM of 2 trims nothing: named the mean
+            if key == "success_rate":  # the episodes of both seeds, pooled: Wilson's interval
+                assert "95% Wilson interval over" in pooled and "pooled from 2 seed(s)" in pooled, label
         assert_no_zero_width_interval(over_seeds, label)
     assert several or name == "reacher-quick"  # sar-hand-quick's findings are over its 2 seeds
 
