@@ -313,8 +313,9 @@ _exact("HumanoidStandup-v4", planning=(_plan("observation", "humanoid_standup_v4
 # env steps with [128, 128] and horizon 25, at 1,800 with [64, 64] and horizon 25; with the defaults
 # (seed 0) it was 39 at 3,000. Three CEM iterations (warm-started) keep one env's plan ~40 ms
 # (benchmarks/plan_latency.py; [128, 128] at 5 iterations: ~67 ms). SiLU layers (the default): one
-# env's plan 45.7 ms on one thread, against 59.0 with tanh + LayerNorm, which reached 5 of 5 seeds
-# (benchmarks/results/mbrl-cartpole.json at 0b03992; SiLU's result is in that file now).
+# env's plan 44-46 ms on one thread, against 59.0 with tanh + LayerNorm. Both reached 5 of 5 seeds
+# within 3,000 env steps: tanh at a Kaplan-Meier median of 1,400 (0b03992), SiLU at 1,000
+# (benchmarks/results/mbrl-cartpole.json at b1fc2b0).
 _exact("CartpoleSwingup-v0", planning=(_plan("observation", "cartpole_swingup", state_size=5),),
        planner={"horizon": 25, "iterations": 3}, model={"hidden": [128, 128]},
        obs_labels=("cart position (m)", "sin pole angle (0 upright)", "cos pole angle", "cart velocity (m/s)",
