@@ -205,6 +205,13 @@ class StepsToThreshold:
         shared = len(set(self.budgets)) == 1
         return f"{head}; median > {self.median_above:,} ({'budget' if shared else 'the largest budget'})"
 
+    def at_most(self, steps: float) -> bool | None:
+        """Is the median at most `steps`? None where the censoring leaves it open (fewer than half
+        solved within a budget below `steps`: the median is above the budget, where is unknown)."""
+        if self.median is not None:
+            return self.median <= steps
+        return False if self.median_above >= steps else None
+
     def to_json(self) -> dict[str, Any]:
         """Every number, for a results file."""
         return {"solved": self.solved, "seeds": self.seeds, "budgets": list(self.budgets),
@@ -268,6 +275,16 @@ class StepsRatio:
     def text(self) -> str:
         sign = {"exact": "=", "lower": ">", "upper": "<"}.get(self.bound)
         return "unknown (both medians censored)" if sign is None else f"{sign} {self.ratio:.3g}"
+
+    def at_most(self, value: float) -> bool | None:
+        """Is the ratio at most `value`? None where its bound leaves that open."""
+        if self.bound == "exact":
+            return self.ratio <= value
+        if self.bound == "upper":  # ratio < self.ratio
+            return True if self.ratio <= value else None
+        if self.bound == "lower":  # ratio > self.ratio
+            return False if self.ratio >= value else None
+        return None
 
     def to_json(self) -> dict[str, Any]:
         return {"ratio": self.ratio, "bound": self.bound, "numerator": self.numerator,

@@ -100,3 +100,19 @@ def test_ratio_bounds():
     unknown = steps_ratio(loop_censored, sac_censored)
     assert (unknown.ratio, unknown.bound) == (None, "unknown")
     assert unknown.to_json()["text"] == "unknown (both medians censored)"
+
+
+def test_targets_on_censored_medians_and_ratios_are_met_unmet_or_open():
+    solved = steps_to_threshold([1000, 1000, 2000], 3000)  # median 1000
+    few = steps_to_threshold([None, None, 2000], 3000)  # median > 3000
+    assert solved.at_most(1000) is True and solved.at_most(999) is False
+    assert few.at_most(3000) is False  # above its budget, so above 3000
+    assert few.at_most(5000) is None  # somewhere above 3000: 5000 or less is open
+    sac = steps_to_threshold([5000, 6000, 7000], 30_000)
+    sac_censored = steps_to_threshold([None, None, 7000], 30_000)
+    assert steps_ratio(solved, sac).at_most(6) is True and steps_ratio(solved, sac).at_most(5.9) is False
+    assert steps_ratio(few, sac).at_most(2) is True  # the ratio < 2
+    assert steps_ratio(few, sac).at_most(1) is None
+    assert steps_ratio(solved, sac_censored).at_most(30) is False  # the ratio > 30
+    assert steps_ratio(solved, sac_censored).at_most(40) is None
+    assert steps_ratio(few, sac_censored).at_most(1) is None
