@@ -23,7 +23,6 @@ Prints one JSON object.
 from __future__ import annotations
 
 import argparse
-import json
 import multiprocessing as mp
 import os
 import platform
@@ -31,6 +30,7 @@ import time
 
 import gymnasium as gym
 import numpy as np
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 from motorlab.dynamics.collection import collect_transitions
 
@@ -121,6 +121,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes / threads per side")
     parser.add_argument("--repeats", type=int, default=3, help="interleaved rounds of both sides; medians are reported")
     args = parser.parse_args()
+    recorder = Recorder("dynamics_collect")  # the git state and load, read as the run starts
 
     # Interleaved rounds (reference, then motorlab): a drift in the machine's speed hits both
     # sides alike; medians over rounds, and the median of the per-round ratios.
@@ -141,7 +142,7 @@ def main() -> None:
     identical = (data.meta["simulator"] == "closed-form" and max(converged) < 1e-12 and max(defaults) < 1e-5
                  and check["mujoco_max_joint_diff"] == 0.0 and check["mujoco_max_tip_m_diff"] < 1e-12
                  and check["mujoco_max_reward_diff"] < 1e-12)
-    print(json.dumps({
+    recorder.record({
         "benchmark": "dynamics_collect", "env_id": "Reacher-v5", "episodes": args.episodes,
         "workers": args.workers, "cpus": os.cpu_count(), "machine": platform.processor() or platform.machine(),
         "motorlab_simulator": data.meta["simulator"],
@@ -159,7 +160,7 @@ def main() -> None:
         # target scaled by it is the ratio target again
         "machine_slowdown_vs_issue": ISSUE_REFERENCE_RATE / ref_rate,
         **check,
-    }, indent=2))
+    })
 
 
 if __name__ == "__main__":

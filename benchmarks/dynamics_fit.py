@@ -15,12 +15,12 @@ Prints one JSON object.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
 
 import torch
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 from torch import nn
 
 from motorlab.dynamics.collection import collect_transitions
@@ -48,6 +48,7 @@ def main() -> None:
     parser.add_argument("--reference-epochs", type=int, default=50)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    recorder = Recorder("dynamics_fit")  # the git state and load, read as the run starts
 
     data = collect_transitions("Reacher-v5", args.episodes, seed=args.seed, progress=False)
 
@@ -62,7 +63,7 @@ def main() -> None:
     with torch.no_grad():
         ref_mse = float(((module(x[valid_rows]) - y[valid_rows]) ** 2).mean())
     ours_mse = normalized_mse(model, x[valid_rows], y[valid_rows])
-    print(json.dumps({
+    recorder.record({
         "benchmark": "dynamics_fit", "env_id": "Reacher-v5", "transitions": len(data),
         "train_rows": len(train_rows), "valid_rows": len(valid_rows), "cpus": os.cpu_count(),
         "torch_threads": torch.get_num_threads(), "machine": platform.processor() or platform.machine(),
@@ -70,7 +71,7 @@ def main() -> None:
         "reference_seconds": ref_seconds, "reference_valid_mse": ref_mse, "reference_epochs": args.reference_epochs,
         "speedup": ref_seconds / ours_seconds, "mse_ratio": ours_mse / ref_mse, "target_speedup": TARGET_SPEEDUP,
         "meets_target": ref_seconds / ours_seconds >= TARGET_SPEEDUP and ours_mse <= ref_mse,
-    }, indent=2))
+    })
 
 
 if __name__ == "__main__":

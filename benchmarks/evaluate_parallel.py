@@ -19,7 +19,6 @@ Prints one JSON object. Run it on an otherwise idle machine (it reports the load
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
@@ -27,6 +26,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 from motorlab.envs import EnvConfig, make_env
 from motorlab.evaluation.pool import _context as pool_context
@@ -76,6 +77,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=available_cores(), help="processes of the parallel path")
     parser.add_argument("--run", type=Path, help="a trained hand run folder (default: an untrained SAC policy)")
     args = parser.parse_args()
+    recorder = Recorder("evaluate_parallel")  # the git state and load, read as the run starts
 
     with tempfile.TemporaryDirectory() as tmp:
         run = args.run or random_sac_run(Path(tmp))
@@ -120,7 +122,7 @@ def main() -> None:
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "cores_available": available_cores(),
                     "processor": platform.processor() or platform.machine()},
     }
-    print(json.dumps(result))
+    recorder.record(result)
 
 
 if __name__ == "__main__":

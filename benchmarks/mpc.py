@@ -16,7 +16,6 @@ Prints one JSON object.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
 import platform
@@ -26,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 from motorlab.control.mpc_episodes import build_policy, run_episodes
 from motorlab.control.steps import MpcSettings
@@ -107,6 +107,7 @@ def main() -> None:
     parser.add_argument("--reference-episodes", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    recorder = Recorder("mpc")  # the git state and load, read as the run starts
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -134,14 +135,14 @@ def main() -> None:
     def meets(targets: dict[str, float]) -> bool:
         return all(ours[k] >= v if k == "return_mean" else ours[k] <= v for k, v in targets.items())
 
-    print(json.dumps({
+    recorder.record({
         "benchmark": "mpc", "env_id": "Reacher-v5", "cpus": os.cpu_count(),
         "machine": platform.processor() or platform.machine(), "motorlab": ours, "reference": reference,
         "plan_speedup": reference["plan_ms_median"] / ours["plan_ms_median"],
         "return_gain": ours["return_mean"] - reference["return_mean"], "targets": TARGETS, "meets_targets": meets(TARGETS),
         "machine_slowdown_vs_issue": slowdown, "targets_scaled_to_this_machine": scaled,
         "meets_scaled_targets": meets(scaled),
-    }, indent=2))
+    })
 
 
 if __name__ == "__main__":

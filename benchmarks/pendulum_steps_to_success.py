@@ -18,11 +18,12 @@ Prints one JSON object.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import tempfile
 from pathlib import Path
+
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 from motorlab.rl.config import resolve
 from motorlab.rl.train import train
@@ -71,6 +72,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--env", default="InvertedPendulum-v5")
     args = parser.parse_args()
+    recorder = Recorder("pendulum_steps_to_success")  # the git state and load, read as the run starts
     seeds = list(range(args.seeds))
     env, delayed = {"id": args.env}, {"id": args.env, "delay": 0.2}
     with tempfile.TemporaryDirectory() as tmp:
@@ -95,7 +97,7 @@ def main() -> None:
             "delayed_median_steps": reached(delay["motorlab_fast"]).at_most(TARGETS["delayed_median_steps"]),
         },
     }
-    print(json.dumps(result, indent=2))
+    recorder.record(result)
 
 
 if __name__ == "__main__":

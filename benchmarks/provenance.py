@@ -68,3 +68,30 @@ def write_result(out: dict, path: Path) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+class Recorder:
+    """One run of a benchmark script, recorded: the git state and the load average are read when it
+    starts (what ran is the code its processes loaded then); `record` adds the date, the command
+    line, the package versions, the machine and the load at the end, writes
+    benchmarks/results/<name>.json whole (a newer run of the same script replaces it) and prints it."""
+
+    def __init__(self, name: str, results: Path = HERE / "results"):
+        import sys
+
+        self.name, self.results = name, results
+        self.argv = sys.argv[1:]
+        self.git = git_state()
+        self.load = load()
+
+    def record(self, result: dict, file: str | None = None) -> dict:
+        import datetime
+
+        out = {"benchmark": self.name, **result,
+               "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+               "argv": self.argv, "git": git_state(at_start=self.git), "versions": versions(),
+               "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "load_average_start": self.load,
+                           "load_average_end": load()}}
+        write_result(out, self.results / f"{file or self.name}.json")
+        print(json.dumps(out, indent=2))
+        return out

@@ -19,7 +19,6 @@ Prints one JSON object.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
@@ -29,6 +28,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 from motorlab.synergies.sklearn_import import import_sklearn
 
@@ -50,6 +50,7 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=DATA, help="folder with pca.pkl, ica.pkl, normalizer.pkl")
     parser.add_argument("--runs", type=int, default=7, help="timeit repeats; the median is reported")
     args = parser.parse_args()
+    recorder = Recorder("sar_decode")  # the git state and load, read as the run starts
 
     import joblib
     import sklearn
@@ -118,7 +119,7 @@ def main() -> None:
         "machine": {"python": platform.python_version(), "numpy": np.__version__, "sklearn": sklearn.__version__,
                     "cpus": os.cpu_count(), "processor": platform.processor() or platform.machine()},
     }
-    print(json.dumps(result))
+    recorder.record(result)
 
 
 if __name__ == "__main__":

@@ -28,13 +28,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import multiprocessing as mp
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 from sar_study import steady_rate  # env steps/s after the warm-up, from metrics.csv (benchmarks/ is on sys.path)
 
 CHAIN_STEPS = {"play + SAR-RL": 1_500_000 + 2_500_000, "RL-E2E": 4_000_000}
@@ -180,6 +180,7 @@ def main() -> None:
     parser.add_argument("--terrain", choices=sorted(terrain_ids), default="rough")
     parser.add_argument("--keep", type=Path, default=None, help="keep the runs in this folder")
     args = parser.parse_args()
+    recorder = Recorder("sar_legs")  # the git state and load, read as the run starts
     out: dict = {"benchmark": "sar_legs", "terrain": terrain_ids[args.terrain], "chain_env_steps": CHAIN_STEPS}
     out["machine"] = machine_speed()
     print(f"machine: {out['machine']['speed_vs_noted']} of the noted speeds", file=sys.stderr)
@@ -205,7 +206,7 @@ def main() -> None:
         # roughly, on a machine at the noted speeds (env stepping and updates are most of the time)
         out["study"]["projected_full_hours_at_noted_speeds"] = round(
             hours * out["machine"]["geometric_mean_speed_vs_noted"], 2)
-    print(json.dumps(out, indent=2))
+    recorder.record(out)
 
 
 if __name__ == "__main__":  # spawned chains and env subprocesses re-import this file

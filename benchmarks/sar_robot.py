@@ -38,6 +38,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
+
 RECIPE = "sar-ant"
 SEEDS = 3
 # Budget fields of the recipe divided by --scale, each with the smallest value it may take.
@@ -95,6 +97,7 @@ def main() -> None:
                         help="divide every budget by this (default 1: the bundled study)")
     parser.add_argument("--keep", type=Path, default=None, help="write the study here instead of a temporary folder")
     args = parser.parse_args()
+    recorder = Recorder("sar_robot")  # the git state and load, read as the run starts
     with tempfile.TemporaryDirectory() as tmp:
         recipe = scaled_recipe(max(1, args.scale), Path(tmp))
         study = args.keep or Path(tmp) / "study"
@@ -130,7 +133,7 @@ def main() -> None:
         "wall_seconds": round(wall, 1), "cpus": os.cpu_count(),
         "target": "full scale in <= 1800 s on this 2-core machine",
     }
-    print(json.dumps(out, indent=2))
+    recorder.record(out)
 
 
 if __name__ == "__main__":

@@ -16,10 +16,11 @@ Prints one JSON object.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 from pathlib import Path
+
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 STUDY_STEPS = 1_000_000 + 1_500_000 + 2_500_000
 PUBLISHED = Path(__file__).resolve().parents[2] / "shared" / "data" / "myosuite_sar_pretrained" / "manipulation"
@@ -54,6 +55,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=4000, help="env steps per setting (the first 1000-2048 warm up)")
     args = parser.parse_args()
+    recorder = Recorder("sar_study")  # the git state and load, read as the run starts
     out = {"benchmark": "sar_study", "env": "myoHandReorient100-v0", "phi": 0.66, "steps_per_setting": args.steps,
            "study_env_steps": STUDY_STEPS, "settings": {}}
     with tempfile.TemporaryDirectory() as tmp:
@@ -73,7 +75,7 @@ def main() -> None:
     out["speedup_over_reference"] = {k: round(v[key] / ref, 2) for k, v in out["settings"].items()}
     out["target"] = "full sar-hand study <= 2 h with success >= reference at equal env steps"
     out["speed_part_met_by"] = [k for k, v in out["settings"].items() if v["projected_study_hours"] <= 2.0]
-    print(json.dumps(out, indent=2))
+    recorder.record(out)
 
 
 if __name__ == "__main__":  # the PPO setting starts env subprocesses, which re-import this file

@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import sys
 import tempfile
 import tomllib
 from pathlib import Path
 
 import tomli_w
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 
 def scaled_recipe(scale: float) -> str:
@@ -50,6 +50,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scale", type=float, default=40, help="divide every budget by this (default 40)")
     args = parser.parse_args()
+    recorder = Recorder("sar_study_overlap")  # the git state and load, read as the run starts
     recipe = parse_recipe(scaled_recipe(args.scale), f"sar-hand / {args.scale:g}")
     out = {"benchmark": "sar_study_overlap", "recipe": "sar-hand", "scale": args.scale,
            "env_steps": sum(s.train.timesteps for s in recipe.steps if s.kind == "train")}
@@ -70,7 +71,7 @@ def main() -> None:
         "same_numbers": {k: summaries[2].get(k) for k in steps} == steps,
         "numbers_compared": len(steps),
     })
-    print(json.dumps(out, indent=2))
+    recorder.record(out)
 
 
 if __name__ == "__main__":  # env subprocesses re-import this file

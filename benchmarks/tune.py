@@ -39,6 +39,7 @@ import tomllib
 from pathlib import Path
 
 import optuna
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 from motorlab.stats import steps_ratio, steps_to_threshold
 
@@ -166,6 +167,7 @@ def main() -> None:
                         help="keep what an earlier run left in --out (the search resumes; finished runs are kept); "
                              "the wall time then measures only what was left")
     a = parser.parse_args()
+    recorder = Recorder("tune")  # the git state and load, read as the run starts
     root = a.out.resolve()
     if root.exists() and not a.reuse:
         if any(root.iterdir()) and not (root / "search").is_dir():
@@ -223,7 +225,7 @@ def main() -> None:
                     "minutes_max": TARGET_MINUTES, "minutes_met": wall / 60 <= TARGET_MINUTES},
     }
     (root / "benchmark.json").write_text(json.dumps(result, indent=2))
-    print(json.dumps(result))
+    recorder.record(result)
 
 
 if __name__ == "__main__":

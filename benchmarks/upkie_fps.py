@@ -14,10 +14,11 @@ Prints one JSON object.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
+
+from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 ENV_ID = "Upkie-PyBullet-Pendulum"
 
@@ -66,13 +67,14 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=16384, help="env steps per motorlab measurement")
     parser.add_argument("--reference-steps", type=int, default=2048, help="env steps for Upkie's real-time default")
     args = parser.parse_args()
+    recorder = Recorder("upkie_fps")  # the git state and load, read as the run starts
     k1 = motorlab_fps(1, args.steps)
     print(f"K=1: {k1:,.0f} steps/s", file=sys.stderr)
     k2 = motorlab_fps(2, args.steps)
     print(f"K=2: {k2:,.0f} steps/s", file=sys.stderr)
     ref = upkie_default_fps(args.reference_steps)
     print(f"Upkie defaults: {ref:,.0f} steps/s", file=sys.stderr)
-    print(json.dumps({
+    recorder.record({
         "env": ENV_ID,
         "cores": os.cpu_count(),
         "steps": args.steps,
@@ -81,7 +83,7 @@ def main() -> None:
         "scaling_k2_over_k1": round(k2 / k1, 3),
         "upkie_defaults_fps": round(ref, 1),
         "speedup_k2_over_upkie_defaults": round(k2 / ref, 2),
-    }))
+    })
 
 
 if __name__ == "__main__":

@@ -74,6 +74,18 @@ def facts(benchmark: str, data: dict[str, Any]) -> list[Fact]:
                 for group in data["groups"]] + \
                [Fact(f"{group}: user's reward / bundled", ("groups", group, "ratios", "user_over_builtin"), "ratio")
                 for group in data["groups"]]
+    return target_facts(data)
+
+
+def target_facts(data: dict[str, Any]) -> list[Fact]:
+    """Any other benchmark: whether each of its targets is met, wherever its file says so."""
+    if isinstance(data.get("met"), dict):
+        return [Fact(f"{k} met:", ("met", k), "met") for k in data["met"]]
+    if isinstance(data.get("targets"), dict) and all(isinstance(v, dict) and "met" in v for v in data["targets"].values()):
+        return [Fact(f"{k} met:", ("targets", k, "met"), "met") for k in data["targets"]]
+    for key in ("meets_target", "meets_scaled_targets", "meets_targets", "all_met"):
+        if isinstance(data.get(key), bool):
+            return [Fact("target met:", (key,), "met")]
     return []
 
 
