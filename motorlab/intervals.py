@@ -186,9 +186,11 @@ class PBetter:
 
     @property
     def method(self) -> str:
-        if self.ci is None:
+        if self.ci is not None:
+            return f"95% stratified-bootstrap CI over {self.seeds[0]} and {self.seeds[1]} seeds"
+        if min(self.seeds) < MIN_SEEDS_FOR_INTERVAL:
             return f"no interval: n = {self.seeds[0]} and {self.seeds[1]} seeds (too few for one)"
-        return f"95% stratified-bootstrap CI over {self.seeds[0]} and {self.seeds[1]} seeds"
+        return "no interval: every bootstrap resample gives the same P (the two sides' seeds do not overlap)"
 
     def text(self) -> str:
         interval = f" [{self.ci[0]:.2f}, {self.ci[1]:.2f}]" if self.ci else ""
@@ -215,5 +217,6 @@ def p_better(a: list[float] | np.ndarray, b: list[float] | np.ndarray, higher_is
             _, intervals = rly.get_interval_estimates({"pair": (x, y)}, rm.probability_of_improvement, reps=REPS,
                                                       confidence_interval_size=CONFIDENCE,
                                                       random_state=np.random.RandomState(0))
-        ci = tuple(float(v) for v in np.ravel(intervals["pair"]))
+        low, high = (float(v) for v in np.ravel(intervals["pair"]))
+        ci = (low, high) if high > low else None  # seeds that do not overlap: a point is no 95% interval
     return PBetter(p, ci, (len(x), len(y)))

@@ -195,7 +195,12 @@ def test_stats_iqm_improvement_and_direction(monkeypatch):
     assert flat["a.final_return_mean"] == pytest.approx(4.5)
     assert flat["a.final_return_p_better_than[b]"] == 1.0
     pair = details["probability_of_improvement"]["final_return"][0]
-    assert pair["p"] == 1.0 and pair["ci"] is not None and "over 8 and 8 seeds" in pair["method"]
+    # every a above every b: each resample gives P = 1, and a point is shown as no interval
+    assert pair["p"] == 1.0 and pair["ci"] is None and "do not overlap" in pair["method"]
+    mixed = aggregate({"a": [{"final_return": (float(v), False)} for v in (1, 3, 5, 7)],
+                       "b": [{"final_return": (float(v), False)} for v in (2, 4, 6, 8)]})[1]
+    pair = mixed["probability_of_improvement"]["final_return"][0]
+    assert pair["ci"][0] < pair["p"] < pair["ci"][1] and "over 4 and 4 seeds" in pair["method"]
     assert flat["a.steps_to_success_p_better_than[b]"] == 1.0  # fewer steps is better
     # steps: 4 of b's 8 seeds censored at 500; the median is Kaplan-Meier's, never a mean of budgets
     assert flat["b.steps_to_success_unsolved"] == 4 and flat["b.steps_to_success_solved"] == 4
