@@ -29,12 +29,15 @@ from provenance import Recorder  # benchmarks/provenance.py: the script's folder
 
 
 def scaled_recipe(scale: float) -> str:
-    """The bundled sar-hand recipe with every budget (env steps, episodes) divided by `scale`."""
+    """The bundled sar-hand recipe with every budget (env steps, episodes) divided by `scale`, one
+    seed per arm."""
     from motorlab.recipes import bundled
 
     data = tomllib.loads(bundled()["sar-hand"].read_text())
     data["name"] = f"sar-hand-scale{scale:g}"
     for step in data["steps"]:
+        # one seed per arm: this measures how the two chains overlap, not the comparison's spread
+        step.pop("seeds", None)
         if "timesteps" in step:
             step["timesteps"] = max(2000, int(step["timesteps"] / scale))
         for key in ("episodes", "preview"):
@@ -53,7 +56,7 @@ def main() -> None:
     recorder = Recorder("sar_study_overlap")  # the git state and load, read as the run starts
     recipe = parse_recipe(scaled_recipe(args.scale), f"sar-hand / {args.scale:g}")
     out = {"benchmark": "sar_study_overlap", "recipe": "sar-hand", "scale": args.scale,
-           "env_steps": sum(s.train.timesteps for s in recipe.steps if s.kind == "train")}
+           "env_steps": sum(s.settings.timesteps for s in recipe.steps if s.kind.trains)}
     summaries = {}
     # progress bars and tables to stderr: stdout is the JSON
     with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(sys.stderr):
@@ -67,7 +70,7 @@ def main() -> None:
         "speedup": round(summaries[1]["wall_seconds"] / summaries[2]["wall_seconds"], 3),
         "step_wall_seconds": {k: {"sequential": summaries[1].get(f"{s.name}.wall_seconds"),
                                   "parallel": summaries[2].get(f"{s.name}.wall_seconds")}
-                              for k, s in ((s.name, s) for s in recipe.steps if s.kind == "train")},
+                              for k, s in ((s.name, s) for s in recipe.steps if s.kind.trains)},
         "same_numbers": {k: summaries[2].get(k) for k in steps} == steps,
         "numbers_compared": len(steps),
     })

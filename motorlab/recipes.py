@@ -5,6 +5,8 @@
     imports = ["mypkg.envs"]   # optional: your modules that register env ids (or env = "mypkg.envs:MyArm-v0")
     parallel_steps = 2         # optional: training steps that need nothing from each other run at once,
                                # each its own process, at most 2 (default 1: one step after another)
+    demo = "tiny budgets, 2 seeds per arm: it shows the pipeline"
+                               # optional: why its budgets or seeds are small on purpose, shown with its findings
 
     [defaults]                 # fields every step gets unless it sets them (where its kind has them)
     env = "InvertedPendulum-v5"
@@ -99,6 +101,7 @@ class Recipe:
     source: str = ""
     parallel_steps: int = 1
     findings: list[FindingSpec] = field(default_factory=list)
+    demo: str | None = None  # why its budgets or seeds are small on purpose (see _RecipeFile.demo)
 
 
 class FindingSpec(BaseModel):
@@ -135,6 +138,11 @@ class _RecipeFile(BaseModel):
     defaults: dict[str, Any] = Field(default_factory=dict)
     steps: list[dict[str, Any]] = Field(min_length=1)
     findings: list[FindingSpec] = Field(default_factory=list)  # default: each step's own (see StepKind.findings)
+    demo: str | None = Field(None, min_length=1, description=(
+        "A quick or demo recipe whose budgets or seeds per arm are small on purpose says why, in a line (\"tiny "
+        "budgets, 2 seeds per arm: it shows the pipeline\"); the study shows it with its findings "
+        "(results.json, report.html, the printed summary, the Python API's Study). A full comparison sets none and "
+        "runs at least 5 seeds per arm"))
 
 
 def fields_of(step_kind: StepKind) -> set[str]:
@@ -345,7 +353,7 @@ def parse_recipe(text: str, source: str = "<recipe>", announce: Announce | None 
             names = [s.name for s in steps]
             raise MotorlabError(f"{source}: findings[{i}]: no step named {f.step!r}{did_you_mean(f.step, names)}")
     return Recipe(name=raw.name, description=raw.description, source=source, parallel_steps=raw.parallel_steps,
-                  steps=steps, findings=raw.findings)
+                  steps=steps, findings=raw.findings, demo=raw.demo)
 
 
 def load_recipe(name_or_path: str, given: dict[str, Any] | None = None, announce: Announce | None = None) -> Recipe:

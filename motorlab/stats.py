@@ -241,6 +241,13 @@ def steps_to_threshold(steps: list[int | None], budgets: list[int] | int) -> Ste
     return StepsToThreshold(per_seed, _km_median(per_seed))
 
 
+def steps_to_success(steps: list[int | None], ran: list[int]) -> StepsToThreshold:
+    """Steps to success over training runs: each run's budget is the env steps it ran (at least its
+    steps to success: the last rollout may end past `timesteps`), so an unsolved run is censored
+    where it stopped. The one rule for a study's finding, a step's aggregate and any headline."""
+    return steps_to_threshold(steps, [max(r, s or 0, 1) for r, s in zip(ran, steps, strict=True)])
+
+
 def _km_median(per_seed: tuple[SeedSteps, ...]) -> float | None:
     from scipy.stats import CensoredData, ecdf
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from motorlab.errors import MotorlabError
-from motorlab.recipes import bundled, load_recipe, parse_recipe, set_fields
+from motorlab.recipes import bundled, load_recipe, parse_recipe, refs_in, set_fields
 from tests.helpers import assert_ok, assert_png, read_summary, run_cli
 
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
@@ -445,3 +445,88 @@ def test_motorlab_recipes_lists_every_bundled_recipe():
     assert_ok(proc)
     listed = {line.split(":", 1)[0] for line in proc.stdout.splitlines() if ":" in line}
     assert set(bundled()) <= listed and "sar-hand-published" in listed
+
+
+# ---- seeds per arm (issue 38): full comparisons on 5 seeds, the rest say they are demos --------
+
+MIN_SEEDS = 5
+# The bundled full-size comparisons: every arm on MIN_SEEDS seeds or more, no demo note
+FULL = ("sar-hand", "sar-hand-reference", "sar-hand-published", "sar-legs", "sar-legs-reference",
+        "sar-legs-published", "sar-ant", "mbrl-cartpole")
+
+
+def arms(recipe) -> dict[str, int]:
+    """The trained arms a recipe's findings rest on, with their number of seeds: its training steps
+    that no other training step builds on (play feeds SAR-RL through collect and fit: not an arm)."""
+    by_name = {s.name: s for s in recipe.steps}
+
+    def upstream(name: str) -> set[str]:
+        return {m for n in by_name[name].inputs() for m in {n, *upstream(n)}}
+
+    feeding = set().union(*(upstream(s.name) for s in recipe.steps if s.kind.trains))
+    return {s.name: len(s.seeds or [0]) for s in recipe.steps if s.kind.trains and s.name not in feeding}
+
+
+@pytest.fixture(scope="module")
+def every_recipe(request) -> dict:
+    """Every bundled recipe, loaded (the published-SAR ones with MyoSuite's published SARs)."""
+    given = {"sar-hand-published": {"sar": str(request.getfixturevalue("hand_sar"))},
+             "sar-legs-published": {"sar": str(request.getfixturevalue("legs_sar"))}}
+    return {name: load_recipe(name, given.get(name)) for name in sorted(bundled())}
+
+
+def test_full_comparisons_run_at_least_five_seeds_per_arm(every_recipe):
+    for name in FULL:
+        recipe = every_recipe[name]
+        seeds = arms(recipe)
+        assert len(seeds) >= 2 and all(n >= MIN_SEEDS for n in seeds.values()), (name, seeds)
+        assert recipe.demo is None, name  # a full study is not excused as a demo
+        compared = {n for s in recipe.steps if s.kind.name == "compare" for n in refs_in(s.fields["groups"])}
+        assert compared == set(seeds), name  # what it compares is what it trains on 5 seeds
+        play = [s for s in recipe.steps if s.name == "play"]
+        assert all(s.seeds is None for s in play), name  # play -> collect -> fit stays one run
+
+
+def test_every_other_recipe_says_its_counts_are_small_on_purpose(every_recipe):
+    small = {name for name, recipe in every_recipe.items()
+             if name.endswith("-quick") or any(n < MIN_SEEDS for n in arms(recipe).values())}
+    assert {"sar-hand-quick", "sar-legs-quick", "sar-ant-quick", "reacher-quick", "mbrl-pendulum", "pendulum",
+            "upkie"} <= small
+    for name in small:
+        assert every_recipe[name].demo, f"{name}: fewer than {MIN_SEEDS} seeds per arm, and no demo line"
+    assert not small & set(FULL)
+
+
+def test_steps_after_a_five_seed_arm_take_every_seed(every_recipe, tmp_path):
+    """A dry run of each full recipe's plan (the runner's run folders and resolved references, nothing
+    run): zero-shot, evaluate and compare steps take all 5 seeds of each arm, and the zero-shot
+    findings (`sar-rl.<env>.success_rate_mean`) are the mean over those 5."""
+    from motorlab.evaluation.zeroshot import run_label
+    from motorlab.studies.runner import _Outputs, _runs
+
+    for name in FULL:
+        recipe = every_recipe[name]
+        outputs, seeds = _Outputs(recipe.steps), arms(recipe)
+        for step in recipe.steps:
+            runs = _runs(step, tmp_path / name, outputs)
+            outputs.dirs[step.name] = [d for d, _ in runs]
+            settings = runs[0][1]
+            if step.kind.name == "compare":
+                assert {g: len(paths) for g, paths in settings.groups.items()} == \
+                    {g: sum(seeds[n] for n in refs_in(refs)) for g, refs in step.fields["groups"].items()}, name
+            if step.kind.name == "evaluate" and step.inputs()[0] in seeds:  # one evaluation per seed
+                assert len(runs) == seeds[step.inputs()[0]], (name, step.name)
+            if step.kind.name == "zeroshot":
+                labels = [run_label(Path(r)) for r in settings.runs]
+                assert sorted(labels) == sorted(f"{a}/seed{k}" for a in step.inputs() for k in range(seeds[a]))
+                rate = {label: i / 10 for i, label in enumerate(labels)}  # each run's own success rate
+                summary = step.kind.summary.model_validate({
+                    "runs": labels, "envs": settings.envs, "episodes": 1, "seed": 0, "numerical_faults": 0,
+                    **{f"{label}.{env}.{key}": rate[label] for label in labels for env in settings.envs
+                       for key in ("success_rate", "return_mean")}})
+                headline = step.kind.headline(summary)
+                for f in (f for f in recipe.findings if f.step == step.name):
+                    per_seed = step.kind.seed_values([(step.name, summary)], f.key)
+                    arm = f.key.split(".")[0]
+                    assert sorted(per_seed) == sorted((f"seed{k}", rate[f"{arm}/seed{k}"]) for k in range(seeds[arm]))
+                    assert headline[f.key] == pytest.approx(sum(v for _, v in per_seed) / seeds[arm]), (name, f.key)

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from motorlab.errors import MotorlabError
-from motorlab.report.results import Number, read_run_results, read_study_results
+from motorlab.report.results import DEMO_LABEL, Number, read_run_results, read_study_results
 from motorlab.rl.steps import TRAIN
 from motorlab.runs import CONFIG, SUMMARY, is_complete, read_json
 
@@ -178,12 +178,19 @@ class Study(Result):
                 found[name] = [load(p) for p in seeds]
         return found
 
+    @property
+    def demo(self) -> str | None:
+        """Why its budgets or seeds are small on purpose (a quick or demo recipe's `demo`), else None."""
+        results = read_study_results(self.path) if self.findings else None
+        return results.demo if results else None
+
     def _rows(self) -> list[tuple[str, str]]:
         results = read_study_results(self.path) if self.findings else None
         if results is None:
             return super()._rows()
-        return [(f"{f.label} ({f.step})", f.text + (f"  {_over_seeds(f)}" if f.aggregate else "")
-                 + (f"  episodes: {f.pooled}" if f.pooled else "")) for f in results.findings]
+        demo = [(DEMO_LABEL, results.demo)] if results.demo else []  # first: a reader sees it before the numbers
+        return demo + [(f"{f.label} ({f.step})", f.text + (f"  {_over_seeds(f)}" if f.aggregate else "")
+                        + (f"  episodes: {f.pooled}" if f.pooled else "")) for f in results.findings]
 
     def _repr_html_(self) -> str:
         table = html.escape(self.table)

@@ -3,7 +3,8 @@
 The file carries everything inline (plots as PNG data URIs, videos as MP4 data URIs,
 CSS in the page, no scripts or network assets), so it opens offline and can be mailed:
 
-    findings           a study's few numbers it is about, with seeds, IQM and 95% CI
+    findings           a study's few numbers it is about, with seeds, IQM and 95% CI (and, above
+                       them, why a quick or demo recipe's budgets or seeds are small)
     study              its figures (each with a caption), then each step's headline numbers,
                        labelled and in their units; the full summary.json one click away
     comparison         training runs side by side, one column per run and seed: their results,
@@ -31,8 +32,9 @@ from motorlab.environment import describe
 from motorlab.errors import MotorlabError
 from motorlab.intervals import across_seeds
 from motorlab.report.plots import figure_caption
-from motorlab.report.results import Finding, Number, StepResults, read_run_results, read_study_results
+from motorlab.report.results import DEMO_LABEL, Finding, Number, StepResults, read_run_results, read_study_results
 from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, is_complete, read_json
+from motorlab.stats import steps_to_threshold
 
 REPORT = "report.html"
 # Headline keys of a comparison, in the order readers scan them; other numbers shared
@@ -116,6 +118,7 @@ class StudyView:
     findings: list[Finding] = field(default_factory=list)
     results: list[StepResults] | None = None  # each step's numbers as shown, where the study wrote them
     linked: set[str] | None = None  # rows whose runs the page shows (None: every row's)
+    demo: str | None = None  # why its budgets or seeds are small on purpose (its recipe's `demo`)
 
 
 def _scalar(v: Any) -> bool:
@@ -210,7 +213,8 @@ class _Collector:
         return StudyView(name=name, path=path, description=summary.get("description", ""),
                          steps=steps, columns=columns, rows=rows, plots=plots, runs=runs,
                          table_text=table.read_text() if table.is_file() else None,
-                         findings=results.findings if results else [], results=results.steps if results else None)
+                         findings=results.findings if results else [], results=results.steps if results else None,
+                         demo=results.demo if results else None)
 
     def tune(self, path: Path) -> StudyView:
         """A `motorlab tune` folder: the best settings and their numbers on the search's seeds and on
@@ -225,19 +229,21 @@ class _Collector:
         columns = ["state", *space, "value", "per seed", "env steps", "env steps saved"]
         rows = []
         for t in trials:
-            values = [t["state"].lower(), *(_parsed(t.get(k, "")) for k in space), _parsed(t["value"]), t["seed_values"],
+            values = [t["state"].lower(), *(_parsed(t.get(k, "")) for k in space), _parsed(t["value"]),
+                      _seed_cells(t["seed_values"], t.get("seed_censored", "")),
                       _parsed(t["env_steps"]), _parsed(t["env_steps_saved"])]
             rows.append((f"trial-{t['number']}", [Cell(c, v) for c, v in zip(columns, values)]))
         findings = []
         if best is not None:
             seeds = [f"seed{s}" for s in summary.get("seeds", [])]
             findings.append(_finding(f"{objective}, best trial ({best}) on the search's seeds", f"trial-{best}",
-                                     objective, summary["best_value"], seeds, summary.get("best_seed_values") or []))
+                                     objective, summary["best_value"], seeds, summary.get("best_seed_values") or [],
+                                     summary.get("best_seed_censored")))
         if summary.get("fresh_values"):
             findings.append(_finding(f"{objective}, the best settings on fresh seeds", "fresh", objective,
                                      summary.get("fresh_value", summary.get("fresh_iqm")),
                                      [f"seed{s}" for s in summary["fresh_seeds"]],
-                                     summary["fresh_values"]))
+                                     summary["fresh_values"], summary.get("fresh_censored")))
         runs = []
         for label, folder in ((f"trial-{best}", path / "trials" / str(best)), ("fresh", path / "fresh")):
             if best is not None and folder.is_dir():
@@ -245,7 +251,8 @@ class _Collector:
         counts = ", ".join(f"{n} {state}" for state, n in (summary.get("n_trials") or {}).items())
         best_params = ", ".join(f"{k}={fmt(v)}" for k, v in (summary.get("best_params") or {}).items())
         description = (f"Optuna search ({config.get('sampler', 'tpe')} sampler, {config.get('pruner', 'median')} "
-                       f"pruning), {summary.get('direction', '')} {objective}: each trial is the IQM over seeds "
+                       f"pruning), {summary.get('direction', '')} {objective}: each trial is the "
+                       f"{summary.get('statistic', 'IQM')} over seeds "
                        f"{', '.join(map(str, summary.get('seeds', [])))}. Trials: {counts}. "
                        + (f"Best: trial {best}, {best_params}. best.toml holds it as a preset file "
                           "(motorlab train --preset-file best.toml). " if best is not None else "")
@@ -272,17 +279,33 @@ def _video_captions(path: Path, summary: dict[str, Any]) -> dict[str, str]:
             for i, (v, r) in enumerate(zip(videos, returns))}
 
 
-def _finding(label: str, step: str, key: str, value: float, seeds: list[str], values: list[float]) -> Finding:
+def _finding(label: str, step: str, key: str, value: float, seeds: list[str], values: list[float],
+             censored: list[bool] | None = None) -> Finding:
     """A tuning number over seeds (the search's value, or the fresh seeds'), each seed's value, and
-    what the seeds give together (motorlab.intervals: an interval only from 3 seeds on)."""
+    what the seeds give together (motorlab.intervals: an interval only from 3 seeds on). Steps to
+    success: k of n solved and their Kaplan-Meier median, an unsolved seed shown as "> budget"."""
+    censored = censored or [False] * len(values)
     together = {}
-    if len(values) > 1:
+    steps = key.rpartition(".")[2] == "steps_to_success"
+    if steps and values:
+        top = max(1, int(max(values)))  # a solved seed's budget is not kept: the largest seen
+        reached = steps_to_threshold([None if c else max(1, int(v)) for v, c in zip(values, censored)],
+                                     [max(1, int(v)) if c else top for v, c in zip(values, censored)])
+        together = {"aggregate": reached.text, "ci": None, "ci_method": "unsolved seeds censored at their budgets"}
+    elif len(values) > 1:
         summary = across_seeds(values)
         together = {"aggregate": f"{summary.statistic} {fmt(summary.value)}",
                     "ci": f"[{fmt(summary.ci[0])}, {fmt(summary.ci[1])}]" if summary.ci else None,
                     "ci_method": summary.method}
-    return Finding(label=label, step=step, key=key, text=fmt(value), value=value, seeds=seeds,
-                   values=[fmt(v) for v in values], **together)
+    text = f"restricted mean {fmt(value)}" if steps else fmt(value)
+    return Finding(label=label, step=step, key=key, text=text, value=value, seeds=seeds,
+                   values=[f"> {fmt(v)}" if c else fmt(v) for v, c in zip(values, censored)], **together)
+
+
+def _seed_cells(values: str, censored: str) -> str:
+    """trials.csv's per-seed numbers as people read them: an unsolved seed's "> budget"."""
+    flags = [c == "1" for c in censored.split()] or [False] * len(values.split())
+    return " ".join(f">{v}" if c else v for v, c in zip(values.split(), flags))
 
 
 def _parsed(text: str) -> Any:
@@ -391,11 +414,12 @@ def build_report(paths: list[Path], out: Path | None = None) -> Path:
     all_runs = runs + [r for s in studies for r in s.runs]
     comparison = _comparison(all_runs)
     env = jinja2.Environment(loader=jinja2.PackageLoader("motorlab.report", "templates"),
-                             autoescape=jinja2.select_autoescape(), undefined=jinja2.StrictUndefined)
+                             # report.html.j2: select_autoescape() alone matches .html, not .html.j2 (text was inserted raw)
+                             autoescape=jinja2.select_autoescape(["html", "htm", "xml", "html.j2"]), undefined=jinja2.StrictUndefined)
     html = env.get_template("report.html.j2").render(
         title=" · ".join(s.name for s in studies) or " · ".join(r.label for r in runs),
         created=datetime.datetime.now().strftime("%Y-%m-%d %H:%M"), studies=studies, runs=runs,
         comparison=comparison, environments=_environments(all_runs),
-        motorlab_version=describe()["packages"]["motorlab"], fmt=fmt)
+        motorlab_version=describe()["packages"]["motorlab"], fmt=fmt, demo_label=DEMO_LABEL)
     atomic_write_text(out, html)
     return out

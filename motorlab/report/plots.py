@@ -188,10 +188,12 @@ def _trace_heatmaps(observations: np.ndarray, actions: np.ndarray, t: np.ndarray
 
 
 def comparison_bars(names: list[str], values: list[float | None], ylabel: str, path: Path, title: str,
-                    caption: str, missing_label: str = "not reached", steps: bool = False) -> Path | None:
+                    caption: str, missing_label: str = "not reached", steps: bool = False,
+                    notes: list[str | None] | None = None) -> Path | None:
     """One bar per study step; steps without a value are marked, not drawn as zero.
-    `steps`: the values are environment steps (labelled 250k, 1.5M). Nothing is drawn (and an
-    older chart at `path` is removed) when no step has a value."""
+    `steps`: the values are environment steps (labelled 250k, 1.5M). `notes`: a line under each
+    bar's label (e.g. "2 of 3 seeds solved"). Nothing is drawn (and an older chart at `path` is
+    removed) when no step has a value."""
     if all(v is None for v in values):
         Path(path).unlink(missing_ok=True)
         return None
@@ -200,8 +202,9 @@ def comparison_bars(names: list[str], values: list[float | None], ylabel: str, p
         xs = np.arange(len(names))
         heights = [v if v is not None else 0.0 for v in values]
         bars = ax.bar(xs, heights, color=["tab:blue" if v is not None else "lightgray" for v in values])
-        for x, v, b in zip(xs, values, bars):
+        for x, v, b, note in zip(xs, values, bars, notes or [None] * len(values)):
             label = missing_label if v is None else (step_count(v) if steps else f"{v:,.0f}")
+            label += f"\n{note}" if note else ""
             ax.annotate(label, (x, b.get_height()),
                         ha="center", va="bottom", fontsize=8)
         ax.set_ylim(bottom=min(0.0, *(v for v in values if v is not None)))

@@ -22,6 +22,8 @@ from typing import Any, Literal
 from motorlab.runs import atomic_write_text
 
 RESULTS = "results.json"
+# What a study's findings say above them when its recipe is a demonstration (its `demo` line follows)
+DEMO_LABEL = "A demonstration, not evidence"
 
 Form = Literal["number", "return", "percent", "steps", "count", "mm", "ms", "s", "text"]
 
@@ -180,10 +182,13 @@ class Finding:
 
 @dataclass(frozen=True)
 class StudyResults:
-    """results.json of a study folder."""
+    """results.json of a study folder. `demo`: why its recipe's budgets or seeds are small on
+    purpose (a quick or demo recipe), shown with the findings; None for a full study (and in files
+    written before it existed)."""
 
     findings: list[Finding]
     steps: list[StepResults]
+    demo: str | None = None
 
 
 def _numbers(rows: list[dict[str, Any]]) -> list[Number]:
@@ -218,8 +223,8 @@ def read_study_results(study_dir: Path) -> StudyResults | None:
     data = _load(Path(study_dir) / RESULTS)
     try:
         return StudyResults([Finding.from_json(f) for f in data["findings"]],
-                            [StepResults(**{**s, "numbers": _numbers(s["numbers"])}) for s in data["steps"]]
-                            ) if data else None
+                            [StepResults(**{**s, "numbers": _numbers(s["numbers"])}) for s in data["steps"]],
+                            data["demo"] if isinstance(data.get("demo"), str) else None) if data else None
     except (KeyError, TypeError):
         return None
 

@@ -16,7 +16,7 @@ from motorlab.report.results import Metric, Number, write_run_results
 from motorlab.rl.config import TrainConfig, resolve
 from motorlab.runs import FolderMode, is_complete, last_timesteps
 from motorlab.settings import Summary
-from motorlab.stats import steps_to_threshold
+from motorlab.stats import steps_to_success
 from motorlab.stepkind import (
     SCORED_METRICS,
     Artifact,
@@ -234,8 +234,7 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
         rates = [s.train_success_rate_last100 for s in summaries]
         # a seed that never solved is censored at the steps it ran (its budget), never counted as a
         # value; the Kaplan-Meier median is None (above the budget) when fewer than half solved
-        reached = steps_to_threshold([s.steps_to_success for s in summaries],
-                                     [max(s.timesteps, s.steps_to_success or 0, 1) for s in summaries])
+        reached = steps_to_success([s.steps_to_success for s in summaries], [s.timesteps for s in summaries])
         return {**seeds_headline([self.scores(s) for s in summaries]),
                 "train_success_rate_last100": statistics.fmean(rates) if None not in rates else None,
                 "steps_to_success": reached.median,

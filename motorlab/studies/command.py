@@ -10,6 +10,7 @@ from rich.console import Console
 from motorlab.command import Command, Resumable
 from motorlab.launcher import ExecutionSettings
 from motorlab.recipes import load_recipe
+from motorlab.report.results import DEMO_LABEL
 
 
 class RunSettings(ExecutionSettings):
@@ -56,7 +57,11 @@ class RunCommand(Command[RunSettings]):
     def report(self, result: Any, settings: RunSettings, console: Console) -> None:
         if settings.check:
             console.print(f"{result.source}: valid, {len(result.steps)} steps: "
-                          + ", ".join(f"{st.name} ({st.kind.name})" for st in result.steps))
+                          + ", ".join(f"{st.name} ({st.kind.name}"
+                                      + (f", {len(st.seeds)} seeds" if st.seeds and len(st.seeds) > 1 else "") + ")"
+                                      for st in result.steps))
+            if result.demo:
+                console.print(f"{DEMO_LABEL}: {result.demo}", highlight=False, markup=False)
             return
         console.print(f"\n[bold]Results:[/bold] {result['study_dir']}  (report.html, table.txt, summary.json, "
                       "plots/*.png, one folder per step)")

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 
 from motorlab import jobs, launcher, trackers
 from motorlab.errors import MotorlabError
@@ -40,6 +41,7 @@ from motorlab.recipes import FindingSpec, Recipe, Step, refs_in
 from motorlab.report.html import build_report
 from motorlab.report.plots import comparison_bars
 from motorlab.report.results import (
+    DEMO_LABEL,
     Finding,
     StepResults,
     StudyResults,
@@ -65,7 +67,7 @@ from motorlab.runs import (
     write_toml,
 )
 from motorlab.settings import Settings, Summary
-from motorlab.stats import steps_to_threshold
+from motorlab.stats import steps_to_success
 from motorlab.studies.schedule import Overlaps, run_overlapped
 
 STEP_FILE = "recipe_step.toml"  # what the study asked of a step, for resuming
@@ -350,10 +352,12 @@ def _run_steps(recipe: Recipe, study_dir: Path, console: Console, execution: Exe
                            outputs.dirs[s.name], study_dir) for s in recipe.steps]
     rows = [[r.step, r.what, results_text(r.numbers), results_text(r.numbers, setup=True), r.note] for r in steps]
     atomic_write_text(study_dir / "table.txt", plain_table(COLUMNS, rows))
-    write_study_results(study_dir, StudyResults(_findings(recipe, results, console), steps))
+    write_study_results(study_dir, StudyResults(_findings(recipe, results, console), steps, recipe.demo))
     write_summary(study_dir, study_summary)
     console.print(rich_table(f"{recipe.name}: {recipe.description}" if recipe.description else recipe.name,
                              COLUMNS, rows, left=tuple(COLUMNS)))
+    if recipe.demo:  # its small budgets or seeds are on purpose: said wherever its numbers are shown
+        console.print(f"[bold yellow]{DEMO_LABEL}:[/bold yellow] {escape(recipe.demo)}")
     build_report([study_dir], study_dir / "report.html")
     study_summary["study_dir"] = str(study_dir)
     return study_summary
@@ -419,7 +423,7 @@ def _censored_steps(step: Step, outcome: _Outcome) -> dict[str, Any]:
     steps = [h.get("steps_to_success") for h in heads]
     if not all(isinstance(h.get("timesteps"), int) and h["timesteps"] > 0 for h in heads):
         return {}
-    reached = steps_to_threshold(steps, [max(h["timesteps"], s or 0) for h, s in zip(heads, steps)])
+    reached = steps_to_success(steps, [h["timesteps"] for h in heads])
     return {"aggregate": reached.text, "ci": None, "ci_method": "unsolved seeds censored at their budgets"}
 
 
@@ -446,7 +450,13 @@ def _figures(recipe: Recipe, results: dict[str, dict[str, Any]], study_dir: Path
                     caption="Mean evaluation return of each step that trains or evaluates a policy "
                             "(several seeds: the mean over seeds).")
     solving = [s.name for s in recipe.steps if s.kind.trains and getattr(s.settings, "until_solved", False)]
+    # several seeds: the bar is their Kaplan-Meier median (unsolved seeds censored at their budgets),
+    # labelled with how many solved; no bar where fewer than half did (the median is above the budget)
+    notes = [f"{results[n]['steps_to_success_solved']} of {results[n]['seeds']} seeds solved"
+             if "steps_to_success_solved" in results[n] and "seeds" in results[n] else None for n in solving]
     comparison_bars(solving, [results[n].get("steps_to_success") for n in solving], "environment steps",
                     study_dir / "plots" / "steps_to_success.png", f"{recipe.name}: steps until consistently solved",
-                    steps=True, caption="Environment steps each training needed until its evaluations were "
-                                        "consistently solved (grey: not within its budget).")
+                    steps=True, missing_label="not within the budget", notes=notes,
+                    caption="Environment steps each training needed until its evaluations were consistently "
+                            "solved; with several seeds the Kaplan-Meier median, unsolved seeds censored at their "
+                            "budgets (grey: not within the budget, or fewer than half the seeds solved).")

@@ -1,5 +1,5 @@
 """`motorlab tune`: an Optuna search over a command's or recipe's settings, each trial judged
-by the IQM over several seeds, with pruning, a resumable shared study, and a fresh-seed check.
+over several seeds (the IQM; steps to success: censored at the budget), with pruning, a resumable shared study, and a fresh-seed check.
 
     space.py      --space KEY=DIST: loguniform, uniform, int, choice
     objective.py  the number per seed (summary.json) and the intermediate numbers (metrics.csv)

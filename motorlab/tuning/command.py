@@ -21,9 +21,11 @@ class TuneSettings(ExecutionSettings):
         "delay), a recipe FIELD or STEP.FIELD, or an SB3 hyperparameter (set.KEY, or any KEY that is not a setting)"))
     trials: int = Field(20, ge=1, description="Trials in all (COMPLETE and PRUNED), over every process sharing the "
                         "study")
-    seeds: int = Field(3, ge=1, description="Seeds per trial (0..K-1); its value is their IQM")
+    seeds: int = Field(3, ge=1, description="Seeds per trial (0..K-1); its value is their IQM (the "
+                       "mean below 4 seeds; for steps_to_success their restricted mean)")
     objective: str = Field("steps_to_success", description=(
-        "steps_to_success (unsolved counts as the budget), final_return, success_rate, or any number in the runs' "
+        "steps_to_success (the seeds' restricted mean: an unsolved seed at its budget; shown as k of n solved "
+        "and their censored median), final_return, success_rate, or any number in the runs' "
         "summary.json (a study's: STEP.METRIC)"))
     direction: Literal["max", "min"] | None = Field(None, description="max or min (default: min for "
                                                     "steps_to_success, else max)")

@@ -4,9 +4,14 @@ while the seeds still train, the intermediate numbers a pruner compares.
 Intermediate numbers are reported at fixed env steps (every `report_every`), never at
 whatever step a poll happened to see, so that a pruner compares trials at the same step:
 
-- steps_to_success (minimized): at step t, each seed's lower bound, t if it has not solved
-  by t, else its steps-to-success. A trial that solved early keeps its value for every later
-  step, so a slower trial is compared against it there.
+- steps_to_success (minimized): at step t, each seed's steps restricted to t: t if it has not
+  solved by t, else its steps-to-success. A trial that solved early keeps its value for every
+  later step, so a slower trial is compared against it there.
+
+A trial's seeds give one number (`Objective.combine`): for steps_to_success their restricted mean
+(each seed's steps, an unsolved seed's budget), which is what the search compares. People read it
+as "k of n seeds; median ..." with unsolved seeds censored at their budgets (`Objective.describe`),
+never the budget shown as if a seed had solved there.
 - final_return, success_rate: the latest evaluation's return (success rate) at or before t,
   from metrics.csv (the evaluations training already makes); a finished seed keeps its last.
 - any other key: no intermediate numbers (nothing to prune on).
@@ -15,6 +20,7 @@ whatever step a poll happened to see, so that a pruner compares trials at the sa
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,8 +28,9 @@ from typing import Any
 import numpy as np
 
 from motorlab.errors import MotorlabError
+from motorlab.intervals import MIN_SEEDS_FOR_IQM
 from motorlab.runs import SUMMARY, is_complete, last_timesteps, read_config, read_json, read_metrics
-from motorlab.stats import DIRECTION, trial_scores
+from motorlab.stats import DIRECTION, Score, trial_scores
 
 EVAL_COLUMN = {"final_return": "eval_return_mean", "success_rate": "eval_success_rate"}
 
@@ -61,27 +68,76 @@ class Objective:
         """Training reports numbers this objective can be judged by before the end."""
         return _base(self.key) in (*EVAL_COLUMN, "steps_to_success")
 
-    def value(self, summary: dict[str, Any]) -> float:
-        """One seed's number. steps_to_success of a run that never solved is its budget.
+    @property
+    def censors(self) -> bool:
+        """A seed may have no value, only a lower bound: steps_to_success of a run that never solved."""
+        return _base(self.key) == "steps_to_success"
+
+    def score(self, summary: dict[str, Any]) -> Score:
+        """One seed's number, and whether it is censored: steps_to_success of a run that never
+        solved is its budget (the least it would have needed), marked censored.
 
         Raises:
             MotorlabError: the summary has no such number (one line listing the keys it has).
         """
         scores = trial_scores(summary)
         if self.key in scores:
-            if _base(self.key) == "steps_to_success" and scores[self.key][1]:
+            if self.censors and scores[self.key][1]:
                 prefix = self.key[: -len("steps_to_success")]
                 budget = summary.get(f"{prefix}budget")
                 if isinstance(budget, (int, float)):
-                    return float(budget)
-            return scores[self.key][0]
+                    return float(budget), True
+            return scores[self.key]
         value = summary.get(self.key)
         if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
+            return float(value), False
         keys = sorted({*scores, *(k for k, v in summary.items() if isinstance(v, (int, float))
                                   and not isinstance(v, bool))})
         raise MotorlabError(f"--objective {self.key}: the runs' summary.json has no number {self.key!r}; "
                             f"numbers it has: {', '.join(keys)}.")
+
+    def value(self, summary: dict[str, Any]) -> float:
+        """One seed's number (a censored one at its budget: see `score`)."""
+        return self.score(summary)[0]
+
+    def statistic(self, n: int) -> str:
+        """What `combine` computes over n seeds."""
+        if self.censors:
+            return "restricted mean"
+        return "IQM" if n >= MIN_SEEDS_FOR_IQM else "mean"
+
+    def combine(self, values: list[float]) -> float:
+        """A trial's number over its seeds, the one the search compares.
+
+        steps_to_success: the restricted mean, each seed's min(steps, budget) averaged (the area
+        under the seeds' censored curve up to the budget: survival analysis's restricted mean).
+        It needs no guess of what an unsolved seed would have needed and ranks a trial that
+        solves more seeds, or sooner, lower. Otherwise the IQM from 4 seeds, else the mean
+        (motorlab.intervals' rule)."""
+        return float(np.mean(values)) if self.censors else iqm(values)
+
+    def reached(self, scores: list[Score]):
+        """Steps to success over the seeds (motorlab.stats.StepsToThreshold): k of n solved and
+        their Kaplan-Meier median, each unsolved seed censored at its budget."""
+        from motorlab.stats import steps_to_threshold  # scipy: only where people read it
+
+        # a solved seed's budget is not in its score: the largest one seen (it only says whether
+        # the seeds shared one), as motorlab.stats does for a sweep's seeds
+        top = max(1, int(max(v for v, _ in scores)))
+        return steps_to_threshold([None if c else max(1, int(v)) for v, c in scores],
+                                  [max(1, int(v)) if c else top for v, c in scores])
+
+    def describe(self, scores: list[Score], fmt: Callable[[float], str]) -> str:
+        """A trial's seeds as people read them: "2 of 3 seeds; median 1,200 steps (Kaplan–Meier);
+        restricted mean 1,900" for steps to success, else "IQM 812.3"."""
+        together = f"{self.statistic(len(scores))} {fmt(self.combine([v for v, _ in scores]))}"
+        return f"{self.reached(scores).text}; {together}" if self.censors else together
+
+    @staticmethod
+    def seed_text(score: Score, fmt: Callable[[float], str]) -> str:
+        """One seed's number; a censored one as "> budget"."""
+        value, censored = score
+        return f"> {fmt(value)}" if censored else fmt(value)
 
     def progress(self, run_dir: Path, step: int) -> float | None:
         """One seed's intermediate number at env step `step`, or None when it is not known yet
@@ -126,7 +182,7 @@ MAX_FILL_REPORTS = 200  # numbers a finished trial reports for the steps after i
 
 def iqm(values: list[float]) -> float:
     """rliable's interquartile mean, scipy.stats.trim_mean(values, 0.25), without importing scipy
-    (a Ray worker imports this module for every trial)."""
+    (a Ray worker imports this module for every trial); below 4 values it cuts nothing: the mean."""
     a = np.sort(np.asarray(values, dtype=float))
     cut = int(0.25 * a.size)
     return float(a[cut:a.size - cut].mean())
@@ -138,7 +194,7 @@ def trial_horizon(dirs: list[Path]) -> int:
 
 
 class Reporter:
-    """A trial's intermediate numbers (IQM over its seeds) at each multiple of `every` env steps
+    """A trial's intermediate numbers (`Objective.combine` over its seeds) at each multiple of `every` env steps
     that every seed has reached, read from their run folders. Both backends report them: the local
     one to its Optuna trial (for the pruner), the ray one to Ray Tune (for its scheduler, ASHA)."""
 
@@ -152,7 +208,7 @@ class Reporter:
         values = [self.objective.progress(d, step) for d in self.dirs]
         if any(v is None for v in values):
             return None
-        return iqm(values)
+        return self.objective.combine(values)
 
     def reached(self) -> list[tuple[int, float]]:
         """(step, number) for every step reached since the last call, in order."""

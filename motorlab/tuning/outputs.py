@@ -15,9 +15,11 @@ import optuna
 import tomli_w
 from optuna.trial import FrozenTrial, TrialState
 
-from motorlab.intervals import SeedsSummary
+from motorlab.intervals import across_seeds
 from motorlab.rl.config import TrainConfig
 from motorlab.runs import atomic_write_text, write_summary
+from motorlab.stats import Score
+from motorlab.tuning.objective import Objective
 from motorlab.tuning.space import Dist
 
 
@@ -26,14 +28,59 @@ class Fresh:
     """The best settings re-run on seeds the search never used."""
 
     seeds: list[int]
-    values: list[float]
-    summary: SeedsSummary  # the IQM from 4 seeds (else the mean), an interval from 3
+    scores: list[Score]  # per seed: (value, censored: steps to success of a seed that never solved)
+    objective: Objective
+
+    @property
+    def values(self) -> list[float]:
+        return [v for v, _ in self.scores]
+
+    @property
+    def text(self) -> str:
+        """What the seeds give together, with an interval only where the seeds allow one."""
+        if self.objective.censors:
+            return self.objective.describe(self.scores, number)
+        return across_seeds(self.values).text(number)
 
     def to_summary(self) -> dict[str, Any]:
-        """summary.json's fresh_* keys (fresh_ci None below 3 seeds; fresh_ci_method says why)."""
-        s = self.summary
-        return {"fresh_seeds": self.seeds, "fresh_values": self.values, "fresh_value": s.value,
-                "fresh_statistic": s.statistic, "fresh_ci": list(s.ci) if s.ci else None, "fresh_ci_method": s.method}
+        """summary.json's fresh_* keys. Steps to success: k of n solved and the censored median,
+        no interval; otherwise the IQM from 4 seeds (else the mean), its interval from 3
+        (fresh_ci None below; fresh_ci_method says why)."""
+        out = {"fresh_seeds": self.seeds, "fresh_values": self.values, "fresh_censored": [c for _, c in self.scores],
+               "fresh_text": self.text}
+        if self.objective.censors:
+            reached = self.objective.reached(self.scores)
+            return {**out, "fresh_value": self.objective.combine(self.values),
+                    "fresh_statistic": self.objective.statistic(len(self.scores)), "fresh_ci": None,
+                    "fresh_ci_method": "no interval: unsolved seeds censored at their budgets",
+                    "fresh_solved": reached.solved, "fresh_median": reached.median,
+                    "fresh_median_above": reached.median_above}
+        s = across_seeds(self.values)
+        return {**out, "fresh_value": s.value, "fresh_statistic": s.statistic,
+                "fresh_ci": list(s.ci) if s.ci else None, "fresh_ci_method": s.method}
+
+
+def keep_seed_scores(trial: optuna.Trial | FrozenTrial, scores: list[Score]) -> None:
+    """A finished trial's per-seed numbers, and which are censored, in the study's database."""
+    trial.set_user_attr("seed_values", [v for v, _ in scores])
+    trial.set_user_attr("seed_censored", [c for _, c in scores])
+
+
+def seed_scores(trial: FrozenTrial) -> list[Score]:
+    """A trial's per-seed numbers (a trial from before censored flags were kept: none censored)."""
+    values = trial.user_attrs.get("seed_values", [])
+    censored = trial.user_attrs.get("seed_censored") or [False] * len(values)
+    return [(float(v), bool(c)) for v, c in zip(values, censored)]
+
+
+def seeds_text(objective: Objective, scores: list[Score]) -> str:
+    """Each seed's number, a censored one as "> budget"."""
+    return ", ".join(objective.seed_text(s, number) for s in scores)
+
+
+def trial_line(objective: Objective, scores: list[Score]) -> str:
+    """A finished trial as the terminal says it."""
+    return f"{objective.key} {objective.describe(scores, number)} (seeds: {seeds_text(objective, scores)})"
 
 
 def shown_trials(study: optuna.Study) -> list[FrozenTrial]:
@@ -44,15 +91,17 @@ def shown_trials(study: optuna.Study) -> list[FrozenTrial]:
 def write_trials_csv(trials: list[FrozenTrial], space: dict[str, Dist], path: Path) -> None:
     buf = io.StringIO()
     writer = csv.writer(buf)
-    writer.writerow(["number", "state", *space, "value", "seed_values", "env_steps", "env_steps_saved"])
+    writer.writerow(["number", "state", *space, "value", "seed_values", "seed_censored", "env_steps", "env_steps_saved"])
     for t in trials:
+        scores = seed_scores(t)
         writer.writerow([t.number, t.state.name, *(t.params.get(k, "") for k in space),
-                         "" if t.value is None else t.value, " ".join(f"{v:g}" for v in t.user_attrs.get("seed_values", [])),
+                         "" if t.value is None else t.value, " ".join(f"{v:g}" for v, _ in scores),
+                         " ".join(str(int(c)) for _, c in scores),
                          t.user_attrs.get("env_steps", ""), t.user_attrs.get("env_steps_saved", "")])
     atomic_write_text(path, buf.getvalue())
 
 
-COLUMNS = ["trial", "state", "settings", "value (IQM)", "per seed", "env steps"]
+COLUMNS = ["trial", "state", "settings", "value", "per seed", "env steps"]
 
 
 def number(v: float) -> str:
@@ -61,20 +110,18 @@ def number(v: float) -> str:
 
 
 def table_rows(trials: list[FrozenTrial], space: dict[str, Dist], best: FrozenTrial | None,
-               fresh: Fresh | None) -> list[list[str]]:
+               fresh: Fresh | None, objective: Objective) -> list[list[str]]:
     rows = []
     for t in trials:
         settings = ", ".join(f"{k}={t.params[k]:.4g}" if isinstance(t.params.get(k), float) else f"{k}={t.params.get(k)}"
                              for k in space if k in t.params)
         mark = " (best)" if best is not None and t.number == best.number else ""
         rows.append([f"{t.number}{mark}", t.state.name.lower(), settings,
-                     "" if t.value is None else number(t.value),
-                     " ".join(map(number, t.user_attrs.get("seed_values", []))),
+                     "" if t.value is None else number(t.value), seeds_text(objective, seed_scores(t)),
                      f"{t.user_attrs.get('env_steps', 0):,}"])
     if best is not None and fresh is not None:
         rows.append([f"{best.number} on fresh seeds", "complete", f"seeds {fresh.seeds[0]}..{fresh.seeds[-1]}",
-                     fresh.summary.text(number),
-                     " ".join(map(number, fresh.values)), ""])
+                     fresh.text, seeds_text(objective, fresh.scores), ""])
     return rows
 
 

@@ -6,7 +6,7 @@ level: this module is imported only once Ray is known to be there (launcher.init
   trial of the study from the moment Tune asks for it (RUNNING, with heartbeats, so the trials of
   a driver that died are failed and queued again, as the local backend's), numbered by the study,
   its runs in OUT/trials/<number>/ (planned here, with the Planner). The intermediate numbers go
-  to the trial at their env steps; the trial ends COMPLETE (final IQM and seed values), PRUNED
+  to the trial at their env steps; the trial ends COMPLETE (final number and seed values), PRUNED
   (Tune's scheduler stopped it) or FAIL (its seeds failed; or interrupted: queued again by the
   next run), with the user attributes the local backend sets, so that tune.write_results reads
   both backends alike.
@@ -31,7 +31,7 @@ from ray.tune.search import Searcher
 from ray.tune.search.optuna import OptunaSearch
 
 from motorlab.errors import MotorlabError, mask_url
-from motorlab.tuning.outputs import number
+from motorlab.tuning.outputs import keep_seed_scores, trial_line
 from motorlab.tuning.ray_trial import JOB, STEPS
 from motorlab.tuning.search import COUNTED, HEARTBEAT_SECONDS, MAX_FAILURES_IN_A_ROW, Counters, counted
 from motorlab.tuning.trials import run_dirs
@@ -160,14 +160,14 @@ class StudySearch(OptunaSearch):
         self._report(trial_id, result)  # the number Tune's scheduler stopped it on reaches no on_trial_result
         n = trial.number
         if "seed_values" in result:  # the seeds finished (the scheduler may have stopped it after: no matter)
-            per_seed = [float(v) for v in result["seed_values"]]
-            trial.set_user_attr("seed_values", per_seed)
+            censored = result.get("seed_censored") or [False] * len(result["seed_values"])
+            scores = [(float(v), bool(c)) for v, c in zip(result["seed_values"], censored)]
+            keep_seed_scores(trial, scores)
             trial.set_user_attr("env_steps", int(result["env_steps_run"]))
             self._ot_study.tell(trial, float(result["value"]))
             self.counters.failures_in_a_row = 0
             self.counters.done.append(n)
-            self._print(f"  [green]✓[/green] trial {n}: {self.metric} IQM {number(float(result['value']))} "
-                        f"(seeds: {', '.join(map(number, per_seed))})")
+            self._print(f"  [green]✓[/green] trial {n}: {trial_line(self.spec.objective, scores)}")
         elif "failed" in result or error:
             message = result.get("failed") or (f"Ray Tune's trial failed; see its error.txt under "
                                                 f"{self.spec.out / 'ray' / 'tune' / f'trial{n}'}")

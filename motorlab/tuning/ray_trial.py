@@ -5,11 +5,11 @@ Ray is imported at module level: this module is imported only once Ray is known 
 only what a trial needs: not Optuna's samplers, nor the study's database).
 
 SeedTrial (a class trainable) plans nothing: it starts the trial's seed processes (planned on the
-driver, in its config), and each `step` returns the next intermediate number, the IQM over the
-seeds at a multiple of --report-every env steps (objective.Reporter, as the local backend reports
+driver, in its config), and each `step` returns the next intermediate number over the seeds
+(objective.Objective.combine) at a multiple of --report-every env steps (objective.Reporter, as the local backend reports
 to its pruner), with `env_steps` as Tune's time. After the seeds end: the numbers up to the budget
 (as the local backend fills them, so later trials are compared with this one there), each with
-the final IQM and the seed values, then the final IQM alone (`final`, `done`); or why they failed.
+the trial's final number and the seed values, then the final number alone (`final`, `done`); or why they failed.
 
 When Tune stops the trial (ASHA), `cleanup` stops the seed processes (Ctrl-C, then a kill after a
 grace period) and waits for them. A class trainable, because Tune runs `stop` (hence `cleanup`) to
@@ -25,7 +25,6 @@ from typing import Any
 from ray import tune
 
 from motorlab.errors import MotorlabError
-from motorlab.intervals import across_seeds
 from motorlab.runs import SUMMARY, read_json
 from motorlab.tuning.objective import Objective, Reporter, budget_of, steps_run, trial_horizon
 from motorlab.tuning.trials import SeedRuns, run_dirs
@@ -83,7 +82,7 @@ class SeedTrial(tune.Trainable):
         return [self._result(self.reporter.last_step, math.nan, failed=message, fatal=fatal, done=True)]
 
     def _end(self) -> list[dict[str, Any]]:
-        """The seeds have ended: the last numbers, then the final IQM (or why they failed)."""
+        """The seeds have ended: the last numbers, then the trial's own (or why they failed)."""
         try:
             self.seeds.wait()
         except Exception as e:  # noqa: BLE001 - the pool itself failed (e.g. cannot start a process)
@@ -92,11 +91,11 @@ class SeedTrial(tune.Trainable):
         if failed:
             return self._failed(failed[0])
         try:
-            per_seed = [self.objective.value(read_json(d / SUMMARY)) for d in self.dirs]
+            scores = [self.objective.score(read_json(d / SUMMARY)) for d in self.dirs]
         except MotorlabError as e:
             return self._failed(str(e), fatal=True)  # no such number: every trial would fail alike
-        value = across_seeds(per_seed).value  # the IQM from 4 seeds, else the mean
-        final = {"value": value, "seed_values": per_seed}
+        value = self.objective.combine([v for v, _ in scores])
+        final = {"value": value, "seed_values": [v for v, _ in scores], "seed_censored": [c for _, c in scores]}
         numbers = [*self.reporter.reached(), *self.reporter.filled(trial_horizon(self.dirs))]
         return [*(self._result(step, v, **final) for step, v in numbers),
                 self._result(max(self.reporter.last_step, trial_horizon(self.dirs)), value, **final, final=True,

@@ -2,7 +2,8 @@
 
 Each Optuna trial samples settings, runs K seeds of them as processes (the sweep's trials),
 reports intermediate numbers while they train (see objective.py) so a pruner can stop a
-hopeless trial, and scores the trial by the IQM over its seeds.
+hopeless trial, and scores the trial over its seeds (objective.Objective.combine: the IQM, or
+for steps to success the restricted mean, unsolved seeds at their budgets).
 
 The study lives in a database (SQLite DIR/study.db by default), under a name derived from
 what is searched, so the same command resumes it and several processes (or machines sharing
@@ -35,10 +36,9 @@ from optuna.trial import FrozenTrial, TrialState
 from sqlalchemy.exc import IntegrityError, OperationalError
 
 from motorlab.errors import MotorlabError, mask_url, redact
-from motorlab.intervals import across_seeds
 from motorlab.runs import SUMMARY, read_json
+from motorlab.tuning import outputs
 from motorlab.tuning.objective import Objective, Reporter, budget_of, steps_run, trial_horizon
-from motorlab.tuning.outputs import number
 from motorlab.tuning.space import Dist
 from motorlab.tuning.trials import Planner, SeedRuns, run_dirs
 
@@ -268,14 +268,13 @@ class Search:
                 raise MotorlabError(f"{MAX_FAILURES_IN_A_ROW} trials in a row failed; the last: {message}")
             raise TrialFailed(message)
         self.counters.failures_in_a_row = 0
-        per_seed = [self.spec.objective.value(read_json(d / SUMMARY)) for d in dirs]
+        scores = [self.spec.objective.score(read_json(d / SUMMARY)) for d in dirs]
         _report(trial, reporter.filled(trial_horizon(dirs)))
-        value = across_seeds(per_seed).value  # the IQM from 4 seeds, else the mean
-        trial.set_user_attr("seed_values", per_seed)
+        value = self.spec.objective.combine([v for v, _ in scores])
+        outputs.keep_seed_scores(trial, scores)
         trial.set_user_attr("env_steps", sum(steps_run(d) for d in dirs))
         self.counters.done.append(trial.number)
-        self.console.print(f"  [green]✓[/green] trial {trial.number}: {self.spec.objective.key} IQM {number(value)} "
-                           f"(seeds: {', '.join(map(number, per_seed))})")
+        self.console.print(f"  [green]✓[/green] trial {trial.number}: {outputs.trial_line(self.spec.objective, scores)}")
         return value
 
     def _pruned(self, trial: optuna.Trial, dirs: list[Path], step: int) -> None:

@@ -24,7 +24,6 @@ from rich.console import Console
 
 from motorlab import launcher, trackers
 from motorlab.errors import MotorlabError, mask_url
-from motorlab.intervals import across_seeds
 from motorlab.launcher import is_finished
 from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
@@ -147,8 +146,8 @@ def fresh_evaluation(spec: TuneSpec, planner: Planner, settings: dict[str, str],
             group.wait()
             if failed := group.failures():
                 raise MotorlabError(f"the re-evaluation on fresh seeds failed: {failed[0]}")
-    values = [spec.objective.value(read_json(Path(t["run_dir"]) / SUMMARY)) for t in runs]
-    return outputs.Fresh(seeds, values, across_seeds(values))
+    scores = [spec.objective.score(read_json(Path(t["run_dir"]) / SUMMARY)) for t in runs]
+    return outputs.Fresh(seeds, scores, spec.objective)
 
 
 
@@ -162,15 +161,17 @@ def write_results(spec: TuneSpec, study: optuna.Study, planner: Planner, console
         fields = outputs.preset_fields(settings, spec.space, None if planner.recipe else planner.options)
         best_toml = spec.out / "best.toml"
         header = [f"best settings of motorlab tune ({spec.study_name}), trial {best.number}: "
-                  f"{spec.objective.key} IQM {outputs.number(best.value)} over seeds {', '.join(map(str, spec.seed_list))}"]
+                  f"{spec.objective.key} {spec.objective.describe(outputs.seed_scores(best), outputs.number)} "
+                  f"over seeds {', '.join(map(str, spec.seed_list))}"]
         if not planner.recipe:
             header.append("reproduce a seed: " + outputs.reproduce_line(spec.target, best_toml, 0))
         outputs.write_best_toml(best_toml, fields, header)
         if planner.recipe:  # a recipe's best settings as a recipe: the best trial's own, at its seed 0
             outputs.write_best_recipe(spec.out / "best_recipe.toml", spec.out / "trials" / str(best.number), header)
     outputs.write_trials_csv(trials, spec.space, spec.out / "trials.csv")
-    rows = outputs.table_rows(trials, spec.space, best, fresh)
-    title = f"tune {spec.objective.key} ({spec.objective.direction}) over {spec.seeds} seeds"
+    rows = outputs.table_rows(trials, spec.space, best, fresh, spec.objective)
+    title = (f"tune {spec.objective.key} ({spec.objective.direction}): each trial's "
+             f"{spec.objective.statistic(spec.seeds)} over {spec.seeds} seeds")
     (spec.out / "table.txt").write_text(plain_table(outputs.COLUMNS, rows))
     console.print(rich_table(title, outputs.COLUMNS, rows, left=("trial", "state", "settings", "per seed")))
     outputs.write_plots(study, spec.space, spec.out / "plots", title)
@@ -183,6 +184,9 @@ def write_results(spec: TuneSpec, study: optuna.Study, planner: Planner, console
         "n_trials": {k: v for k, v in by_state.items() if v}, "best_trial": best.number if best else None,
         "best_value": best.value if best else None, "best_params": best.params if best else None,
         "best_seed_values": best.user_attrs.get("seed_values") if best else None,
+        "best_seed_censored": [c for _, c in outputs.seed_scores(best)] if best else None,
+        "best_text": spec.objective.describe(outputs.seed_scores(best), outputs.number) if best else None,
+        "statistic": spec.objective.statistic(spec.seeds),
         "env_steps_run": steps + (sum(steps_run(spec.out / "fresh" / f"seed{s}") for s in fresh.seeds) if fresh else 0),
         "env_steps_saved_by_pruning": saved, "wall_seconds": round(wall, 2),
     }

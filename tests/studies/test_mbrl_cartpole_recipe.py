@@ -24,7 +24,7 @@ def test_the_bundled_recipe_runs_the_loop_and_sac_for_several_seeds():
     steps = {s.name: s for s in recipe.steps}
     assert [s.kind.name for s in recipe.steps] == ["mbrl", "train", "compare"]
     loop, sac = steps["loop"], steps["sac"]
-    assert loop.seeds == [0, 1, 2, 3, 4] and sac.seeds == [0, 1, 2]
+    assert loop.seeds == sac.seeds == [0, 1, 2, 3, 4]  # 5 seeds per arm
     assert loop.settings.env.id == sac.settings.env.id == "CartpoleSwingup-v0"
     assert loop.settings.rounds * loop.settings.episodes_per_round * 200 == 3000  # the loop's env steps
     assert sac.settings.algo == "sac" and sac.settings.timesteps == 30000 and sac.settings.eval_every == 1000

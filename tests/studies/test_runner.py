@@ -142,3 +142,45 @@ def test_kinds_that_fit_synergies_import_sklearn_before_a_study_starts_threads()
             "assert {'sklearn.decomposition', 'sklearn.preprocessing', 'narwhals'} <= set(sys.modules)")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
+
+
+def test_a_demo_recipe_says_so_with_its_findings(registered, tmp_path):
+    """A quick or demo recipe's `demo` line reaches every place its findings are read: results.json,
+    report.html (above the findings), the printed summary and the Python API's Study; a full
+    study's, and a results.json written before the field existed, have none."""
+    import io
+
+    from motorlab.api.views import load
+    from motorlab.report.results import DEMO_LABEL, read_study_results
+
+    why = "one seed & tiny budgets: it shows the pipeline"
+    recipe = RECIPE.format(value=3) + '[[findings]]\nstep = "b"\nkey = "result"\n'
+    printed = io.StringIO()
+    run_study(parse_recipe(f'demo = "{why}"\n' + recipe, "doubling.toml"), tmp_path / "demo",
+              console=Console(file=printed, width=200))
+    assert json.loads((tmp_path / "demo" / "results.json").read_text())["demo"] == why
+    assert read_study_results(tmp_path / "demo").demo == why
+    report = (tmp_path / "demo" / "report.html").read_text()
+    findings = report[report.index('<section class="findings">'):]
+    assert findings.index(f"{DEMO_LABEL}:") < findings.index('<table class="findings">')
+    assert "one seed &amp; tiny budgets: it shows the pipeline" in findings  # escaped: a recipe's text is no markup
+    assert f"{DEMO_LABEL}: {why}" in printed.getvalue()
+    study = load(tmp_path / "demo")
+    assert study.demo == why and study._rows()[0] == (DEMO_LABEL, why)
+    assert DEMO_LABEL in study._repr_html_() and why in repr(study)
+
+    run_study(parse_recipe(recipe, "doubling.toml"), tmp_path / "full", console=quiet())
+    assert json.loads((tmp_path / "full" / "results.json").read_text())["demo"] is None
+    assert DEMO_LABEL not in (tmp_path / "full" / "report.html").read_text() and load(tmp_path / "full").demo is None
+    older = json.loads((tmp_path / "full" / "results.json").read_text())
+    del older["demo"]
+    (tmp_path / "full" / "results.json").write_text(json.dumps(older))
+    results = read_study_results(tmp_path / "full")
+    assert results is not None and results.demo is None and [f.key for f in results.findings] == ["result"]
+
+
+def test_a_demo_line_is_text():
+    with pytest.raises(MotorlabError, match="field 'demo'"):
+        parse_recipe('demo = ""\n' + RECIPE.format(value=3), "doubling.toml")
+    with pytest.raises(MotorlabError, match="field 'demo'"):
+        parse_recipe("demo = 5\n" + RECIPE.format(value=3), "doubling.toml")

@@ -78,17 +78,18 @@ def test_published_locomotion_sar_recipe_runs(legs_sar, tmp_path):
     sar = load_sar(legs_sar)
     assert (sar.n_synergies, sar.n_muscles) == (20, 80)
     out = tmp_path / "study"
+    # one seed per arm here (the recipe's 5 are for evidence, not for this test of its pipeline)
     proc = run_cli("run", "sar-legs-published", "--set", f"sar={legs_sar}", "--set", "terrain=hilly", *TINY,
-                   "--out", out, timeout=600)
+                   "--set", "seeds=1", "--out", out, timeout=600)
     assert_ok(proc)
-    assert sorted(p.name for p in out.iterdir() if p.is_dir() and (p / "summary.json").is_file()) == \
-        ["curves", "rl-e2e", "sar-rl"]
-    sar_rl, e2e = read_summary(out / "sar-rl"), read_summary(out / "rl-e2e")
+    assert sorted(p.relative_to(out).as_posix() for p in out.glob("**/summary.json")) == \
+        ["curves/summary.json", "rl-e2e/seed0/summary.json", "sar-rl/seed0/summary.json", "summary.json"]
+    sar_rl, e2e = read_summary(out / "sar-rl" / "seed0"), read_summary(out / "rl-e2e" / "seed0")
     assert sar_rl["env_id"] == e2e["env_id"] == "myoLegHillyTerrainWalk-v0"
     assert sar_rl["timesteps"] == e2e["timesteps"] == 400
-    config = (out / "sar-rl" / "config.toml").read_text()
+    config = (out / "sar-rl" / "seed0" / "config.toml").read_text()
     assert str(legs_sar) in config and "phi = 1.0" in config
-    assert tomllib.loads((out / "rl-e2e" / "config.toml").read_text())["env"].get("sar") is None  # SAR-RL's only
+    assert tomllib.loads((out / "rl-e2e" / "seed0" / "config.toml").read_text())["env"].get("sar") is None  # SAR-RL's only
     assert sar_rl["success_by"] == '"solved" at the final step'
     assert 0.0 <= sar_rl["eval_success_rate"] <= 1.0 and sar_rl["eval_episodes"] == 2
 

@@ -253,3 +253,39 @@ def test_an_interrupted_search_resumes_with_its_finished_trials(tmp_path):
 def test_unknown_objective_is_one_line(tmp_path):
     proc = run_cli("tune", QUICK, *SEARCH, "--trials", "1", "--objective", "no_such_key", "--out", tmp_path / "t")
     assert_one_line_error(proc, "no_such_key", "steps_to_success")
+
+
+@pytest.mark.fast
+def test_steps_objective_censors_unsolved_seeds_and_never_shows_the_budget_as_a_value():
+    """Seeds solved at 800 and 1,600 steps, a third unsolved within its 3,000: the search compares
+    the restricted mean ((800 + 1,600 + 3,000) / 3 = 1,800); people read "2 of 3 seeds" and the
+    Kaplan-Meier median (1,600: the estimate reaches 2/3 there), the unsolved seed as "> 3,000"."""
+    from motorlab.report.html import _finding
+    from motorlab.tuning.objective import Objective
+    from motorlab.tuning.outputs import Fresh, number, seeds_text
+
+    objective = Objective.make("steps_to_success", None)
+    summaries = [{"steps_to_success": 800, "timesteps": 800, "budget": 3000},
+                 {"steps_to_success": 1600, "timesteps": 1600, "budget": 3000},
+                 {"steps_to_success": None, "timesteps": 3000, "budget": 3000}]
+    scores = [objective.score(s) for s in summaries]
+    assert scores == [(800.0, False), (1600.0, False), (3000.0, True)]
+    assert objective.combine([v for v, _ in scores]) == pytest.approx(1800.0)
+    assert objective.statistic(3) == "restricted mean"
+    assert objective.describe(scores, number) == ("2 of 3 seeds; median 1,600 steps (Kaplan–Meier); "
+                                                 "restricted mean 1,800")
+    assert seeds_text(objective, scores) == "800, 1,600, > 3,000"
+    fresh = Fresh([100, 101, 102], scores, objective).to_summary()
+    assert (fresh["fresh_solved"], fresh["fresh_median"], fresh["fresh_ci"]) == (2, 1600.0, None)
+    assert fresh["fresh_censored"] == [False, False, True]
+    # fewer than half solved: no median, only a bound; the report's finding says so
+    few = [(800.0, False), (3000.0, True), (3000.0, True)]
+    assert objective.describe(few, number).startswith("1 of 3 seeds; median > 3,000 (budget)")
+    finding = _finding("steps", "fresh", "steps_to_success", 2266.7, ["seed0", "seed1", "seed2"],
+                       [v for v, _ in few], [c for _, c in few])
+    assert finding.values == ["800", "> 3,000", "> 3,000"]
+    assert finding.aggregate.startswith("1 of 3 seeds; median > 3,000") and finding.ci is None
+    # a return objective keeps the across-seed rule: the mean below 4 seeds, its interval from 3
+    returns = Objective.make("final_return", None)
+    assert returns.statistic(3) == "mean" and returns.statistic(4) == "IQM"
+    assert Fresh([100, 101], [(10.0, False), (20.0, False)], returns).to_summary()["fresh_ci"] is None
