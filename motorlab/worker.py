@@ -16,6 +16,11 @@ import sys
 # never see the Ctrl-C that stops it early (motorlab.sweeps.launcher.stop), only the kill after it.
 if hasattr(signal, "pthread_sigmask"):
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+# A shell without job control starts a background command (`motorlab tune ... &`, nohup in a
+# script) with SIGINT ignored, and children inherit that: the Ctrl-C that stops a pruned trial
+# would be lost and the seed would train to its budget. This process is stopped only by its parent.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from pathlib import Path  # noqa: E402

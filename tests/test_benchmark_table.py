@@ -62,10 +62,10 @@ def test_a_benchmark_without_a_result_file_reads_not_yet_run(tmp_path):
 
 
 def test_a_benchmark_the_table_does_not_know_shows_whether_its_targets_are_met():
-    facts = table.facts("dynamics_fit", {"meets_target": False, "speedup": 2.0})
+    facts = table.facts("a_new_benchmark", {"meets_target": False, "speedup": 2.0})
     assert [f.text({"meets_target": False}) for f in facts] == ["target met: **no**"]
     data = {"met": {"plain_median_steps": True, "delayed_median_steps": None}}
-    assert [f.text(data) for f in table.facts("pendulum_steps_to_success", data)] == [
+    assert [f.text(data) for f in table.facts("a_new_benchmark", data)] == [
         "plain_median_steps met: yes", "delayed_median_steps met: –"]  # None: the censoring left it open
 
 

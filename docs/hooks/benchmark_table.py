@@ -32,7 +32,7 @@ class Fact:
 
     label: str
     path: tuple[str, ...]
-    form: str  # "count", "ms", "ratio", "text", "met"
+    form: str  # "count", "ms", "ratio", "percent", "number", "text", "met"
 
     def value(self, data: dict[str, Any]) -> Any:
         for key in self.path:
@@ -41,6 +41,14 @@ class Fact:
 
     def text(self, data: dict[str, Any]) -> str:
         return f"{self.label} {show(self.value(data), self.form)}"
+
+    def present(self, data: dict[str, Any]) -> bool:
+        """The file has this number (an older run's file may not)."""
+        for key in self.path:
+            if not isinstance(data, dict) or key not in data:
+                return False
+            data = data[key]
+        return True
 
 
 def show(value: Any, form: str) -> str:
@@ -54,6 +62,10 @@ def show(value: Any, form: str) -> str:
         return f"{value:.3g}x"
     if form == "count":
         return f"{value:,}"
+    if form == "percent":
+        return f"{100 * value:.0f}%"
+    if form == "number":
+        return f"{value:,.3g}" if abs(value) < 1000 else f"{value:,.0f}"
     return str(value)
 
 
@@ -74,7 +86,47 @@ def facts(benchmark: str, data: dict[str, Any]) -> list[Fact]:
                 for group in data["groups"]] + \
                [Fact(f"{group}: user's reward / bundled", ("groups", group, "ratios", "user_over_builtin"), "ratio")
                 for group in data["groups"]]
-    return target_facts(data)
+    named = NAMED.get(benchmark)
+    # the named facts a file has (an older run's file may lack a newer key), then its targets
+    return [f for f in (named(data) if named else []) if f.present(data)] + target_facts(data)
+
+
+def _sar_study(data: dict[str, Any]) -> list[Fact]:
+    learning = data.get("learning") or {}
+    where = f"{learning.get('env')} at {learning.get('env_steps_per_seed', 0):,} env steps"
+    return [Fact(f"success on {where}, reference SAC:", ("learning", "reference_sac", "success", "value"), "percent"),
+            Fact("sar-sac-fast:", ("learning", "sar_sac_fast", "success", "value"), "percent"),
+            Fact("sar-sac-fast's env steps/s over the reference's:", ("speedup_over_reference", "sar_sac_fast"),
+                 "ratio")]
+
+
+# benchmark -> the numbers its row shows before its targets (each a path into its JSON)
+NAMED = {
+    "sar_study": _sar_study,
+    "sar_robot": lambda d: [Fact("return, SAR-RL:", ("sar_rl", "value"), "number"),
+                            Fact("RL-E2E:", ("rl_e2e", "value"), "number"),
+                            Fact("P(SAR-RL > RL-E2E):", ("p_sar_better", "p"), "number"),
+                            Fact("wall:", ("wall_seconds",), "number")],
+    "sar_legs": lambda d: [Fact("full study projected, hours on this machine:", ("study", "projected_full_hours"),
+                                "number"),
+                           Fact("on a Ray cluster, a machine per seed:",
+                                ("study", "projected_full_hours_ray_cluster_one_machine_per_seed"), "number")],
+    "dynamics_fit": lambda d: [Fact("fit speedup over the reference:", ("speedup",), "ratio"),
+                               Fact("validation MSE / the reference's:", ("mse_ratio",), "ratio")],
+    "dynamics_collect": lambda d: [Fact("transitions/s over the reference's:", ("ratio",), "ratio")],
+    "evaluate_parallel": lambda d: [Fact("every core over one process:", ("ratio",), "ratio")],
+    "sar_decode": lambda d: [Fact("scikit-learn's time / motorlab's:", ("ratio_sklearn_over_motorlab",), "ratio")],
+    "upkie_fps": lambda d: [Fact("env steps/s over Upkie's defaults:", ("speedup_k2_over_upkie_defaults",), "ratio")],
+    "mpc": lambda d: [Fact("plan per control step:", ("motorlab", "plan_ms_median"), "ms"),
+                      Fact("return:", ("motorlab", "return_mean"), "number"),
+                      Fact("plan speedup over EvoTorch CEM:", ("plan_speedup",), "ratio")],
+    "pendulum_steps_to_success": lambda d: [
+        Fact("plain, motorlab / SB3 steps:", ("plain", "steps_ratio_motorlab_over_sb3", "text"), "text"),
+        Fact("delayed:", ("delayed_tau_0.2s_action_and_observation", "steps_ratio_motorlab_over_sb3", "text"), "text")],
+    "sar_study_overlap": lambda d: [Fact("two chains at once over one after another:", ("speedup",), "ratio"),
+                                    Fact("same numbers both ways:", ("same_numbers",), "met")],
+    "tune": lambda d: [Fact("tuned / defaults steps:", ("ratio_tuned_over_defaults", "text"), "text")],
+}
 
 
 def target_facts(data: dict[str, Any]) -> list[Fact]:
@@ -83,7 +135,7 @@ def target_facts(data: dict[str, Any]) -> list[Fact]:
         return [Fact(f"{k} met:", ("met", k), "met") for k in data["met"]]
     if isinstance(data.get("targets"), dict) and all(isinstance(v, dict) and "met" in v for v in data["targets"].values()):
         return [Fact(f"{k} met:", ("targets", k, "met"), "met") for k in data["targets"]]
-    for key in ("meets_target", "meets_scaled_targets", "meets_targets", "all_met"):
+    for key in ("meets_target", "meets_scaled_targets", "meets_targets", "all_met", "met"):
         if isinstance(data.get(key), bool):
             return [Fact("target met:", (key,), "met")]
     return []
@@ -121,6 +173,8 @@ def rows(results: Path = BENCHMARKS / "results") -> list[tuple[str, str, str, st
             data = json.loads(path.read_text())
             commit = (data.get("git") or {}).get("commit") or ""
             when = dated(path, data) + (f", `{commit[:7]}`" if commit else "")
+            if (data.get("git") or {}).get("changed_during_run"):
+                when += " (the tree changed during the run)"  # see the file's git.at_end
             shown = "; ".join(f.text(data) for f in facts(data.get("benchmark", script), data))
             if data.get("quick"):
                 shown = f"(a `--quick` smoke run) {shown}"
