@@ -138,7 +138,9 @@ def target_facts(data: dict[str, Any]) -> list[Fact]:
     for key in ("meets_target", "meets_scaled_targets", "meets_targets", "all_met", "met"):
         if isinstance(data.get(key), bool):
             return [Fact("target met:", (key,), "met")]
-    return []
+    # several named ones: meets_ratio_target, meets_rate_target, ...
+    return [Fact(f"{k.removeprefix('meets_').replace('_', ' ')} met:", (k,), "met")
+            for k, v in data.items() if k.startswith("meets_") and isinstance(v, bool)]
 
 
 def scripts() -> list[str]:

@@ -283,3 +283,26 @@ def test_an_interrupted_recipe_train_step_resumes_from_its_checkpoint(tmp_path):
     assert "continuing the interrupted run from its last checkpoint" in proc.stdout
     summary = read_summary(study / "ppo")
     assert summary["resumed_from"] >= 1024 and summary["timesteps"] == 6144
+
+
+def test_a_worker_started_with_ctrl_c_ignored_still_stops_on_it(tmp_path):
+    """A background job of a shell without job control (`motorlab tune ... &` in a script) starts
+    with SIGINT ignored, and its children inherit that: a trial's worker must still stop on the
+    Ctrl-C its parent sends it (a pruned or stopped trial), not train to its budget."""
+    from motorlab import jobs
+    from motorlab.rl.config import resolve
+
+    out = tmp_path / "run"
+    settings = resolve({"env": {"id": ENV_ID}, "algo": "ppo", "timesteps": 100000, "progress": False})
+    path = jobs.job("train", settings.config(), {"out": out}).write(tmp_path / "job.json")
+    proc = subprocess.Popen(jobs.process(path), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    deadline = time.monotonic() + 120
+    while not (out / "config.toml").is_file() and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert (out / "config.toml").is_file(), "the run never started"
+    time.sleep(1.0)  # into training
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert not (out / "summary.json").exists()  # stopped, not finished
