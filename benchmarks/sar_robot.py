@@ -15,7 +15,11 @@ rliable's IQM and 95% stratified-bootstrap CI, the zero-shot returns likewise, a
 RL-E2E: the difference of the IQMs and their ratio (where both are positive), whichever way it
 goes. Ant has no success flag: returns it is.
 
-Measured at full scale (2026-11-25, this 2-core machine): 913 s. 5 synergies (VAF 80.5%) of
+Measured at full scale with 5 seeds a side (2026-11-28, results/sar_robot.json): 1,777 s (target
+<= 1,800 s: met). 5 synergies (VAF 80.5%). SAR-RL IQM -54.5 [-149.4, -12.2], RL-E2E -5.6 [-12.8,
+3.2]; P(SAR-RL > RL-E2E) 0.08 [0.00, 0.32]; Mann-Whitney p = 0.99: the science target is not met,
+RL-E2E is ahead. Zero-shot -34.9 vs -24.0, P 0.32 [0.00, 0.68].
+Earlier, with 3 seeds a side (2026-11-25): 913 s. 5 synergies (VAF 80.5%) of
 the 8 motor commands. Running backward, both arms still fail at these budgets: SAR-RL IQM -45
 [-111, -11], RL-E2E -8 [-16, -1]; zero-shot -54 vs -58. At 1/8 scale an earlier run went the
 other way (691 vs 469): early in learning the result turns on falls, not on gait.
