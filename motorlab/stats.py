@@ -55,12 +55,19 @@ def trial_scores(summary: dict[str, Any]) -> dict[str, Score]:
     return _scores_of(summary, "", "eval_")
 
 
+def steps_of_scores(runs: list[Score]) -> StepsToThreshold:
+    """Steps to success over seeds given as Scores: an unsolved seed censored at its budget (its
+    recorded value); a solved seed's budget is not kept, so the largest value seen stands for it
+    (it only says whether the seeds shared one)."""
+    top = max(1, int(max(v for v, _ in runs)))
+    return steps_to_threshold([None if censored else max(1, int(v)) for v, censored in runs],
+                              [max(1, int(v)) if censored else top for v, censored in runs])
+
+
 def _steps_entry(runs: list[Score]) -> dict[str, Any]:
     """Steps to success over seeds: k of n solved and the Kaplan-Meier median, each unsolved seed
     censored at its budget (its recorded value), never counted as if it had solved there."""
-    budget = max(v for v, _ in runs)
-    result = steps_to_threshold([None if censored else int(v) for v, censored in runs],
-                                [int(v) if censored else int(budget) for v, censored in runs])
+    result = steps_of_scores(runs)
     return {"values": [v for v, _ in runs], "censored": [c for _, c in runs], "solved": result.solved,
             "unsolved": result.seeds - result.solved, "median": result.median, "median_above": result.median_above,
             "text": result.text}

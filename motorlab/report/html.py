@@ -34,7 +34,7 @@ from motorlab.intervals import across_seeds
 from motorlab.report.plots import figure_caption
 from motorlab.report.results import DEMO_LABEL, Finding, Number, StepResults, read_run_results, read_study_results
 from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, is_complete, read_json
-from motorlab.stats import steps_to_threshold
+from motorlab.stats import steps_of_scores
 
 REPORT = "report.html"
 # Headline keys of a comparison, in the order readers scan them; other numbers shared
@@ -288,9 +288,7 @@ def _finding(label: str, step: str, key: str, value: float, seeds: list[str], va
     together = {}
     steps = key.rpartition(".")[2] == "steps_to_success"
     if steps and values:
-        top = max(1, int(max(values)))  # a solved seed's budget is not kept: the largest seen
-        reached = steps_to_threshold([None if c else max(1, int(v)) for v, c in zip(values, censored)],
-                                     [max(1, int(v)) if c else top for v, c in zip(values, censored)])
+        reached = steps_of_scores(list(zip(values, censored)))
         together = {"aggregate": reached.text, "ci": None, "ci_method": "unsolved seeds censored at their budgets"}
     elif len(values) > 1:
         summary = across_seeds(values)

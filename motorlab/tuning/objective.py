@@ -30,7 +30,7 @@ import numpy as np
 from motorlab.errors import MotorlabError
 from motorlab.intervals import MIN_SEEDS_FOR_IQM
 from motorlab.runs import SUMMARY, is_complete, last_timesteps, read_config, read_json, read_metrics
-from motorlab.stats import DIRECTION, Score, trial_scores
+from motorlab.stats import DIRECTION, Score, steps_of_scores, trial_scores
 
 EVAL_COLUMN = {"final_return": "eval_return_mean", "success_rate": "eval_success_rate"}
 
@@ -119,13 +119,7 @@ class Objective:
     def reached(self, scores: list[Score]):
         """Steps to success over the seeds (motorlab.stats.StepsToThreshold): k of n solved and
         their Kaplan-Meier median, each unsolved seed censored at its budget."""
-        from motorlab.stats import steps_to_threshold  # scipy: only where people read it
-
-        # a solved seed's budget is not in its score: the largest one seen (it only says whether
-        # the seeds shared one), as motorlab.stats does for a sweep's seeds
-        top = max(1, int(max(v for v, _ in scores)))
-        return steps_to_threshold([None if c else max(1, int(v)) for v, c in scores],
-                                  [max(1, int(v)) if c else top for v, c in scores])
+        return steps_of_scores(scores)
 
     def describe(self, scores: list[Score], fmt: Callable[[float], str]) -> str:
         """A trial's seeds as people read them: "2 of 3 seeds; median 1,200 steps (Kaplan–Meier);
