@@ -43,7 +43,7 @@ from pathlib import Path
 
 from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 from sar_robot import arm, compared, science_target  # over seeds, as for the robot (benchmarks/ is on sys.path)
-from sar_study import steady_rate  # env steps/s after the warm-up, from metrics.csv
+from sar_study import FinalEvaluations, steady_rate  # per-arm evaluations; env steps/s after the warm-up
 
 CHAIN_STEPS = {"play + SAR-RL": 1_500_000 + 2_500_000, "RL-E2E": 4_000_000}
 WARM_UP = 1000  # SAC's learning_starts here: env steps before the first update
@@ -166,17 +166,12 @@ def scaled_study(scale: int, terrain: str, out: Path) -> dict:
 def per_arm(summaries: list[dict]) -> dict:
     """One arm's final evaluations over its seeds: success and return per seed and across seeds,
     the success episodes pooled over the seeds with their Wilson interval."""
-    from motorlab.intervals import pooled_rate
-
-    rates = [float(s["eval_success_rate"]) for s in summaries]
-    episodes = [int(s["eval_episodes"]) for s in summaries]
-    return {"env": summaries[0]["env_id"], "seeds": [s["seed"] for s in summaries],
+    final = FinalEvaluations.of(summaries)
+    return {"env": summaries[0]["env_id"], "seeds": final.seeds,
             "timesteps_per_seed": summaries[0]["timesteps"], "success_by": summaries[0].get("success_by"),
-            "success": arm(rates), "return": arm([float(s["eval_return_mean"]) for s in summaries]),
-            "success_pooled": pooled_rate([round(r * n) for r, n in zip(rates, episodes)], episodes).to_json(),
+            "success": arm(final.success), "return": arm(final.returns), "success_pooled": final.success_pooled(),
             "episode_length_mean_per_seed": [round(float(s["eval_episode_length_mean"]), 1) for s in summaries],
-            "evaluation_episodes_per_seed": episodes,
-            "wall_seconds_per_seed": [round(float(s["wall_seconds"]), 1) for s in summaries]}
+            "evaluation_episodes_per_seed": final.episodes, "wall_seconds_per_seed": final.wall_seconds}
 
 
 def project_cluster(study: dict) -> float:

@@ -35,6 +35,7 @@ import sys
 import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
@@ -138,23 +139,44 @@ def curve(run_dir: Path) -> list[tuple[int, float]]:
             if r.get("eval_success_rate") == r.get("eval_success_rate") and r.get("eval_success_rate") is not None]
 
 
+@dataclass(frozen=True)
+class FinalEvaluations:
+    """An arm's final evaluations, one per seed (each run's summary.json): what sar_study and
+    sar_legs both report per arm."""
+
+    seeds: list[int]
+    success: list[float]
+    returns: list[float]
+    episodes: list[int]
+    wall_seconds: list[float]
+
+    @classmethod
+    def of(cls, summaries: list[dict]) -> FinalEvaluations:
+        return cls(seeds=[int(s["seed"]) for s in summaries],
+                   success=[float(s["eval_success_rate"]) for s in summaries],
+                   returns=[float(s["eval_return_mean"]) for s in summaries],
+                   episodes=[int(s["eval_episodes"]) for s in summaries],
+                   wall_seconds=[round(float(s["wall_seconds"]), 1) for s in summaries])
+
+    def success_pooled(self) -> dict:
+        """The success episodes pooled over the seeds, with their Wilson interval."""
+        from motorlab.intervals import pooled_rate
+
+        return pooled_rate([round(r * n) for r, n in zip(self.success, self.episodes)], self.episodes).to_json()
+
+
 def arm_result(runs: list[Path]) -> dict:
     """One arm over its seeds: success and return per seed, across seeds (the mean, an interval
     from 3 seeds where it has a width), the episodes pooled (Wilson), the curve's mean."""
-    from motorlab.intervals import across_seeds, pooled_rate
+    from motorlab.intervals import across_seeds
 
-    summaries = [json.loads((r / "summary.json").read_text()) for r in runs]
-    rates = [float(s["eval_success_rate"]) for s in summaries]
-    returns = [float(s["eval_return_mean"]) for s in summaries]
-    episodes = [int(s["eval_episodes"]) for s in summaries]
-    pooled = pooled_rate([round(r * n) for r, n in zip(rates, episodes)], episodes)
+    final = FinalEvaluations.of([json.loads((r / "summary.json").read_text()) for r in runs])
     curves = [dict(curve(r)) for r in runs]
     steps = sorted(set.intersection(*(set(c) for c in curves))) if curves else []
-    return {"seeds": [int(r.name.removeprefix("seed")) for r in runs], "success_per_seed": rates,
-            "return_per_seed": [round(v, 2) for v in returns], "episodes_per_seed": episodes,
-            "success": across_seeds(rates).to_json(), "return": across_seeds(returns).to_json(),
-            "success_pooled": pooled.to_json(),
-            "wall_seconds_per_seed": [round(float(s["wall_seconds"]), 1) for s in summaries],
+    return {"seeds": final.seeds, "success_per_seed": final.success,
+            "return_per_seed": [round(v, 2) for v in final.returns], "episodes_per_seed": final.episodes,
+            "success": across_seeds(final.success).to_json(), "return": across_seeds(final.returns).to_json(),
+            "success_pooled": final.success_pooled(), "wall_seconds_per_seed": final.wall_seconds,
             "success_curve_mean": [[t, round(sum(c[t] for c in curves) / len(curves), 3)] for t in steps]}
 
 

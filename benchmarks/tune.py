@@ -7,8 +7,9 @@ maximum return of 1000, checked at the first PPO update after every 1,024 env st
 steps-to-success counts the env steps that trained the first policy that passed.
 
 1. The search: `motorlab tune` over PPO's settings, observation history among them, TRIALS
-   trials, each judged by the IQM of steps-to-success over seeds 0..K-1 (an unsolved seed
-   counts as the search budget), TPE sampler, median pruning on the evaluations training makes.
+   trials, each judged by the restricted mean of steps-to-success over seeds 0..K-1 (the mean of
+   min(steps, budget): an unsolved seed is censored at the search budget, and the record keeps
+   which seeds were), TPE sampler, median pruning on the evaluations training makes.
 2. The winner's settings (best.toml, through `train --preset-file`), SB3's PPO defaults and the
    zoo's hyperparameters, each trained on FRESH seeds the search never saw (1000, 1001, ...) with
    the same, larger budget, so the winner's number is not its selection's.
@@ -184,7 +185,7 @@ def main() -> None:
     motorlab(tune_args, root / "search.log")
     search = json.loads((root / "search" / "summary.json").read_text())
     search_minutes = (time.perf_counter() - t0) / 60
-    log(f"search done in {search_minutes:.1f} min: best trial {search['best_trial']} IQM {search['best_value']:,.0f}")
+    log(f"search done in {search_minutes:.1f} min: best trial {search['best_trial']}: {search['best_text']}")
     study = optuna.load_study(study_name=search["study_name"], storage=search["storage"])
 
     seeds = list(range(FRESH_SEED, FRESH_SEED + a.fresh))
@@ -208,7 +209,8 @@ def main() -> None:
         "task": "InvertedPendulum-v5, 0.2 s delay on action and observation, PPO, steps to 10/10 episodes at 1000",
         "search": {"trials": a.trials, "seeds_per_trial": a.seeds, "budget_per_seed": a.search_budget,
                    "n_trials": search["n_trials"], "best_trial": search["best_trial"],
-                   "best_value_iqm": search["best_value"], "best_seed_values": search["best_seed_values"],
+                   "best_value": search["best_value"], "statistic": search["statistic"], "best_text": search["best_text"],
+                   "best_seed_values": search["best_seed_values"], "best_seed_censored": search["best_seed_censored"],
                    "best_params": search["best_params"], "minutes": round(search_minutes, 1)},
         "fresh_seeds": seeds, "budget_per_fresh_seed": a.budget,
         "motorlab_tuned": tuned, "sb3_ppo_defaults_history10": defaults, "zoo_invertedpendulum_history10": zoo,
