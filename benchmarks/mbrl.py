@@ -284,7 +284,8 @@ def run_oracle(env_id: str, seed: int, seeds: list[int], settings: dict) -> dict
     return {"seed": seed, "reset_seeds": seeds, "returns": returns, "return_mean": float(np.mean(returns)),
             "lengths": [int(x) for x in np.asarray(result.lengths)],
             "plan_ms_median": float(np.median(result.plan_ms)), "wall_seconds": round(time.perf_counter() - started, 1),
-            "settings": {k: getattr(result, k) for k in ("horizon", "population", "iterations", "elites", "seed")}}
+            "settings": {**{k: getattr(result, k) for k in ("horizon", "population", "iterations", "elites", "seed")},
+                         "noise_beta": settings.get("noise_beta", 0.0)}}
 
 
 def oracle_threshold(oracle_mean: float) -> float:
@@ -596,7 +597,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.ceiling:  # the loop's planner on the true simulator: its settings as the loop resolves them
         t = time.perf_counter()
         plan = MbrlSettings(**loop_settings(name, 0, budget, None, None, overrides)).plan()
-        ceiling_settings = {k: plan[k] for k in ("horizon", "population", "iterations", "elites")}
+        ceiling_settings = {k: plan[k] for k in ("horizon", "population", "iterations", "elites", "noise_beta")}
         jobs = [(env["id"], s, eval_seeds(s, EVAL_EPISODES), ceiling_settings) for s in loop_seeds]
         ceiling = in_processes(run_oracle, jobs, args.jobs,
                                lambda r: f"ceiling seed {r['seed']}: mean return {r['return_mean']:.2f} "

@@ -87,10 +87,13 @@ class Recorder:
     def record(self, result: dict, file: str | None = None) -> dict:
         import datetime
 
+        # a script's own "machine" entry is kept beside these facts, not replaced by them
+        reported = result.get("machine")
+        reported = reported if isinstance(reported, dict) else {} if reported is None else {"reported": reported}
         out = {"benchmark": self.name, **result,
                "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                "argv": self.argv, "git": git_state(at_start=self.git), "versions": versions(),
-               "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "load_average_start": self.load,
+               "machine": {**reported, "cpu": cpu_model(), "cores": os.cpu_count(), "load_average_start": self.load,
                            "load_average_end": load()}}
         write_result(out, self.results / f"{file or self.name}.json")
         print(json.dumps(out, indent=2))

@@ -214,7 +214,7 @@ def main() -> None:
     args = parser.parse_args()
     recorder = Recorder("sar_legs")  # the git state and load, read as the run starts
     out: dict = {"benchmark": "sar_legs", "terrain": terrain_ids[args.terrain], "chain_env_steps": CHAIN_STEPS}
-    out["machine"] = machine_speed()
+    out["machine"] = machine_speed()  # kept beside the recorder's cpu, cores and load
     print(f"machine: {out['machine']['speed_vs_noted']} of the noted speeds", file=sys.stderr)
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = args.keep or Path(tmp_name)

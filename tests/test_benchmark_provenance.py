@@ -36,3 +36,12 @@ def test_a_recorded_run_writes_its_result_whole_with_where_it_came_from(tmp_path
     recorder.record({"per_seed": [3.0]}, file="demo-quick")  # a smoke run goes to its own file
     assert json.loads((tmp_path / "demo.json").read_text())["per_seed"] == [1.0, 2.0]
     assert not list(tmp_path.glob("*.tmp"))  # written through a temp file, renamed
+
+
+def test_a_scripts_own_machine_facts_are_kept_beside_the_recorded_ones(tmp_path, capsys):
+    from provenance import Recorder
+
+    recorder = Recorder("demo", results=tmp_path)
+    speed = recorder.record({"machine": {"legs_env_steps_per_second": 1022}})["machine"]
+    assert speed["legs_env_steps_per_second"] == 1022 and speed["cores"] >= 1  # both, neither replaced
+    assert recorder.record({"machine": "x86_64"})["machine"]["reported"] == "x86_64"

@@ -200,8 +200,8 @@ class OracleResult:
 
 
 def oracle_episodes(env: EnvConfig | str, episodes: int, seeds: list[int], *, horizon: int = 15,
-                    population: int = 100, iterations: int = 3, elites: int = 10, seed: int = 0,
-                    progress: bool = False) -> OracleResult:
+                    population: int = 100, iterations: int = 3, elites: int = 10, noise_beta: float = 0.0,
+                    seed: int = 0, progress: bool = False) -> OracleResult:
     """Episodes of MPC that plans on the true simulator: the limit a learned model's MPC can reach.
 
     Every control step, CEM (motorlab.control.mpc.CEMPlanner, warm-started from the last plan, reset
@@ -211,7 +211,7 @@ def oracle_episodes(env: EnvConfig | str, episodes: int, seeds: list[int], *, ho
         env: an env id, or an EnvConfig (its settings that keep state outside the simulation refused).
         episodes: how many episodes; episode i resets with `seeds[i]`.
         seeds: the reset seeds, one per episode.
-        horizon, population, iterations, elites: the CEM's settings.
+        horizon, population, iterations, elites, noise_beta: the CEM's settings.
         seed: the planner's seed.
         progress: show a progress bar.
 
@@ -237,7 +237,7 @@ def oracle_episodes(env: EnvConfig | str, episodes: int, seeds: list[int], *, ho
         scorer = SimulatorScorer(cfg)
         space = controlled.action_space
         planner = CEMPlanner(scorer, space.low, space.high, horizon=horizon, population=population,
-                             iterations=iterations, elites=elites, seed=seed)
+                             iterations=iterations, elites=elites, seed=seed, noise_beta=noise_beta)
         goals = torch.zeros((1, 0))
         returns, lengths, plan_ms = [], [], []
         columns = (TextColumn("oracle {task.description}"), BarColumn(),
