@@ -128,7 +128,12 @@ NAMED = {
         Fact("delayed:", ("delayed_tau_0.2s_action_and_observation", "steps_ratio_motorlab_over_sb3", "text"), "text")],
     "sar_study_overlap": lambda d: [Fact("two chains at once over one after another:", ("speedup",), "ratio"),
                                     Fact("same numbers both ways:", ("same_numbers",), "met")],
-    "tune": lambda d: [Fact("tuned / defaults steps:", ("ratio_tuned_over_defaults", "text"), "text")],
+    "tune": lambda d: [Fact("tuned / defaults steps:", ("ratio_tuned_over_defaults", "text"), "text"),
+                       Fact("tuned median:", ("motorlab_tuned", "median_text"), "text"),
+                       Fact("defaults:", ("sb3_ppo_defaults_history10", "median_text"), "text"),
+                       Fact("wall minutes:", ("wall_minutes",), "number"),
+                       Fact("ratio met:", ("targets", "ratio_met"), "met"),
+                       Fact("minutes met:", ("targets", "minutes_met"), "met")],
 }
 
 
