@@ -16,6 +16,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -179,7 +180,7 @@ def require_continuous(env: gym.Env, env_id: str, user: str, random: bool = Fals
 
 def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "random", workers: int | None = None,
                         seed: int = 0, state: str = "auto", simulator: str = "auto",
-                        progress: bool = True) -> Transitions:
+                        progress: bool = True, before_work: Callable[[], None] | None = None) -> Transitions:
     """Transitions of `episodes` episodes of an env.
 
     Args:
@@ -194,6 +195,10 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
         simulator: "auto" (for the bare Reacher with random actions the arm's closed form where it
             reproduces the model, else MuJoCo rollouts; Gymnasium for anything else, an env with
             wrappers or arguments included), "closed-form", "mujoco" or "gymnasium".
+        progress: show a progress bar.
+        before_work: called once the inputs are checked, before the first episode (`dynamics
+            collect` refuses a finished run's --out there: a mistake in the input is named first,
+            and a refusal costs no episodes).
 
     Raises:
         MotorlabError: bad counts, unknown env or layout, a policy folder that does not fit the env,
@@ -241,6 +246,12 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
             raise MotorlabError("this Reacher arm's dynamics are not the closed form's (it did not reproduce "
                                 "MuJoCo's accelerations); use --simulator mujoco.")
         used = "closed-form" if closed and simulator != "mujoco" else "mujoco"
+    if before_work is not None:
+        try:
+            before_work()
+        except BaseException:
+            env.close()
+            raise
     workers = workers or os.cpu_count() or 1
     start = time.perf_counter()
     with Progress(disable=not progress, transient=False) as bar:

@@ -277,8 +277,8 @@ _exact("Reacher-v4", planning=(_plan("reacher", "reacher_v4", state_size=8),
 # Pusher looks 25 steps ahead (mbrl-lib's PETS Pusher: 25) with 3 iterations, the default's cost (15 x 5).
 # The planner on the true simulator (motorlab.control.oracle; seed 0's first 3 evaluation episodes, one
 # run each): horizon 15 x 5 iterations -41.5 (-50.1, -38.1, -36.4); 25 x 3 -38.7; 25 x 5 -36.2 at 1.7x
-# the cost; 40 x 3 -39.2. On seed 0's 10 evaluation episodes, 25 x 3 scores -36.5 (-46.1 to -28.9): the
-# loop's threshold (SAC's IQM at 30k steps, -37.1) is within 0.6 of what a perfect model gives at this cost.
+# the cost; 40 x 3 -39.2. On each benchmark seed's 10 evaluation episodes (benchmarks/mbrl.py --ceiling),
+# 25 x 3 scores -36.5, -34.8, -38.4, -38.6 and -35.2: SAC's IQM at 30k steps (-37.1) on 3 of 5.
 # A learned model's loop can approach these, not pass them.
 _PUSHER_PLANNER = {"horizon": 25, "iterations": 3}
 _exact("Pusher-v5", planner=_PUSHER_PLANNER, planning=(_plan("observation", "pusher_v5", state_size=23),))

@@ -56,6 +56,7 @@ def test_writing_into_a_finished_run_is_refused(finished, tmp_path, command):
     before = snapshot(target)
     proc = run_here(*[str(finished) if a == "{run}" else a for a in command], "--out", target)
     assert_one_line_error(proc, str(target), "finished run", "--overwrite")
+    assert not proc.stdout.strip(), proc.stdout  # refused before any work (no episodes collected, no progress)
     assert snapshot(target) == before
 
 
