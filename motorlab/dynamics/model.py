@@ -421,6 +421,57 @@ class ForwardModel(nn.Module):
             return (path, torch.stack(outs, 1)[..., n_s]) if reward else path
         return rollout
 
+    def ts_rollout(self, generator: torch.Generator | None = None, reward: bool = False):
+        """Open-loop paths by trajectory sampling (TS-inf, step_fn's "ts" propagation): states (N, S)
+        under action sequences (N, H, A) -> (N, H+1, S), row i always on member i % K (N a multiple
+        of K), a probabilistic member's next state drawn from its Gaussian; with `reward` (a model
+        with a reward head), (path, the head's mean rewards (N, H)).
+
+        Why a path of its own: PETS plans by TS, and step_fn's version spends half a plan's time on
+        the torch calls around the matmuls (normalizing, concatenating, transposing to and from member
+        order at every step ahead). Here the normalizers are folded into the first and last layers,
+        the rows stay in member order for the whole horizon, the first layer's action part of all H
+        steps is one matmul. The draws are step_fn's (one generator, the same calls in the same order),
+        so a seeded plan is the same on either path, to float rounding."""
+        if reward and "reward" not in self.heads:
+            raise MotorlabError("ts_rollout(reward=True) needs a model with a reward head (fit with --learn-reward).")
+        k, n_s, g = self.members, self.state_size, self.gaussian
+        ws, bs, lns = self._planning_layers(reward)
+        cols = ws[-1].shape[-1]  # the delta's columns, and the reward's with `reward`
+        if self.probabilistic:  # the state delta's raw log-variances, computed by the same last matmul
+            ws[-1] = torch.cat([ws[-1], self.net.weights[-1][..., g:g + n_s]], -1)
+            bs[-1] = torch.cat([bs[-1], self.net.biases[-1][..., g:g + n_s]], -1)
+            max_lv, min_lv = self.max_logvar[..., :n_s].detach(), self.min_logvar[..., :n_s].detach()
+            std_d = self.delta_norm.std.float()  # a draw of the normalized delta, in state units
+        first_s, first_a, first_b, rest = self._members_folded(ws, bs, lns)
+
+        @torch.no_grad()
+        def rollout(states: torch.Tensor, actions: torch.Tensor):
+            n, h, a = actions.shape
+            m = n // k
+            s = states.reshape(m, k, n_s).transpose(0, 1)  # (K, M, S): member j's rows
+            action_part = torch.baddbmm(first_b, actions.reshape(m, k, h * a).transpose(0, 1).reshape(k, m * h, a),
+                                        first_a).view(k, m, h, -1)
+            path, outs = [s], []
+            for t in range(h):
+                x = torch.baddbmm(action_part[:, :, t], path[-1], first_s)
+                for w, b in rest:
+                    x = torch.baddbmm(b, _hidden(x, self.nonlinearity), w)
+                delta = x[..., :n_s]
+                if self.probabilistic:  # PETS' soft bounds on the log-variance, then a draw (step by step:
+                    lv = max_lv - F.softplus(max_lv - x[..., cols:])  # step_fn's numbers, in its order)
+                    lv = min_lv + F.softplus(lv - min_lv)
+                    noise = torch.randn((k, m, n_s), generator=generator, device=states.device)
+                    delta = torch.addcmul(delta, (0.5 * lv).exp_().mul_(std_d), noise)
+                if reward:
+                    outs.append(x[..., n_s])
+                path.append(path[-1] + delta)
+            path = torch.stack(path, 2).transpose(0, 1).reshape(n, h + 1, n_s)
+            if not reward:
+                return path
+            return path, torch.stack(outs, 2).transpose(0, 1).reshape(n, h)
+        return rollout
+
     @torch.no_grad()
     def _single_member(self, ws, bs, lns):
         """Member 0's planning layers as 2-d tensors: the first layer split into its state and action rows."""

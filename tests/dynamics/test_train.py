@@ -281,11 +281,61 @@ def test_fast_rollout_with_a_reward_head_equals_step_fn(members, nonlinearity):
     torch.testing.assert_close(exact(s, plans, goals), -path[:, 1:].square().sum((1, 2)), rtol=1e-5, atol=1e-3)
 
 
+@pytest.mark.parametrize("nonlinearity", ["tanh", "silu"])
+@pytest.mark.parametrize("probabilistic, heads", [(True, ()), (True, ("reward",)), (False, ("reward",))])
+def test_ts_rollout_equals_step_fn_trajectory_sampling(probabilistic, heads, nonlinearity):
+    """The planner's TS path draws the same noise as step_fn's "ts" propagation (one seeded generator,
+    the same draws in the same order) and so gives the same paths, each row on its member, and the same
+    reward-head predictions; model_scorer plans on it (the same returns as stepping by hand)."""
+    from motorlab.dynamics.rewards import Task
+
+    rng = np.random.default_rng(3)
+    torch.manual_seed(3)
+    k = 4
+    model = ForwardModel(8, 2, members=k, probabilistic=probabilistic, heads=heads, nonlinearity=nonlinearity)
+    model.fit_normalizers(rng.normal(1, 3, (200, 8)), rng.uniform(-1, 1, (200, 2)),
+                          rng.normal(1, 3, (200, 8)) + rng.normal(0, 0.1, (200, 8)), rng.normal(-2, 5, 200))
+    with torch.no_grad():  # members that differ, variances well inside their bounds and at them
+        for p in model.parameters():
+            p.add_(0.2 * torch.randn_like(p))
+    # 8 candidates, each as k particles (row i on member i % k), as model_scorer lays them out
+    s = torch.as_tensor(rng.normal(1, 3, (8, 8)), dtype=torch.float32).repeat_interleave(k, 0)
+    plans = torch.as_tensor(rng.uniform(-1, 1, (8, 6, 2)), dtype=torch.float32).repeat_interleave(k, 0)
+    step = model.step_fn("ts", torch.Generator().manual_seed(7))
+    path, rewards = [s], []
+    for t in range(6):
+        next_states, r, _ = step(path[-1], plans[:, t])
+        path.append(next_states)
+        rewards.append(r)
+    path = torch.stack(path, 1)
+
+    learned = "reward" in heads
+    fast = model.ts_rollout(torch.Generator().manual_seed(7), reward=learned)(s, plans)
+    fast_path, fast_rewards = fast if learned else (fast, None)
+    assert fast_path.shape == (32, 7, 8)
+    rtol = 1e-4 if nonlinearity == "silu" else 1e-5  # float32 sums in another order, as above
+    torch.testing.assert_close(fast_path, path, rtol=rtol, atol=1e-4)
+    if learned:
+        torch.testing.assert_close(fast_rewards, torch.stack(rewards, 1), rtol=rtol, atol=1e-4)
+    if probabilistic:  # the draws differ between particles of one member: the noise is there
+        assert not torch.allclose(fast_path[::k, 1], model.ts_rollout(None)(s, plans)[::k, 1])
+
+    goals = torch.zeros(32, 0)
+    task = Task(None, None, "learned", "none") if learned else \
+        Task(lambda s0, a, s1, g: -s1.square().sum(-1), None, "builtin", "none")
+    score = model_scorer(model, task, propagation="ts", generator=torch.Generator().manual_seed(7))
+    expected = (torch.stack(rewards, 1) if learned else -path[:, 1:].square().sum(-1)).sum(1)
+    torch.testing.assert_close(score(s[::k], plans[::k], goals[::k]),
+                               expected.reshape(-1, k).mean(1), rtol=1e-4, atol=1e-3)
+
+
 def test_fast_rollout_refuses_what_it_does_not_cover():
     with pytest.raises(MotorlabError, match="deterministic models"):
         ForwardModel(4, 1, probabilistic=True, heads=("reward",)).fast_rollout(reward=True)
     with pytest.raises(MotorlabError, match="reward head"):
         ForwardModel(4, 1, members=2).fast_rollout(reward=True)
+    with pytest.raises(MotorlabError, match="reward head"):
+        ForwardModel(4, 1, members=2, probabilistic=True).ts_rollout(reward=True)
 
 
 def test_damaged_model_json_is_checked_against_the_weights_before_allocating(reacher_data, tmp_path):
