@@ -200,14 +200,16 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
     learned_reward = reward_fn is None
     learned_end = end_fn is None and end_source == "learned"
     deterministic = getattr(model, "deterministic", getattr(model, "plain", True))
-    headed = not learned_reward or "reward" in getattr(model, "heads", ())
-    fast = deterministic and propagation == "mean" and not learned_end and headed
-    if fast and learned_reward:  # (path, the reward head's predictions (N, H))
+    whole_path = not learned_end and (not learned_reward or "reward" in getattr(model, "heads", ()))
+    fast_mean = whole_path and deterministic and propagation == "mean"
+    fast_ts = whole_path and propagation == "ts" and hasattr(model, "ts_rollout")  # step_fn's TS, ~20% faster
+    fast = fast_mean or fast_ts
+    if fast_ts:  # with a learned reward: (path, the reward head's predictions (N, H))
+        rollout = model.ts_rollout(generator, reward=learned_reward)
+    elif fast and learned_reward:
         rollout = model.fast_rollout(reward=True)
     elif fast:
         rollout = model.fast_rollout() if hasattr(model, "fast_rollout") else stepwise_rollout(model.predict)
-    elif propagation == "ts" and not learned_end and headed and hasattr(model, "ts_rollout"):
-        fast, rollout = True, model.ts_rollout(generator, reward=learned_reward)  # step_fn's TS, ~20% faster
     else:
         step = model.step_fn(propagation, generator)
 

@@ -338,6 +338,9 @@ class ForwardModel(nn.Module):
     def _check_fast(self, what: str, reward: bool = False) -> None:
         if self.probabilistic:
             raise MotorlabError(f"{what} covers deterministic models; use step_fn for probabilistic members.")
+        self._check_reward_head(what, reward)
+
+    def _check_reward_head(self, what: str, reward: bool) -> None:
         if reward and "reward" not in self.heads:
             raise MotorlabError(f"{what}(reward=True) needs a model with a reward head (fit with --learn-reward).")
 
@@ -429,12 +432,11 @@ class ForwardModel(nn.Module):
 
         Why a path of its own: PETS plans by TS, and step_fn's version spends about a quarter of a
         plan's time on the torch calls around the matmuls (normalizing, concatenating, transposing to
-        and from member order at every step ahead); one env's Pusher plan took ~20% less time here. Here the normalizers are folded into the first and last layers,
-        the rows stay in member order for the whole horizon, the first layer's action part of all H
-        steps is one matmul. The draws are step_fn's (one generator, the same calls in the same order),
+        and from member order at every step ahead). Here the normalizers are folded into the first and
+        last layers, the rows stay in member order for the whole horizon, and the first layer's action
+        part of all H steps is one matmul: one env's Pusher plan takes ~20% less time. The draws are step_fn's (one generator, the same calls in the same order),
         so a seeded plan is the same on either path, to float rounding."""
-        if reward and "reward" not in self.heads:
-            raise MotorlabError("ts_rollout(reward=True) needs a model with a reward head (fit with --learn-reward).")
+        self._check_reward_head("ts_rollout", reward)
         k, n_s, g = self.members, self.state_size, self.gaussian
         ws, bs, lns = self._planning_layers(reward)
         cols = ws[-1].shape[-1]  # the delta's columns, and the reward's with `reward`
