@@ -500,6 +500,10 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                         help="also play the oracle (MPC on the true simulator) with the loop's own planner settings "
                              f"on every loop seed's {EVAL_EPISODES} evaluation episodes: what the loop's planner "
                              "reaches with a perfect model, the ceiling of a learned one")
+    parser.add_argument("--ceiling-from", type=Path, default=None, metavar="RESULT_JSON",
+                        help="with --ceiling: reuse the ceiling of an earlier result file (benchmarks/results/"
+                             "mbrl-NAME.json) whose planner settings and reset seeds are this run's (the oracle "
+                             "is seeded: a rerun plays the same episodes), instead of playing it again")
     parser.add_argument("--jobs", type=int, default=2, help="SAC and oracle processes at once (one per core)")
     parser.add_argument("--loop-jobs", type=int, default=2,
                         help="the loop's seeds at once, each in its own process (1: one at a time, alone)")
@@ -514,6 +518,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--loop-set", action="append", default=[], metavar="KEY=VALUE",
                         help="a loop setting (an MbrlSettings field), for experiments, e.g. --loop-set horizon=20")
     args = parser.parse_args(argv)
+    if args.ceiling_from and not args.ceiling:
+        parser.error("--ceiling-from reuses a ceiling: give --ceiling too")
     if args.resume and not args.keep:
         parser.error("--resume continues the loop folders of --keep DIR: give --keep")
     if args.loop_seeds == 0 and not args.keep:
@@ -522,6 +528,25 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         for k, v in QUICK.items():
             setattr(args, k, v)
     return args
+
+
+def reused_ceiling(path: Path, name: str, jobs: list[tuple]) -> tuple[list[dict], dict]:
+    """The ceiling runs of an earlier result file, one per job (env id, seed, reset seeds, settings),
+    each checked to be the same episodes with the same planner; and where they came from."""
+    saved = json.loads(path.read_text())
+    if saved.get("env") != name or "ceiling" not in saved:
+        raise SystemExit(f"{path} holds no ceiling of {name}: run --ceiling without --ceiling-from")
+    by_seed = {r["seed"]: r for r in saved["ceiling"]["runs"]}
+    runs = []
+    for env_id, seed, reset_seeds, settings in jobs:
+        run = by_seed.get(seed)
+        if (run is None or saved["env_id"] != env_id or run["reset_seeds"] != reset_seeds
+                or saved["ceiling"]["settings"] != settings):
+            raise SystemExit(f"{path}'s ceiling is not this run's for loop seed {seed} (another env, planner or "
+                             "reset seeds): run --ceiling without --ceiling-from")
+        runs.append(run)
+        say(f"ceiling seed {seed}: mean return {run['return_mean']:.2f} (from {path})")
+    return runs, {"file": str(path), "its_commit": saved.get("git", {}).get("commit"), "its_date": saved.get("date")}
 
 
 def reused(args, name: str) -> tuple[list[dict], list[dict] | None]:
@@ -599,9 +624,12 @@ def main(argv: list[str] | None = None) -> None:
         plan = MbrlSettings(**loop_settings(name, 0, budget, None, None, overrides)).plan()
         ceiling_settings = {k: plan[k] for k in ("horizon", "population", "iterations", "elites", "noise_beta")}
         jobs = [(env["id"], s, eval_seeds(s, EVAL_EPISODES), ceiling_settings) for s in loop_seeds]
-        ceiling = in_processes(run_oracle, jobs, args.jobs,
-                               lambda r: f"ceiling seed {r['seed']}: mean return {r['return_mean']:.2f} "
-                                         f"(min {min(r['returns']):.2f}), {r['plan_ms_median']:.0f} ms/step")
+        if args.ceiling_from:
+            ceiling, ceiling_from = reused_ceiling(args.ceiling_from, name, jobs)
+        else:
+            ceiling = in_processes(run_oracle, jobs, args.jobs,
+                                   lambda r: f"ceiling seed {r['seed']}: mean return {r['return_mean']:.2f} "
+                                             f"(min {min(r['returns']):.2f}), {r['plan_ms_median']:.0f} ms/step")
         walls["ceiling"] = round(time.perf_counter() - t, 1)
     thresholds: list[float] | None = None
     if isinstance(env["value"], float):
@@ -702,6 +730,8 @@ def main(argv: list[str] | None = None) -> None:
                     f"settings, on each loop seed's {EVAL_EPISODES} evaluation reset seeds: the return the loop's "
                     "planner reaches with a perfect model; a learned model's loop can match it, not beat it "
                     "(but for the planner's own randomness)"}
+    if args.ceiling_from:
+        out["ceiling_from"] = ceiling_from
     if args.sac_from:
         out["sac_from"] = str(args.sac_from)
     if args.resume:

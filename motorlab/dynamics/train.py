@@ -43,7 +43,7 @@ def split_episodes(episode: np.ndarray, fraction: float, seed: int) -> tuple[np.
 
 
 def _loss_parts(model: ForwardModel, x: torch.Tensor, y: torch.Tensor, done: torch.Tensor | None,
-                pos_weight: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+                pos_weight: torch.Tensor | None, nll_beta: float = 0.0) -> tuple[torch.Tensor, torch.Tensor]:
     """(training loss, mean squared error of the normalized delta) for inputs x (K, B, in) or
     (B, in), Gaussian targets y (K, B, G) or (B, G), termination flags (K, B)."""
     mean, logvar, logit = model.split(model.net(x))
@@ -51,7 +51,10 @@ def _loss_parts(model: ForwardModel, x: torch.Tensor, y: torch.Tensor, done: tor
     if logvar is None:
         loss = sq.mean()
     else:  # Gaussian NLL per member (mean over rows and entries), summed over members, as mbrl-lib does
-        loss = (sq * torch.exp(-logvar) + logvar).mean((1, 2)).sum()
+        nll = sq * torch.exp(-logvar) + logvar
+        if nll_beta:  # beta-NLL: each entry weighted by its variance ** beta, the weight a constant
+            nll = nll * torch.exp(nll_beta * logvar.detach())
+        loss = nll.mean((1, 2)).sum()
         loss = loss + 0.01 * (model.max_logvar.sum() - model.min_logvar.sum())
     if logit is not None:
         loss = loss + F.binary_cross_entropy_with_logits(logit, done.expand_as(logit), pos_weight=pos_weight)
@@ -90,8 +93,10 @@ KEEP_WEIGHTS = ("best", "last")
 
 
 def check_settings(epochs: int, hidden: tuple[int, ...], ensemble: int, lr: float, batch_size: int,
-                   valid_fraction: float, patience: int | None) -> None:
+                   valid_fraction: float, patience: int | None, nll_beta: float = 0.0) -> None:
     """Raise MotorlabError for settings fit_model cannot use (before any file is touched)."""
+    if not 0 <= nll_beta <= 1:
+        raise MotorlabError(f"--nll-beta must be in [0, 1] (0: PETS' plain NLL; 0.5: beta-NLL's advice), got {nll_beta}.")
     if epochs <= 0 or batch_size <= 0 or ensemble <= 0 or lr <= 0:
         raise MotorlabError(f"--epochs, --batch-size, --ensemble and --lr must be positive "
                             f"(got {epochs}, {batch_size}, {ensemble}, {lr}).")
@@ -110,7 +115,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
               heads: tuple[str, ...] = (), init: ForwardModel | None = None,
               valid_episodes: np.ndarray | None = None, device: str = "cpu",
               nonlinearity: str = DEFAULT_NONLINEARITY,
-              keep_weights: str = "best") -> tuple[ForwardModel, dict[str, Any]]:
+              keep_weights: str = "best", nll_beta: float = 0.0) -> tuple[ForwardModel, dict[str, Any]]:
     """Train a normalized-delta forward model.
 
     Args:
@@ -134,6 +139,12 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
             see motorlab.dynamics.model).
         keep_weights: "best": the epoch's with the lowest valid_mse (where there are held-out rows);
             "last": the final epoch's (valid_mse is still measured and reported).
+        nll_beta: probabilistic members only: beta-NLL (Seitzer et al. 2022, "On the pitfalls of
+            heteroscedastic uncertainty estimation with probabilistic neural networks"): each entry's
+            NLL is weighted by its predicted variance ** nll_beta (no gradient through the weight).
+            Plain NLL (0) scales the mean's gradient by 1 / variance, so entries the net can call
+            noisy stop training the mean; 1 gives the mean MSE's gradient. Deterministic members
+            train by MSE and ignore it.
 
     Returns:
         The model (best weights when validating, on the CPU) and its metrics.
@@ -141,7 +152,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
     from motorlab.dynamics.model import device_for
 
     if not checked:
-        check_settings(epochs, hidden, ensemble, lr, batch_size, valid_fraction, patience)
+        check_settings(epochs, hidden, ensemble, lr, batch_size, valid_fraction, patience, nll_beta)
     if keep_weights not in KEEP_WEIGHTS:
         raise MotorlabError(f"keep_weights {keep_weights!r}: use {' or '.join(KEEP_WEIGHTS)}.")
     if threads:
@@ -200,7 +211,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
             total_loss = total_mse = 0.0
             for i in range(0, len(x_train), batch_size):
                 idx = perms[:, i:i + batch_size]
-                loss, sq = _loss_parts(model, x_train[idx], y_train[idx], d_train[idx], pos_weight)
+                loss, sq = _loss_parts(model, x_train[idx], y_train[idx], d_train[idx], pos_weight, nll_beta)
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 optimizer.step()

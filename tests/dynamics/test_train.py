@@ -154,6 +154,42 @@ def test_dynamics_fit_keeps_the_best_epoch_and_the_loop_the_last():
     assert MbrlSettings(env="InvertedPendulum-v5", keep_weights="best").loop_plan().fit["keep_weights"] == "best"
 
 
+def _rare_push(n: int, seed: int):
+    """Transitions where entry 0 always changes with the action and entry 1 only where state 0 > 0.8
+    (a tenth of the rows, as an object moves only while pushed): there by 2.5 (s0 - 0.8) a."""
+    from motorlab.dynamics.transitions import Transitions
+
+    rng = np.random.default_rng(seed)
+    s, a = rng.uniform(-1, 1, (n, 2)), rng.uniform(-1, 1, (n, 1))
+    push = s[:, 0] > 0.8
+    delta = np.c_[0.1 * a[:, 0] + 0.05 * s[:, 0], np.where(push, 2.5 * (s[:, 0] - 0.8) * a[:, 0], 0.0)]
+    flags = np.zeros(n, dtype=bool)
+    return Transitions(s, a, s + delta, np.zeros(n), flags, flags, np.arange(n) // 50, np.zeros((n, 0))), push
+
+
+def test_beta_nll_fits_the_mean_of_rare_changes_that_plain_nll_calls_noise():
+    """PETS' plain NLL explains the rare pushes by variance and leaves their mean at ~0 (as the loop's
+    members did with Pusher's object); beta-NLL (0.5) fits them. Shares of the pushes' variance
+    explained on new rows: plain ~0.02, beta 0.40-0.47 (seeds 0, 1)."""
+    train, _ = _rare_push(3000, seed=0)
+    test, push = _rare_push(3000, seed=1)
+    change = (test.next_states - test.states)[push, 1]
+
+    def explained(nll_beta: float) -> float:
+        model, _ = fit_model(train, epochs=30, hidden=(32, 32), ensemble=2, batch_size=64, probabilistic=True,
+                             valid_fraction=0, progress=False, nll_beta=nll_beta)
+        s, a = (torch.as_tensor(x, dtype=torch.float32) for x in (test.states, test.actions))
+        with torch.no_grad():
+            predicted = (model.predict(s, a).numpy() - test.states)[push, 1]
+        return 1 - float(((predicted - change) ** 2).sum() / (change ** 2).sum())
+
+    assert explained(0.0) < 0.1 and explained(0.5) > 0.3
+    with pytest.raises(MotorlabError, match="--nll-beta must be in"):
+        fit_model(train, epochs=1, probabilistic=True, progress=False, nll_beta=1.5)
+    with pytest.raises(ValueError, match="nll_beta"):
+        ModelSettings(nll_beta=-0.5)
+
+
 def test_a_silu_model_fits_saves_and_loads_as_silu(reacher_data, tmp_path):
     """nonlinearity="silu" (the Python API's default, as the CLI's): SiLU hidden layers without layer norms (no layer-norm weights stored); it
     learns, and a saved model loads back with the same nonlinearity and predictions. A model.json
