@@ -45,7 +45,7 @@ from motorlab.errors import MotorlabError
 from motorlab.faults import write_faults_log
 from motorlab.intervals import across_seeds
 from motorlab.report.results import Metric, Number, RunResults, write_run_results
-from motorlab.runs import prepare_run_dir, read_text_file, write_config, write_summary
+from motorlab.runs import prepare_run_dir, read_text_file, refuse_finished, write_config, write_summary
 from motorlab.settings import Settings, Summary
 
 
@@ -238,6 +238,14 @@ class StepKind(Command[S], Generic[S, R]):
         can fail where the package imports itself in a circle (SB3 does)."""
 
     # ---- the ending every run shares ------------------------------------------------------
+
+    @staticmethod
+    def refuse_finished_out(out: Path | None) -> None:
+        """Refuse a finished run's --out (see `refuse_finished`) before the work: a kind calls it once
+        its inputs are checked (so an input mistake is still named first) and before its episodes.
+        `start` checks again; this one saves the work a refusal would waste."""
+        if out is not None:
+            refuse_finished(Path(out))
 
     def start(self, out: Path | None) -> Path:
         """The run folder, created and marked unfinished (call once the settings are checked); a

@@ -17,7 +17,7 @@ from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, check_env_id, descri
 from motorlab.envs.spaces import decode_space, require_actions
 from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric, Number
-from motorlab.runs import atomic_write_npz, refuse_finished
+from motorlab.runs import atomic_write_npz
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
 
@@ -96,9 +96,8 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
         from motorlab.dynamics.collection import collect_transitions
 
         s = settings
-        refuse = (lambda: refuse_finished(Path(out))) if out is not None else None  # before the episodes
         data = collect_transitions(s.env, s.episodes, s.policy, s.workers, s.seed, s.state, s.simulator, progress,
-                                   before_work=refuse)
+                                   before_work=lambda: self.refuse_finished_out(out))
         run_dir = self.start(out)
         data.save(run_dir / TRANSITIONS)
         seconds = data.meta["seconds"]
@@ -311,6 +310,7 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
         from motorlab.report.dynamics_plots import error_by_dimension, error_vs_horizon, xy_traces
 
         model = load_model(Path(settings.model))
+        self.refuse_finished_out(out)
         r = open_loop(model, settings.episodes, settings.seed, settings.steps)
         run_dir = self.start(out)
         env_id = model.meta["env_id"]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import multiprocessing as mp
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -210,7 +211,7 @@ class Collection:
 
 def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int = 50, seed: int = 0,
             deterministic: bool = False, workers: int | None = None, max_episodes: int | None = None,
-            progress: bool = True, signal: str = "auto") -> Collection:
+            progress: bool = True, signal: str = "auto", before_work: Callable[[], None] | None = None) -> Collection:
     """A motor signal of `episodes` episodes at or above the preview's percentile.
 
     Args:
@@ -222,6 +223,8 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
         workers: processes (default: all cores).
         max_episodes: give up after this many episodes past the preview (default 20 N).
         signal: what to record (`SIGNALS`): act, ctrl, action, or auto (see `resolve_signal`).
+        before_work: called once the run and its signal are checked, before the first episode
+            (`synergies collect` refuses a finished --out there).
 
     Returns:
         The kept episodes, the resolved signal and its bounds.
@@ -241,6 +244,8 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
         low, high = signal_bounds(probe, signal)
     finally:
         probe.close()
+    if before_work is not None:
+        before_work()
     workers = workers or os.cpu_count() or 1
     max_episodes = max_episodes or 20 * episodes
     init_args = (str(run_dir), cfg.model_dump(), deterministic, signal)

@@ -160,6 +160,7 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
             target = max_return(env_cfg.id)
         finally:
             probe.close()
+        self.refuse_finished_out(out)
         result = evaluate(policy, env_cfg, settings.episodes, settings.seed, workers=settings.workers)
         run_dir = self.start(out)
         summary = EvaluateSummary(policy=settings.policy, env_id=env_cfg.id, delay=env_cfg.delay,
@@ -287,7 +288,7 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
         from motorlab.report.plots import grouped_bars
 
         t = transfer([Path(r) for r in settings.runs], settings.envs, settings.episodes, settings.seed,
-                     workers=settings.workers)
+                     workers=settings.workers, before_work=lambda: self.refuse_finished_out(out))
         run_dir = self.start(out)
         grouped_bars(t.envs, {n: [t.results[n][e]["success_rate"] for e in t.envs] for n in t.names},
                      "success rate", run_dir / "plots" / "zeroshot.png",

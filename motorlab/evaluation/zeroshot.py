@@ -8,6 +8,7 @@ history, synergy actions) with only the id changed. Success is the env's
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,9 +36,11 @@ def run_label(run: Path) -> str:
 
 
 def transfer(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: int = 0,
-             workers: int | None = None) -> Transfer:
+             workers: int | None = None, before_work: Callable[[], None] | None = None) -> Transfer:
     """Evaluate every run's policy on every env, `episodes` episodes each from `seed`, the envs
     stepping in `workers` processes (see `evaluate`; the results do not depend on it).
+    `before_work` is called once the runs and envs are checked, before the first episode (`transfer`
+    refuses a finished --out there).
 
     Raises:
         MotorlabError: no runs or envs, unknown env id, a policy whose action or
@@ -55,6 +58,8 @@ def transfer(run_dirs: list[Path], envs: list[str], episodes: int = 500, seed: i
     names = [run_label(r) for r in runs]
     if len(set(names)) < len(names):
         names = [str(r) for r in runs]
+    if before_work is not None:
+        before_work()
     results: dict[str, dict[str, dict]] = {}
     fault_log: list[str] = []
     with keep_workers():  # every evaluation below steps its envs in the same worker processes

@@ -99,6 +99,7 @@ class RobustnessKind(StepKind[RobustnessSettings, RobustnessSummary]):
 
         axes = parse_axes(settings.vary)
         targets = subjects(settings.policies, settings.env)
+        self.refuse_finished_out(out)
         curves = measure(targets, axes, settings.episodes, settings.seed, settings.workers, progress)
         run_dir = self.start(out)
         write_points_csv(run_dir / "curves.csv", curves)

@@ -87,7 +87,7 @@ class CollectKind(StepKind[CollectSettings, CollectSummary]):
             progress: bool = True) -> CollectSummary:
         s = settings
         c = collect(Path(s.run), s.episodes, s.percentile, s.preview, s.seed, s.deterministic, s.workers,
-                    s.max_episodes, progress, s.signal)
+                    s.max_episodes, progress, s.signal, before_work=lambda: self.refuse_finished_out(out))
         run_dir = self.start(out)
         acts = c.activations()
         meta = {"source_run": str(c.source_run.resolve()), "env_id": c.env_id, "percentile": s.percentile,
@@ -259,6 +259,7 @@ class FitKind(StepKind[FitSettings, FitSummary]):
     def run(self, settings: FitSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> FitSummary:
         acts, meta = load_activations(Path(settings.activations))
+        self.refuse_finished_out(out)
         sar = fit_sar(acts, n_synergies=settings.n_synergies, vaf=settings.vaf, method=settings.method,
                       seed=settings.seed, source_env=meta.get("env_id"), signal=meta["signal"],
                       bounds=(meta["low"], meta["high"]))

@@ -60,6 +60,43 @@ def test_writing_into_a_finished_run_is_refused(finished, tmp_path, command):
     assert snapshot(target) == before
 
 
+def test_a_finished_out_is_refused_before_the_work(finished, collected, tmp_path, monkeypatch):
+    """The steps whose work comes before their folder (episodes, a fit) refuse a finished --out once
+    their inputs are checked, before that work starts: each one's work here fails the test if run."""
+    from motorlab.api.steps import run_kind
+    from motorlab.dynamics import open_loop
+    from motorlab.errors import MotorlabError
+    from motorlab.evaluation import activations, steps, zeroshot
+    from motorlab.kinds import KINDS
+    from motorlab.robustness_curves import curves
+    from motorlab.synergies import steps as synergy_steps
+
+    def work(*args, **kwargs):
+        raise AssertionError("the work started before the finished --out was refused")
+
+    activations_run = tmp_path / "activations"  # fit-sar's input: a synergies collect of the LQR run
+    run_kind(KINDS["collect"], out=activations_run, progress=False, run=finished, episodes=2, preview=2,
+             percentile=0, workers=1)
+    model = tmp_path / "model"  # dynamics check's input
+    run_kind(KINDS["dynamics-fit"], out=model, progress=False, transitions=collected, epochs=1)
+    for module, name in [(steps, "evaluate"), (zeroshot, "evaluate"), (curves, "measure"),
+                         (activations, "_episodes"), (synergy_steps, "fit_sar"), (open_loop, "open_loop")]:
+        monkeypatch.setattr(module, name, work)
+    target = tmp_path / "target"
+    target.mkdir()
+    (target / "summary.json").write_text('{"finished": true}\n')
+    before = snapshot(target)
+    for kind, fields in [("evaluate", {"policy": "pid", "env": ENV_ID, "episodes": 1}),
+                         ("zeroshot", {"runs": [finished], "envs": [ENV_ID], "episodes": 1}),
+                         ("robustness", {"policies": [finished], "vary": ["delay=0,0.1"], "episodes": 1}),
+                         ("collect", {"run": finished, "episodes": 2, "preview": 2}),
+                         ("fit", {"activations": activations_run, "n_synergies": 1}),
+                         ("dynamics-check", {"model": model, "episodes": 1})]:
+        with pytest.raises(MotorlabError, match="finished run"):
+            run_kind(KINDS[kind], out=target, progress=False, **fields)
+        assert snapshot(target) == before, kind
+
+
 def test_overwrite_replaces_a_finished_run_whole(finished, tmp_path):
     out = tmp_path / "run"
     assert_ok(run_here("train", ENV_ID, *LQR, "--out", out))
