@@ -218,58 +218,53 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
         raise MotorlabError(f"--simulator {simulator} steps the bare Reacher arm and cannot apply {given} "
                             f"({describe_env(env_cfg)}); use --simulator gymnasium (auto picks it).")
     env = make_env(env_cfg)  # reward shaping (--reward) too: the rewards recorded are the ones a learned head fits
-    try:  # before any work: one line for an env a forward model cannot act on
+    try:  # the env closed whatever ends the collection: a refused input, a fault, the end
+        # before any work: one line for an env a forward model cannot act on
         require_continuous(env, env_id, "dynamics collect", random=policy == "random")
         layout = env_layout(env, env_id, state)
-    except MotorlabError:
-        env.close()
-        raise
-    policy_dir = None
-    if policy != "random":
-        policy_dir = str(Path(policy).resolve())
-        if not Path(policy).exists():
-            raise MotorlabError(f"--policy {policy!r} is neither 'random' nor a run folder from `motorlab train`.")
-        expected = getattr(getattr(load_run_policy(Path(policy)), "policy", None), "observation_space", None)
-        if expected is not None:  # a policy trained on a Dict observation acts on its flat vector here
-            expected = flat_space(expected)
-        if expected is not None and expected.shape != env.observation_space.shape:
-            raise MotorlabError(f"the policy in {policy} expects observations of shape {expected.shape}, "
-                                f"{env_id} gives {env.observation_space.shape}; pick the env it was trained on.")
-    fast = _is_reacher(env) and policy_dir is None and bare
-    if simulator in ("closed-form", "mujoco") and not fast:
-        raise MotorlabError(f"--simulator {simulator} covers Reacher with random actions only; use auto or gymnasium.")
-    fast = fast and simulator != "gymnasium"
-    used = "gymnasium"
-    if fast:
-        closed = closed_form_arm(env) is not None
-        if simulator == "closed-form" and not closed:
-            raise MotorlabError("this Reacher arm's dynamics are not the closed form's (it did not reproduce "
-                                "MuJoCo's accelerations); use --simulator mujoco.")
-        used = "closed-form" if closed and simulator != "mujoco" else "mujoco"
-    if before_work is not None:
-        try:
-            before_work()
-        except BaseException:
-            env.close()
-            raise
-    workers = workers or os.cpu_count() or 1
-    start = time.perf_counter()
-    with Progress(disable=not progress, transient=False) as bar:
-        task = bar.add_task(f"{env_id} episodes", total=episodes)
+        policy_dir = None
+        if policy != "random":
+            policy_dir = str(Path(policy).resolve())
+            if not Path(policy).exists():
+                raise MotorlabError(f"--policy {policy!r} is neither 'random' nor a run folder from `motorlab train`.")
+            expected = getattr(getattr(load_run_policy(Path(policy)), "policy", None), "observation_space", None)
+            if expected is not None:  # a policy trained on a Dict observation acts on its flat vector here
+                expected = flat_space(expected)
+            if expected is not None and expected.shape != env.observation_space.shape:
+                raise MotorlabError(f"the policy in {policy} expects observations of shape {expected.shape}, "
+                                    f"{env_id} gives {env.observation_space.shape}; pick the env it was trained on.")
+        fast = _is_reacher(env) and policy_dir is None and bare
+        if simulator in ("closed-form", "mujoco") and not fast:
+            raise MotorlabError(f"--simulator {simulator} covers Reacher with random actions only; use auto or gymnasium.")
+        fast = fast and simulator != "gymnasium"
+        used = "gymnasium"
         if fast:
-            arrays, faults = _collect_reacher(env, episodes, seed, layout, workers, used, bar, task)
-        else:
-            arrays, faults = _collect_pool(env_cfg, policy_dir, episodes, seed, layout, workers, bar, task)
-    if len(arrays["states"]) == 0:
-        raise MotorlabError(f"every episode of {env_id} ended on a numerical fault before its first step "
-                            f"(first: {faults[0]}); nothing to collect.")
-    seconds = time.perf_counter() - start
-    meta = {"env_id": env_id, "env": env_record(env_cfg), "state_layout": layout.name, "state_labels": list(layout.labels),
-            "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),
-            "obs_layout": layout.keys_json(), "action_space": encode_space(env.action_space),
-            "action_low": env.action_space.low.tolist(), "action_high": env.action_space.high.tolist(),
-            "policy": policy_dir or "random", "seed": seed, "episodes": episodes,
-            "simulator": used, "workers": workers, "seconds": seconds,
-            "numerical_faults": len(faults), "fault_log": faults}
-    env.close()
-    return Transitions(**arrays, meta=meta).check()
+            closed = closed_form_arm(env) is not None
+            if simulator == "closed-form" and not closed:
+                raise MotorlabError("this Reacher arm's dynamics are not the closed form's (it did not reproduce "
+                                    "MuJoCo's accelerations); use --simulator mujoco.")
+            used = "closed-form" if closed and simulator != "mujoco" else "mujoco"
+        if before_work is not None:
+            before_work()
+        workers = workers or os.cpu_count() or 1
+        start = time.perf_counter()
+        with Progress(disable=not progress, transient=False) as bar:
+            task = bar.add_task(f"{env_id} episodes", total=episodes)
+            if fast:
+                arrays, faults = _collect_reacher(env, episodes, seed, layout, workers, used, bar, task)
+            else:
+                arrays, faults = _collect_pool(env_cfg, policy_dir, episodes, seed, layout, workers, bar, task)
+        if len(arrays["states"]) == 0:
+            raise MotorlabError(f"every episode of {env_id} ended on a numerical fault before its first step "
+                                f"(first: {faults[0]}); nothing to collect.")
+        seconds = time.perf_counter() - start
+        meta = {"env_id": env_id, "env": env_record(env_cfg), "state_layout": layout.name, "state_labels": list(layout.labels),
+                "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),
+                "obs_layout": layout.keys_json(), "action_space": encode_space(env.action_space),
+                "action_low": env.action_space.low.tolist(), "action_high": env.action_space.high.tolist(),
+                "policy": policy_dir or "random", "seed": seed, "episodes": episodes,
+                "simulator": used, "workers": workers, "seconds": seconds,
+                "numerical_faults": len(faults), "fault_log": faults}
+        return Transitions(**arrays, meta=meta).check()
+    finally:
+        env.close()

@@ -142,6 +142,33 @@ def test_discrete_actions_are_refused_by_each_part_that_needs_a_box():
         learn_lqr(EnvConfig(id="CartPole-v1"), LQRSettings(), 100, 0, on_update=lambda *a: True)
 
 
+def test_collect_closes_its_env_whatever_ends_it(monkeypatch, tmp_path):
+    """dynamics collect's env is closed when a check refuses the collection (a policy folder that is not
+    there, a finished --out through before_work), not only after its episodes."""
+    from motorlab.dynamics import collection
+
+    closed = []
+    made = collection.make_env
+
+    def watched(*args, **kwargs):
+        env = made(*args, **kwargs)
+        close = env.close
+        env.close = lambda: (closed.append(True), close())[1]
+        return env
+
+    def refuse():
+        raise MotorlabError("refused before the episodes")
+
+    monkeypatch.setattr(collection, "make_env", watched)
+    with pytest.raises(MotorlabError, match="neither 'random' nor a run folder"):
+        collect_transitions("Pendulum-v1", 1, policy=str(tmp_path / "missing"), workers=1, progress=False)
+    assert closed == [True]
+    with pytest.raises(MotorlabError, match="refused before the episodes"):
+        collect_transitions("Pendulum-v1", 1, workers=1, progress=False, before_work=refuse)
+    assert closed == [True, True]
+    assert len(collect_transitions("Pendulum-v1", 1, workers=1, progress=False)) == 200 and closed == [True] * 3
+
+
 # ---- the planner's NaN and Inf --------------------------------------------------------------------
 
 
