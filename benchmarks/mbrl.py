@@ -41,7 +41,9 @@ What runs
   seed: the return the loop's planner reaches with a perfect model, which a learned model can only
   approach. It tells a threshold the planner cannot reach from one the model misses (Reacher, seed 1:
   ceiling -4.59 against the threshold -5.0). Reacher ~0.3 s a control step: ~7 min for 5 seeds on 2
-  processes; the pendulum's 1,000-step episodes take far longer.
+  processes; the pendulum's 1,000-step episodes take far longer. --ceiling-from RESULT_JSON reuses
+  an earlier result's ceiling where its planner settings and reset seeds are this run's (Pusher's
+  takes ~25 min to play again).
 
 Measured
   Steps to threshold, per seed: the env steps collected at the first evaluation that meets the
