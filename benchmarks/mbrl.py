@@ -536,16 +536,15 @@ def reused_ceiling(path: Path, name: str, jobs: list[tuple]) -> tuple[list[dict]
     """The ceiling runs of an earlier result file, one per job (env id, seed, reset seeds, settings),
     each checked to be the same episodes with the same planner; and where they came from."""
     saved = json.loads(path.read_text())
-    if saved.get("env") != name or "ceiling" not in saved:
-        raise SystemExit(f"{path} holds no ceiling of {name}: run --ceiling without --ceiling-from")
+    if saved.get("env") != name or "ceiling" not in saved or any(saved["env_id"] != job[0] for job in jobs):
+        raise SystemExit(f"{path} holds no ceiling of {name} ({jobs[0][0]}): run --ceiling without --ceiling-from")
     by_seed = {r["seed"]: r for r in saved["ceiling"]["runs"]}
     runs = []
-    for env_id, seed, reset_seeds, settings in jobs:
+    for _, seed, reset_seeds, settings in jobs:
         run = by_seed.get(seed)
-        if (run is None or saved["env_id"] != env_id or run["reset_seeds"] != reset_seeds
-                or saved["ceiling"]["settings"] != settings):
-            raise SystemExit(f"{path}'s ceiling is not this run's for loop seed {seed} (another env, planner or "
-                             "reset seeds): run --ceiling without --ceiling-from")
+        if run is None or run["reset_seeds"] != reset_seeds or saved["ceiling"]["settings"] != settings:
+            raise SystemExit(f"{path}'s ceiling is not this run's for loop seed {seed} (another planner or reset "
+                             "seeds): run --ceiling without --ceiling-from")
         runs.append(run)
         say(f"ceiling seed {seed}: mean return {run['return_mean']:.2f} (from {path})")
     return runs, {"file": str(path), "its_commit": saved.get("git", {}).get("commit"), "its_date": saved.get("date")}

@@ -206,9 +206,9 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
     fast = fast_mean or fast_ts
     if fast_ts:  # with a learned reward: (path, the reward head's predictions (N, H))
         rollout = model.ts_rollout(generator, reward=learned_reward)
-    elif fast and learned_reward:
+    elif fast_mean and learned_reward:
         rollout = model.fast_rollout(reward=True)
-    elif fast:
+    elif fast_mean:
         rollout = model.fast_rollout() if hasattr(model, "fast_rollout") else stepwise_rollout(model.predict)
     else:
         step = model.step_fn(propagation, generator)

@@ -235,7 +235,8 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
                                     f"{env_id} gives {env.observation_space.shape}; pick the env it was trained on.")
         fast = _is_reacher(env) and policy_dir is None and bare
         if simulator in ("closed-form", "mujoco") and not fast:
-            raise MotorlabError(f"--simulator {simulator} covers Reacher with random actions only; use auto or gymnasium.")
+            raise MotorlabError(f"--simulator {simulator} covers Reacher with random actions only; "
+                                "use auto or gymnasium.")
         fast = fast and simulator != "gymnasium"
         used = "gymnasium"
         if fast:
@@ -258,8 +259,8 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
             raise MotorlabError(f"every episode of {env_id} ended on a numerical fault before its first step "
                                 f"(first: {faults[0]}); nothing to collect.")
         seconds = time.perf_counter() - start
-        meta = {"env_id": env_id, "env": env_record(env_cfg), "state_layout": layout.name, "state_labels": list(layout.labels),
-                "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),
+        meta = {"env_id": env_id, "env": env_record(env_cfg), "state_layout": layout.name,
+                "state_labels": list(layout.labels), "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),
                 "obs_layout": layout.keys_json(), "action_space": encode_space(env.action_space),
                 "action_low": env.action_space.low.tolist(), "action_high": env.action_space.high.tolist(),
                 "policy": policy_dir or "random", "seed": seed, "episodes": episodes,

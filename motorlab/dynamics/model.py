@@ -434,8 +434,9 @@ class ForwardModel(nn.Module):
         plan's time on the torch calls around the matmuls (normalizing, concatenating, transposing to
         and from member order at every step ahead). Here the normalizers are folded into the first and
         last layers, the rows stay in member order for the whole horizon, and the first layer's action
-        part of all H steps is one matmul: one env's Pusher plan takes ~20% less time. The draws are step_fn's (one generator, the same calls in the same order),
-        so a seeded plan is the same on either path, to float rounding."""
+        part of all H steps is one matmul: one env's Pusher plan takes ~20% less time. The draws are
+        step_fn's (one generator, the same calls in the same order), so a seeded plan is the same on
+        either path, to float rounding."""
         self._check_reward_head("ts_rollout", reward)
         k, n_s, g = self.members, self.state_size, self.gaussian
         ws, bs, lns = self._planning_layers(reward)

@@ -96,7 +96,8 @@ def check_settings(epochs: int, hidden: tuple[int, ...], ensemble: int, lr: floa
                    valid_fraction: float, patience: int | None, nll_beta: float = 0.0) -> None:
     """Raise MotorlabError for settings fit_model cannot use (before any file is touched)."""
     if not 0 <= nll_beta <= 1:
-        raise MotorlabError(f"--nll-beta must be in [0, 1] (0: PETS' plain NLL; 0.5: beta-NLL's advice), got {nll_beta}.")
+        raise MotorlabError(f"--nll-beta must be in [0, 1] (0: PETS' plain NLL; 0.5: beta-NLL's advice), "
+                            f"got {nll_beta}.")
     if epochs <= 0 or batch_size <= 0 or ensemble <= 0 or lr <= 0:
         raise MotorlabError(f"--epochs, --batch-size, --ensemble and --lr must be positive "
                             f"(got {epochs}, {batch_size}, {ensemble}, {lr}).")
