@@ -212,11 +212,6 @@ class ForwardModel(nn.Module):
         """Deterministic state-only members."""
         return not self.probabilistic and not self.heads
 
-    @property
-    def deterministic(self) -> bool:
-        """Deterministic members, with heads or without: the planning fast paths apply (`fast_rollout`)."""
-        return not self.probabilistic
-
     def fit_normalizers(self, states, actions, next_states, rewards=None) -> None:
         self.state_norm.fit(states)
         self.action_norm.fit(actions)
@@ -335,11 +330,6 @@ class ForwardModel(nn.Module):
         bs = [2 * b0, *(2 * b for b in net.biases[1:-1]), b_last]
         return ws, bs, [(w, b) for w, b in zip(net.ln_weights, net.ln_biases)]
 
-    def _check_fast(self, what: str, reward: bool = False) -> None:
-        if self.probabilistic:
-            raise MotorlabError(f"{what} covers deterministic models; use step_fn for probabilistic members.")
-        self._check_reward_head(what, reward)
-
     def _check_reward_head(self, what: str, reward: bool) -> None:
         if reward and "reward" not in self.heads:
             raise MotorlabError(f"{what}(reward=True) needs a model with a reward head (fit with --learn-reward).")
@@ -348,8 +338,7 @@ class ForwardModel(nn.Module):
         """predict() for planning: the normalizers folded into the first and last layers, the input
         concatenation split into two matmuls, no autograd. ~Half the torch calls per step, which is
         what a small-batch planner pays for (per-call overhead, not FLOPs, dominates on a CPU).
-        Deterministic models only (their heads are left out)."""
-        self._check_fast("fast_predict")
+        A probabilistic member predicts its Gaussian's mean; heads are left out."""
         ws, bs, lns = self._planning_layers()
         if self.members == 1:
             first_s, first_a, first_b, rest, norms = self._single_member(ws, bs, lns)
@@ -377,9 +366,9 @@ class ForwardModel(nn.Module):
         model with a reward head), (path, rewards (N, H)): the reward head's mean prediction at each
         step comes with the path, from the same pass. The first layer's action part of all H steps is
         one matmul up front (every member's at once), so each step is one matmul per layer; with K
-        members the layer norms' affines are folded into the layers after them. Deterministic models
-        (heads not asked for are left out)."""
-        self._check_fast("fast_rollout", reward)
+        members the layer norms' affines are folded into the layers after them. A probabilistic member
+        predicts its Gaussian's mean (its variance columns, and heads not asked for, are left out)."""
+        self._check_reward_head("fast_rollout", reward)
         n_s = self.state_size
         ws, bs, lns = self._planning_layers(reward)
         if self.members == 1:

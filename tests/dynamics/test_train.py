@@ -256,11 +256,12 @@ def test_reacher_reward_in_torch_matches_the_env(reacher_data):
 
 
 @pytest.mark.parametrize("nonlinearity", ["tanh", "silu"])
-@pytest.mark.parametrize("members", [1, 3])
-def test_fast_predict_equals_predict(members, nonlinearity):
-    """The planner's folded-normalizer model computes the same next states, step by step and over a horizon."""
+@pytest.mark.parametrize("members, probabilistic", [(1, False), (3, False), (3, True)])
+def test_fast_predict_equals_predict(members, probabilistic, nonlinearity):
+    """The planner's folded-normalizer model computes the same next states, step by step and over a
+    horizon (probabilistic members: their Gaussians' means, as predict and mean propagation use)."""
     rng = np.random.default_rng(0)
-    model = ForwardModel(8, 2, members=members, nonlinearity=nonlinearity)
+    model = ForwardModel(8, 2, members=members, probabilistic=probabilistic, nonlinearity=nonlinearity)
     model.fit_normalizers(rng.normal(1, 3, (200, 8)), rng.uniform(-1, 1, (200, 2)), rng.normal(1, 3, (200, 8))
                           + rng.normal(0, 0.1, (200, 8)))
     s = torch.as_tensor(rng.normal(1, 3, (64, 8)), dtype=torch.float32)
@@ -276,16 +277,17 @@ def test_fast_predict_equals_predict(members, nonlinearity):
 
 
 @pytest.mark.parametrize("nonlinearity", ["tanh", "silu"])
-@pytest.mark.parametrize("members", [1, 5])
-def test_fast_rollout_with_a_reward_head_equals_step_fn(members, nonlinearity):
-    """A deterministic model with heads plans on the fast path: the same path and reward-head
-    predictions as step_fn's mean propagation, and the same returns in model_scorer (learned reward,
-    and an exact one on the head model); the termination column is left out."""
+@pytest.mark.parametrize("members, probabilistic", [(1, False), (5, False), (5, True)])
+def test_fast_rollout_with_a_reward_head_equals_step_fn(members, probabilistic, nonlinearity):
+    """A model with heads plans on the fast path under mean propagation: the same path and reward-head
+    predictions as step_fn's, and the same returns in model_scorer (learned reward, and an exact one
+    on the head model); the termination column (and a probabilistic member's variances) left out."""
     from motorlab.dynamics.rewards import Task
 
     rng = np.random.default_rng(members)
     torch.manual_seed(members)
-    model = ForwardModel(8, 2, members=members, heads=("reward", "termination"), nonlinearity=nonlinearity)
+    model = ForwardModel(8, 2, members=members, probabilistic=probabilistic, heads=("reward", "termination"),
+                         nonlinearity=nonlinearity)
     model.fit_normalizers(rng.normal(1, 3, (200, 8)), rng.uniform(-1, 1, (200, 2)),
                           rng.normal(1, 3, (200, 8)) + rng.normal(0, 0.1, (200, 8)), rng.normal(-2, 5, 200))
     with torch.no_grad():  # members that differ, and layer norms whose affines are not the identity
@@ -366,8 +368,6 @@ def test_ts_rollout_equals_step_fn_trajectory_sampling(probabilistic, heads, non
 
 
 def test_fast_rollout_refuses_what_it_does_not_cover():
-    with pytest.raises(MotorlabError, match="deterministic models"):
-        ForwardModel(4, 1, probabilistic=True, heads=("reward",)).fast_rollout(reward=True)
     with pytest.raises(MotorlabError, match="reward head"):
         ForwardModel(4, 1, members=2).fast_rollout(reward=True)
     with pytest.raises(MotorlabError, match="reward head"):
