@@ -126,6 +126,7 @@ class LoopPlan:
     optimizer: str
     plan: dict[str, Any]  # the optimizer's settings
     scoring: dict[str, Any]  # build_policy's reward, termination, propagation, particles, device
+    collect_noise: float = 0.0  # exploration noise on the collected episodes' actions (MPCPolicy's explore)
 
 
 def holdout(episodes: np.ndarray, every: int, per_round: int) -> np.ndarray:
@@ -157,11 +158,11 @@ def collect_config(plan: LoopPlan) -> EnvConfig:
     return cfg.model_copy(update={"kwargs": {**cfg.kwargs, "max_episode_steps": limit}})
 
 
-def _planner(plan: LoopPlan, model: ForwardModel, r: int):
+def _planner(plan: LoopPlan, model: ForwardModel, r: int, explore: float = 0.0):
     env = make_env(env_config(plan), shaped=False)
     try:
         return build_policy(env, env_config(plan), model, plan.optimizer, plan.seed * 1000 + r, **plan.scoring,
-                            **plan.plan)
+                            explore=explore, **plan.plan)
     finally:
         env.close()
 
@@ -182,7 +183,7 @@ def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | N
         data.meta["env"] = env_record(env_config(plan))
         return data, PhaseFaults([f"round {r + 1} collect: {line}" for line in data.meta["fault_log"]],
                                  data.meta["numerical_faults"])
-    policy = _planner(plan, model, r)
+    policy = _planner(plan, model, r, explore=plan.collect_noise)
     result = run_episodes(collect_config(plan), policy, n, base, min(plan.parallel, n), progress=progress,
                           seeds=[base + i for i in range(n)], record=True)
     faults = PhaseFaults.of(result, f"round {r + 1} collect", policy.task.reward_source, f"rounds/{r - 1:02d}/model")
@@ -244,12 +245,18 @@ def _flat(settings: dict[str, Any]) -> dict[str, Any]:
     return flat
 
 
+# settings added after loop folders were first written: at these values (what those loops ran with)
+# they are left out of loop.json, so a folder written before them stays resumable
+_ADDED_LATER = {"collect_noise": 0.0}
+
+
 def _comparable(plan: dict[str, Any]) -> dict[str, Any]:
     """The settings a resumed loop must share with the interrupted one (JSON-shaped, rounds left out)."""
     import json
 
-    return json.loads(json.dumps({k: v for k, v in plan.items() if k not in ("rounds", "until_return", "until_every_episode",
-                                                                        "max_env_steps")}))
+    left_out = ("rounds", "until_return", "until_every_episode", "max_env_steps")
+    return json.loads(json.dumps({k: v for k, v in plan.items()
+                                  if k not in left_out and not (k in _ADDED_LATER and v == _ADDED_LATER[k])}))
 
 
 @dataclass
@@ -337,7 +344,8 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                         "record": asdict(record), "faults": round_faults.to_json(),
                         "collected_with": "random actions" if r == 0 else {
                             "model": f"rounds/{r - 1:02d}/model", "optimizer": plan.optimizer, **plan.plan,
-                            **plan.scoring, "seed": plan.seed * 1000 + r - 1},
+                            **plan.scoring, "seed": plan.seed * 1000 + r,  # _collect's planner's
+                            **({"explore": plan.collect_noise} if plan.collect_noise else {})},
                         "evaluated_with": {"model": f"rounds/{r:02d}/model", "optimizer": plan.optimizer, **plan.plan,
                                            **plan.scoring, "seed": plan.seed * 1000 + r,
                                            "episodes": plan.eval_episodes},

@@ -544,13 +544,22 @@ class MPCPolicy:
 
     With an ensemble `model`, it records the members' disagreement on the next state under each
     action it takes (`disagreements`, one array per control step: how far the planner trusted a
-    model whose members disagree)."""
+    model whose members disagree).
 
-    def __init__(self, planner, layout, model=None, device: torch.device | str = "cpu"):
+    `explore` > 0 adds Gaussian noise to each action it takes, its std that share of each action's
+    half-range, clipped to the bounds (drawn from its own generator, seeded by `seed`): exploration
+    while the model-based loop collects. The planner's warm start keeps its own plan."""
+
+    def __init__(self, planner, layout, model=None, device: torch.device | str = "cpu", explore: float = 0.0,
+                 seed: int = 0):
         self.planner, self.layout, self.model = planner, layout, model
         self.device = torch.device(device)
         self.disagreements: list[np.ndarray] = []
         self.task = None  # the reward and termination it plans with (build_policy sets it)
+        if explore < 0:
+            raise MotorlabError(f"exploration noise must be 0 or more, got {explore}.")
+        self.explore = explore
+        self._noise = np.random.default_rng(seed)
 
     @property
     def faults(self) -> PlannerFaults:
@@ -571,4 +580,9 @@ class MPCPolicy:
         actions = self.planner.plan(states, goals)
         if self.model is not None and self.model.members > 1:
             self.disagreements.append(self.model.disagreement(states, actions).cpu().numpy())
-        return actions.cpu().numpy()
+        actions = actions.cpu().numpy()
+        if not self.explore:
+            return actions
+        low, high = (torch.as_tensor(b).cpu().numpy() for b in (self.planner.low, self.planner.high))
+        noise = self._noise.standard_normal(actions.shape) * self.explore * (high - low) / 2
+        return np.clip(actions + noise, low, high).astype(actions.dtype)

@@ -31,12 +31,12 @@ from motorlab.report.video import filming, record_episode, write_mp4
 def build_policy(env, env_id: str | EnvConfig, model: Path | ForwardModel, optimizer: str = "cem", seed: int = 0,
                  threads: int | None = 1, reward: str = "auto", termination: str = "auto", propagation: str = "mean",
                  particles: int | None = None, device: str = "cpu", termination_draws: int = 0,
-                 termination_margin: float = 0.0, **settings) -> MPCPolicy:
+                 termination_margin: float = 0.0, explore: float = 0.0, **settings) -> MPCPolicy:
     """An MPC policy for `env` on a forward model (or the model folder holding one), checked against the
     env and its layout. `env_id`: the env's id, or the EnvConfig it was made from (its --sar makes the
     planner's actions synergies). `reward` and `termination` say what it scores
     (motorlab.dynamics.rewards.resolve_task); `settings` are the optimizer's (horizon, population,
-    iterations, elites or temperature)."""
+    iterations, elites or temperature); `explore`: MPCPolicy's exploration noise."""
     cfg = env_config(env_id)
     env_id = cfg.id
     require_plannable(env, env_id)
@@ -72,7 +72,7 @@ def build_policy(env, env_id: str | EnvConfig, model: Path | ForwardModel, optim
                          termination_draws=termination_draws, termination_margin=termination_margin)
     planner = make_planner(optimizer, score, env.action_space.low, env.action_space.high, seed=seed, device=dev,
                            faults=faults, **settings)
-    policy = MPCPolicy(planner, layout, model, dev)
+    policy = MPCPolicy(planner, layout, model, dev, explore=explore, seed=seed + 104729)
     policy.task = task
     return policy
 

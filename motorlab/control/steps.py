@@ -309,6 +309,11 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
         None, gt=0, description="Cut each collected episode after this many env steps (it ends as truncated), so "
         "the model is refit at least that often even where an episode lasts long (default: the env's time limit; "
         "evaluation episodes always run to it)")
+    # A planner that trusts its model goes back to the states the model knows, so the data may never
+    # show the model the rest: noise on the collected actions shows it more (off by default, as in PETS)
+    collect_noise: float = Field(0.0, ge=0, le=1, description="Exploration while collecting: Gaussian noise added "
+                                 "to the planner's actions, its std this share of each action's half-range, clipped "
+                                 "to the bounds (evaluation episodes plan without it)")
     eval_episodes: int = Field(3, ge=0, description="MPC episodes evaluating each round's model (fixed reset seeds; "
                                "not added to the data)")
     # PETS by default: in benchmarks/mbrl.py (3 seeds, same budgets) probabilistic members with TS-inf
@@ -374,7 +379,8 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
                         collect_steps=self.collect_steps, holdout_every=holdout_every, until_return=self.until_return,
                         until_every_episode=self.until_every_episode, max_env_steps=self.max_env_steps,
                         state=layout_name(self.env, self.state), fit=fit,
-                        optimizer=self.optimizer, plan=self.plan(), scoring=self.scoring())
+                        optimizer=self.optimizer, plan=self.plan(), scoring=self.scoring(),
+                        collect_noise=self.collect_noise)
 
 
 class MbrlSummary(PlannerFaultsSummary):

@@ -41,7 +41,7 @@ PLANNER_KEYS = ("horizon", "population", "iterations", "elites", "optimizer", "t
                 "noise_beta", "termination_draws", "termination_margin")
 MODEL_KEYS = ("hidden", "nonlinearity", "epochs", "ensemble", "batch_size", "lr",
               "nll_beta")  # the model-based loop's forward model
-LOOP_KEYS = ("episodes_per_round", "collect_steps")  # the model-based loop's rounds
+LOOP_KEYS = ("episodes_per_round", "collect_steps", "collect_noise")  # the model-based loop's rounds
 _REWARDS = "motorlab.dynamics.rewards"  # the bundled planner rewards live there (a layer above)
 
 

@@ -428,3 +428,50 @@ def test_collect_steps_cuts_collected_episodes_and_the_catalogue_sets_it_for_the
     assert record["eval_return_mean"] > cut  # the evaluation episode was not cut
     # the cut is the loop's way of collecting, not the env: the model records the env as given
     assert json.loads((tmp_path / "run" / "model" / "model.json").read_text())["env"] == {"id": IP}
+
+
+def test_exploration_noise_widens_the_collected_actions_and_leaves_the_plan_and_evaluation_alone(tmp_path):
+    """MPCPolicy's `explore`: Gaussian noise of that share of each action's half-range on the planned
+    actions, clipped to the bounds, seeded; 0 is the plan itself. In the loop (--collect-noise) it
+    changes what the later rounds collect, not how a round's model is evaluated."""
+    from dataclasses import asdict
+    from types import SimpleNamespace
+
+    from motorlab.control.mbrl import _comparable
+    from motorlab.control.mpc import MPCPolicy
+    from motorlab.control.steps import MBRL
+    from motorlab.dynamics.transitions import load_transitions
+
+    planned = torch.tensor([[0.5, -1.9]]).repeat(4000, 1)
+    planner = SimpleNamespace(plan=lambda s, g: planned.clone(), low=torch.tensor([-1.0, -2.0]),
+                              high=torch.tensor([1.0, 2.0]))
+    layout = SimpleNamespace(state=lambda obs: obs, goal=lambda obs: obs[:, :0])
+    obs = np.zeros((4000, 3))
+    np.testing.assert_array_equal(MPCPolicy(planner, layout).act(obs), planned.numpy())
+    acts = MPCPolicy(planner, layout, explore=0.2, seed=5).act(obs)
+    np.testing.assert_array_equal(acts, MPCPolicy(planner, layout, explore=0.2, seed=5).act(obs))
+    assert (acts >= [-1, -2]).all() and (acts <= [1, 2]).all() and acts[:, 1].min() == -2  # clipped
+    # the first action's noise, far from its bounds: std 0.2 x half-range 1
+    assert abs((acts[:, 0] - 0.5).std() - 0.2) < 0.01 and abs((acts[:, 0] - 0.5).mean()) < 0.01
+    assert (acts[:, 1] > -1.9).mean() > 0.4  # the second's, near its bound: pushed up where not clipped
+    with pytest.raises(MotorlabError, match="exploration"):
+        MPCPolicy(planner, layout, explore=-0.1)
+
+    runs = {}
+    for noise in (0.0, 0.5):
+        out = tmp_path / f"noise{noise}"
+        run_kind(MBRL, out, rounds=2, episodes_per_round=3, eval_episodes=1, ensemble=2, epochs=5, seed=3,
+                 collect_noise=noise, **TINY_PLAN, env=IP)
+        rounds = [json.loads((out / "rounds" / f"{r:02d}" / "round.json").read_text()) for r in range(2)]
+        runs[noise] = rounds, load_transitions(out / "rounds" / "01" / "transitions.npz")
+    (quiet, quiet_data), (noisy, noisy_data) = runs[0.0], runs[0.5]
+    # round 1 collects random actions and fits the same model either way: its evaluation is the same
+    assert quiet[0]["record"]["eval_return_mean"] == noisy[0]["record"]["eval_return_mean"]
+    # round 2 collected with that model's planner, with noise on its actions
+    assert noisy[1]["collected_with"]["explore"] == 0.5 and "explore" not in quiet[1]["collected_with"]
+    assert noisy[1]["collected_with"]["seed"] == 3 * 1000 + 1  # the planner's seed in round 2 (round.json said 3000)
+    n = min(len(quiet_data.actions), len(noisy_data.actions))
+    assert not np.allclose(quiet_data.actions[:n], noisy_data.actions[:n])
+    # a loop written before the setting (loop.json without it) resumes at its default
+    assert "collect_noise" not in _comparable(asdict(MBRL.make(env=IP).loop_plan()))
+    assert _comparable(asdict(MBRL.make(env=IP, collect_noise=0.5).loop_plan()))["collect_noise"] == 0.5
