@@ -295,7 +295,8 @@ _exact("Reacher-v4", planning=(_plan("reacher", "reacher_v4", state_size=8),
 # errors). More samples did less than more iterations (160 x 5: -37.7, -38.0), iCEM's colored noise
 # little (beta 1: -38.5, -39.0), horizons 15 and 35 worse (-46.0 and -39.4 on seed 0). The probabilistic
 # members' mean plans on the whole-path fast path (ForwardModel.fast_rollout): one env's plan at 80 x 8
-# ~30 ms, against ~42 for TS at 80 x 5.
+# ~30 ms, against ~42 for TS at 80 x 5. The benchmark with it (benchmarks/results/mbrl-pusher.json at
+# b27192e): 4 of 5 seeds reach the threshold (2,000 to 6,000 env steps; seed 0 ends at -38.80).
 _PUSHER_PLANNER = {"horizon": 25, "population": 80, "iterations": 8, "propagation": "mean"}
 # Pusher's members learn with beta-NLL (0.5; ModelSettings.nll_beta says why). With PETS' plain NLL the
 # loop's members explained none of the object's motion: on loop seed 0's 6,000 steps (the run above),
