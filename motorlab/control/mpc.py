@@ -173,8 +173,9 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
     Mean propagation predicts the whole path first (`fast_rollout`, a probabilistic member's Gaussian
     mean; with a learned reward, the reward head's predictions come with it from the same passes);
     then the reward scores all H steps in one call on (N, H, ...) tensors: a reward is elementwise
-    over its leading dimensions, and one call instead of H saves ~10 torch calls per step ahead. TS propagation has its own whole path (`ts_rollout`); a learned termination (or a
-    learned reward without a reward head) steps with `step_fn`, collecting the heads' outputs on the way.
+    over its leading dimensions, and one call instead of H saves ~10 torch calls per step ahead.
+    TS propagation has its own whole path (`ts_rollout`); a learned termination (or a learned reward
+    without a reward head) steps with `step_fn`, collecting the heads' outputs on the way.
 
     A candidate whose return is NaN or Inf scores -inf (rejected), and is counted in `faults`.
 
