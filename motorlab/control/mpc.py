@@ -561,6 +561,8 @@ class MPCPolicy:
             raise MotorlabError(f"exploration noise must be 0 or more, got {explore}.")
         self.explore = explore
         self._noise = np.random.default_rng(seed)
+        # the planner's action bounds, as arrays once (the noise is drawn at every control step)
+        self._low, self._high = (torch.as_tensor(b).cpu().numpy() for b in (planner.low, planner.high))
 
     @property
     def faults(self) -> PlannerFaults:
@@ -584,6 +586,5 @@ class MPCPolicy:
         actions = actions.cpu().numpy()
         if not self.explore:
             return actions
-        low, high = (torch.as_tensor(b).cpu().numpy() for b in (self.planner.low, self.planner.high))
-        noise = self._noise.standard_normal(actions.shape) * self.explore * (high - low) / 2
-        return np.clip(actions + noise, low, high).astype(actions.dtype)
+        noise = self._noise.standard_normal(actions.shape) * self.explore * (self._high - self._low) / 2
+        return np.clip(actions + noise, self._low, self._high).astype(actions.dtype)
