@@ -245,9 +245,14 @@ def _flat(settings: dict[str, Any]) -> dict[str, Any]:
     return flat
 
 
-# settings added after loop folders were first written: at these values (what those loops ran with)
-# they are left out of loop.json, so a folder written before them stays resumable
-_ADDED_LATER = {"collect_noise": 0.0}
+# settings added after loop folders were first written (the loop's own, and fit_model's): at these
+# values (what those loops ran with) they are left out of loop.json, so a folder written before them
+# stays resumable
+_ADDED_LATER = {"collect_noise": 0.0, "nll_beta": 0.0}
+
+
+def _without_later_defaults(settings: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in settings.items() if not (k in _ADDED_LATER and v == _ADDED_LATER[k])}
 
 
 def _comparable(plan: dict[str, Any]) -> dict[str, Any]:
@@ -255,8 +260,8 @@ def _comparable(plan: dict[str, Any]) -> dict[str, Any]:
     import json
 
     left_out = ("rounds", "until_return", "until_every_episode", "max_env_steps")
-    return json.loads(json.dumps({k: v for k, v in plan.items()
-                                  if k not in left_out and not (k in _ADDED_LATER and v == _ADDED_LATER[k])}))
+    kept = _without_later_defaults({k: v for k, v in plan.items() if k not in left_out})
+    return json.loads(json.dumps({**kept, "fit": _without_later_defaults(kept["fit"])}))
 
 
 @dataclass

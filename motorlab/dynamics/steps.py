@@ -174,8 +174,7 @@ class ModelSettings(Settings):
                     batch_size=self.batch_size, valid_fraction=self.valid_fraction, patience=self.patience,
                     keep_weights=self.keep_weights,
                     probabilistic=self.probabilistic, heads=self.heads(), device=self.device, checked=True,
-                    # left out at 0: loop folders written before the setting existed stay resumable
-                    **({"nll_beta": self.nll_beta} if self.nll_beta else {}))
+                    nll_beta=self.nll_beta)
 
 
 class DynamicsFitSettings(ModelSettings):

@@ -472,6 +472,9 @@ def test_exploration_noise_widens_the_collected_actions_and_leaves_the_plan_and_
     assert noisy[1]["collected_with"]["seed"] == 3 * 1000 + 1  # the planner's seed in round 2 (round.json said 3000)
     n = min(len(quiet_data.actions), len(noisy_data.actions))
     assert not np.allclose(quiet_data.actions[:n], noisy_data.actions[:n])
-    # a loop written before the setting (loop.json without it) resumes at its default
+    # a loop written before the setting (loop.json without it) resumes at its default; so does one
+    # written before --nll-beta
     assert "collect_noise" not in _comparable(asdict(MBRL.make(env=IP).loop_plan()))
     assert _comparable(asdict(MBRL.make(env=IP, collect_noise=0.5).loop_plan()))["collect_noise"] == 0.5
+    assert "nll_beta" not in _comparable(asdict(MBRL.make(env=IP).loop_plan()))["fit"]
+    assert _comparable(asdict(MBRL.make(env=IP, nll_beta=0.5).loop_plan()))["fit"]["nll_beta"] == 0.5
