@@ -260,7 +260,8 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
                                 f"(first: {faults[0]}); nothing to collect.")
         seconds = time.perf_counter() - start
         meta = {"env_id": env_id, "env": env_record(env_cfg), "state_layout": layout.name,
-                "state_labels": list(layout.labels), "goal_labels": list(layout.goal_labels), "obs_dim": int(env.observation_space.shape[0]),
+                "state_labels": list(layout.labels), "goal_labels": list(layout.goal_labels),
+                "obs_dim": int(env.observation_space.shape[0]),
                 "obs_layout": layout.keys_json(), "action_space": encode_space(env.action_space),
                 "action_low": env.action_space.low.tolist(), "action_high": env.action_space.high.tolist(),
                 "policy": policy_dir or "random", "seed": seed, "episodes": episodes,
