@@ -26,6 +26,7 @@ from pathlib import Path
 from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 from motorlab.rl.config import resolve
+from motorlab.rl.steps import TRAIN
 from motorlab.rl.train import train
 from motorlab.stats import steps_ratio, steps_to_threshold
 
@@ -35,7 +36,7 @@ TARGETS = {"plain_median_steps": 5000, "plain_wall_ratio_max": 0.5, "delayed_med
 def run(settings: dict, seeds: list[int], root: Path, tag: str) -> dict:
     steps, wall = [], []
     for seed in seeds:
-        s = train(resolve({**settings, "seed": seed, "until_solved": True, "progress": False}), root / f"{tag}-{seed}")
+        s = train(resolve({**settings, "seed": seed, "until_solved": True, "progress": False}), root / f"{tag}-{seed}", kind=TRAIN.name)
         steps.append(s["steps_to_success"])
         wall.append(s["wall_seconds"])
         print(f"{tag} seed {seed}: steps_to_success={s['steps_to_success']} wall={s['wall_seconds']:.2f}s", file=sys.stderr)

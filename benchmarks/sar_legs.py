@@ -103,9 +103,10 @@ def machine_speed() -> dict:
 
 def _train(settings: dict, out: str) -> None:
     from motorlab.rl.config import resolve
+    from motorlab.rl.steps import TRAIN
     from motorlab.rl.train import train
 
-    train(resolve(settings), Path(out))
+    train(resolve(settings), Path(out), kind=TRAIN.name)
 
 
 def both_chains(name: str, settings: dict, steps: int, terrain: str, tmp: Path) -> dict:

@@ -67,6 +67,7 @@ def steady_rate(run_dir: Path, warm_up: int) -> float:
 
 def main() -> None:
     from motorlab.rl.config import resolve
+    from motorlab.rl.steps import TRAIN
     from motorlab.rl.train import train
     from motorlab.synergies import import_sklearn
 
@@ -89,7 +90,7 @@ def main() -> None:
         for name, settings in CANDIDATES.items():
             cfg = resolve({**settings, "env": {"id": "myoHandReorient100-v0", "sar": str(sar), "phi": 0.66},
                            "timesteps": args.steps, "eval_every": 10**9, "progress": False, "solve_episodes": 1})
-            s = train(cfg, Path(tmp) / name)
+            s = train(cfg, Path(tmp) / name, kind=TRAIN.name)
             rate = steady_rate(Path(tmp) / name, warm_up=1000 if cfg.algo == "sac" else 2048)
             out["settings"][name] = {"env_steps": s["timesteps"], "wall_seconds": s["wall_seconds"],
                                      "env_steps_per_second_after_warm_up": round(rate, 1),

@@ -16,12 +16,13 @@ from __future__ import annotations
 import contextlib
 import csv
 import errno
+import hashlib
 import io
 import json
 import math
 import os
+import re
 import shutil
-import tempfile
 import time
 import tomllib
 import zipfile
@@ -33,11 +34,12 @@ from typing import Any, Literal
 import numpy as np
 import tomli_w
 
+from motorlab import claims
+from motorlab.claims import SUMMARY, atomic_path, atomic_write_bytes, atomic_write_text, is_complete  # noqa: F401
 from motorlab.environment import describe
 from motorlab.errors import MotorlabError
 from motorlab.user_modules import imported_names, remember
 
-SUMMARY = "summary.json"
 CONFIG = "config.toml"
 ENVIRONMENT = "environment.json"
 METRICS = "metrics.csv"
@@ -47,44 +49,6 @@ POLICY_JSON = "policy.json"  # a run's policy: its type, spaces and numbers (mot
 def default_out(step: str) -> Path:
     """`runs/<step>-<timestamp>` under the current directory."""
     return Path("runs") / f"{step}-{time.strftime('%Y%m%d-%H%M%S')}"
-
-
-def current_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_FILE_MODE = 0o666 & ~current_umask()  # what open() gives; mkstemp's 0600 would hide plots and videos from others
-
-
-@contextlib.contextmanager
-def atomic_path(path: Path, suffix: str = ".tmp"):
-    """A temp file beside `path` to write to (by name, e.g. for ffmpeg); renamed over `path` when
-    the block ends, removed if it fails. It gets the permissions open() would give, not mkstemp's 0600."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
-    os.fchmod(fd, _FILE_MODE)
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write `data` to a temp file beside `path`, fsync, then rename over it."""
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    atomic_write_bytes(path, text.encode())
 
 
 def atomic_write_npz(path: Path, **arrays: Any) -> None:
@@ -218,16 +182,10 @@ def read_config(run_dir: Path) -> dict[str, Any]:
 
 
 def write_summary(run_dir: Path, summary: dict[str, Any]) -> None:
+    """summary.json (the run is finished), then the marker names what the folder holds: what a later
+    --overwrite may delete with it (files it writes after, plots, are added when its lock is given back)."""
     write_json(Path(run_dir) / SUMMARY, summary)
-
-
-def is_complete(run_dir: Path) -> bool:
-    """True when `run_dir` holds a finished run: a summary.json that parses as a JSON object (a
-    damaged one, e.g. cut short by a full disk, is an unfinished run)."""
-    try:
-        return isinstance(json.loads((Path(run_dir) / SUMMARY).read_bytes()), dict)
-    except (OSError, ValueError):
-        return False
+    claims.record_entries(run_dir)
 
 
 def run_path(out: Path | None, step: str) -> Path:
@@ -238,12 +196,13 @@ def run_path(out: Path | None, step: str) -> Path:
     return run_dir
 
 
-# ---- what a command may do to a folder that holds a finished run ---------------------------
+# ---- what a command may do to a folder: only what its marker allows --------------------------
 
 FolderMode = Literal["new", "resume", "overwrite"]
 _MODE: ContextVar[FolderMode] = ContextVar("motorlab_run_folder_mode", default="new")
 _REPLACED: ContextVar[list[tuple[Path, Path]] | None] = ContextVar("motorlab_replaced_runs", default=None)
-ASIDE = ".replaced-"  # a run --overwrite moved aside: <parent>/.<name>.replaced-<time>
+ASIDE = ".replaced-"  # a run --overwrite moved aside: <parent>/.<name>.replaced-<time>-<pid>
+_ASIDE_TAIL = re.compile(r"\d{8}-\d{6}-(\d+)")  # what follows ASIDE: the time and the process that moved it
 
 
 @contextlib.contextmanager
@@ -252,18 +211,21 @@ def run_folders(mode: FolderMode = "new"):
     "new" refuses to write there, "resume" continues it (the command knows how), "overwrite"
     replaces it whole. A replaced run is moved aside, not deleted, until the block ends: deleted
     when the new run finished, moved back when it did not (an error, Ctrl-C). Old TensorBoard
-    events therefore never mix with new ones, and a failed --overwrite loses nothing."""
+    events therefore never mix with new ones, and a failed --overwrite loses nothing. The run
+    folders locked inside the block (one writer each) are given back when it ends."""
     replaced: list[tuple[Path, Path]] = []
     tokens = _MODE.set(mode), _REPLACED.set(replaced)
     try:
-        yield
-    except BaseException:
-        for run_dir, aside in reversed(replaced):
-            _restore(run_dir, aside)
-        raise
-    else:
-        for run_dir, aside in replaced:
-            _settle(run_dir, aside)
+        with claims.lock_scope():
+            try:
+                yield
+            except BaseException:
+                for run_dir, aside in reversed(replaced):
+                    _restore(run_dir, aside)
+                raise
+            else:
+                for run_dir, aside in replaced:
+                    _settle(run_dir, aside)
     finally:
         _MODE.reset(tokens[0])
         _REPLACED.reset(tokens[1])
@@ -280,28 +242,66 @@ def replacements() -> list[tuple[Path, Path]] | None:
     return _REPLACED.get()
 
 
+def _aside_prefix(name: str) -> str:
+    """The start of the name a run called `name` gets when moved aside: `.<name>.replaced-`, or, where
+    that would be too long for a file name, a hash of the name in its place (exact all the same)."""
+    prefix = f".{name}{ASIDE}"
+    if len(os.fsencode(prefix)) + 40 > 255:  # the time, the pid and room to spare
+        prefix = f".{hashlib.sha256(os.fsencode(name)).hexdigest()[:24]}{ASIDE}"
+    return prefix
+
+
 def move_aside(run_dir: Path, replaced: list[tuple[Path, Path]]) -> Path:
     """Move a run out of the way of the run that replaces it, recorded in `replaced` (a
     `run_folders` block's list: deleted when the block ends well, put back otherwise)."""
-    aside = run_dir.parent / f".{run_dir.name}{ASIDE}{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+    aside = run_dir.parent / f"{_aside_prefix(run_dir.name)}{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
     os.replace(run_dir, aside)  # one rename: the old run is whole, either here or there
     replaced.append((run_dir, aside))
     return aside
 
 
 def _restore(run_dir: Path, aside: Path) -> None:
-    """Put a replaced run back where it was (the run that was to replace it did not finish)."""
-    if aside.is_dir():
+    """Put a replaced run back where it was (the run that was to replace it did not finish). What
+    stands in its place is removed only when it is motorlab's unfinished run that no other process
+    is writing; otherwise the replaced run stays aside, whole, for the next `recover`."""
+    if not aside.is_dir():
+        return
+    if run_dir.exists() or run_dir.is_symlink():
+        if not _disposable(run_dir):
+            return
         shutil.rmtree(run_dir, ignore_errors=True)
-        os.replace(aside, run_dir)
+    os.replace(aside, run_dir)
+
+
+def _disposable(run_dir: Path) -> bool:
+    """True when `run_dir` may be deleted to put a replaced run back: an unfinished motorlab run (or
+    an empty folder) that no other process holds."""
+    if run_dir.is_symlink() or not run_dir.is_dir() or is_complete(run_dir) or not claims.free(run_dir):
+        return False
+    try:
+        return claims.read_claim(run_dir) is not None or not claims.entries(run_dir)
+    except (MotorlabError, OSError):
+        return False
 
 
 def _asides(run_dir: Path) -> list[Path]:
     """Runs an --overwrite of `run_dir` moved aside and left there: its process was killed (one
-    still running owns its aside, named with its process id)."""
-    if not run_dir.parent.is_dir():
+    still running owns its aside, named with its process id). Found by their exact names: the
+    one the new run's marker records, and those whose names are `run_dir`'s own prefix followed by
+    a time and a pid (never a pattern: a name with `[`, `*` or `?` matches only itself)."""
+    parent = run_dir.parent
+    if not parent.is_dir():
         return []
-    return [a for a in sorted(run_dir.parent.glob(f".{run_dir.name}{ASIDE}*")) if not _alive(a.name.rsplit("-", 1)[-1])]
+    prefix = _aside_prefix(run_dir.name)
+    found = []
+    with os.scandir(parent) as listing:
+        for entry in listing:
+            if not entry.name.startswith(prefix):
+                continue
+            tail = _ASIDE_TAIL.fullmatch(entry.name[len(prefix):])
+            if tail is not None and entry.is_dir(follow_symlinks=False) and not _alive(tail.group(1)):
+                found.append(parent / entry.name)
+    return sorted(found)
 
 
 def _alive(pid: str) -> bool:
@@ -336,31 +336,89 @@ def finished_run_message(run_dir: Path, resumable: bool = False) -> str:
             "to replace it.")
 
 
-def refuse_finished(run_dir: Path, resumable: bool = False) -> None:
-    """Raise unless `run_dir` may be written: it holds no finished run, or the command resumes or
-    overwrites (see `run_folders`). Call it before any work, so a refusal costs nothing."""
-    run_dir = Path(run_dir)
-    recover(run_dir)
-    if folder_mode() == "new" and is_complete(run_dir):
-        raise MotorlabError(finished_run_message(run_dir, resumable))
+def refuse_finished(run_dir: Path, resumable: bool = False, kind: str | None = None) -> None:
+    """Raise unless `run_dir` may be written by a run of `kind` (None: any kind's run folder) in the
+    current folder mode (see `run_folders`). Call it before any work, so a refusal costs nothing.
 
-
-def prepare_run_dir(out: Path | None, step: str, resumable: bool = False) -> Path:
-    """Create the run folder; a stale summary.json is removed so the folder
-    does not look complete until this run finishes. Call it only once the
-    settings are known to be valid, so a mistake never spoils a finished run.
+    A folder is motorlab's to write when it is new or empty, or when its marker (motorlab.claims)
+    says it holds a run of this kind: then a finished run is refused unless the command resumes or
+    overwrites it, and --overwrite refuses a folder that has gained entries its run did not leave
+    there. Any other folder is refused, whatever the mode: motorlab never writes into, replaces or
+    resumes what it did not make.
 
     Raises:
-        MotorlabError: the folder holds a finished run (unless resuming or overwriting it), or
-            it cannot be written.
+        MotorlabError: one line naming the folder, why, and the fix.
     """
+    run_dir = Path(run_dir)
+    recover(run_dir)
+    if not run_dir.is_dir():
+        if run_dir.exists():
+            raise MotorlabError(f"--out {run_dir} is a file; choose a folder path.")
+        return
+    claim = claims.read_claim(run_dir)
+    held = claims.entries(run_dir)
+    if claim is None:
+        if held:
+            raise MotorlabError(
+                f"{run_dir} is not empty and is not a motorlab run folder (it has no {claims.MARKER}); motorlab writes "
+                "only into new or empty folders and its own runs, and replaces nothing else: choose another --out.")
+        return
+    if kind is not None and claim.kind != kind:
+        raise MotorlabError(f"{run_dir} holds a motorlab {claim.kind} run, not a {kind} run; a {kind} command neither "
+                            "replaces nor continues it: choose another --out.")
+    mode = folder_mode()
+    if mode == "new" and is_complete(run_dir):
+        raise MotorlabError(finished_run_message(run_dir, resumable))
+    foreign = sorted(held - set(claim.files)) if claim.files is not None else []
+    if mode == "overwrite" and foreign:
+        shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+        raise MotorlabError(f"{run_dir} holds {shown}, which its run did not write; --overwrite would delete "
+                            "them: move them out first, or choose another --out.")
+
+
+def prepare_run_dir(out: Path | None, step: str, resumable: bool = False, kind: str | None = None) -> Path:
+    """Create the run folder of a run of `kind` (default: `step`; `step` names the default folder,
+    runs/<step>-<time>), marked as motorlab's, locked for this process (until the innermost
+    `run_folders` block or `claims.lock_scope` ends), with a stale summary.json removed so the folder
+    does not look complete until this run finishes. Call it only once the settings are known to be
+    valid, so a mistake never spoils a finished run.
+
+    Raises:
+        MotorlabError: the folder may not be written (see `refuse_finished`), another process is
+            writing it, it holds a symbolic link, or it cannot be made.
+    """
+    kind = kind or step
     run_dir = run_path(out, step)
-    refuse_finished(run_dir, resumable)  # resumable: the refusal names --resume too
-    replaced = _REPLACED.get()
-    if folder_mode() == "overwrite" and run_dir.is_dir() and any(run_dir.iterdir()) and replaced is not None:
-        move_aside(run_dir, replaced)
+    refuse_finished(run_dir, resumable, kind)
+    replaces = None
+    if run_dir.is_dir():
+        claims.lock(run_dir)  # before anything is written; then the checks again, as the holder
+        refuse_finished(run_dir, resumable, kind)
+        replaced = _REPLACED.get()
+        if folder_mode() == "overwrite" and claims.entries(run_dir) and replaced is not None:
+            replaces = move_aside(run_dir, replaced).name
     make_folder(run_dir)
+    claims.lock(run_dir)  # a new folder (or the same one: this process holds it already)
+    claims.refuse_links(run_dir)
+    claims.mark(run_dir, kind, replaces)
     (run_dir / SUMMARY).unlink(missing_ok=True)
+    return run_dir
+
+
+def claim_folder(run_dir: Path, kind: str) -> Path:
+    """Make `run_dir` a marked run folder of `kind` without locking it, for a run another process
+    will write (a study's training step): the same refusals as `prepare_run_dir`, which that
+    process then calls.
+
+    Raises:
+        MotorlabError: as `refuse_finished`, or another process is writing it.
+    """
+    refuse_finished(run_dir, True, kind)
+    make_folder(run_dir)
+    if not claims.free(run_dir):
+        raise MotorlabError(claims.busy_message(run_dir))
+    claims.refuse_links(run_dir)
+    claims.mark(run_dir, kind)
     return run_dir
 
 

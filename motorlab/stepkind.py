@@ -38,7 +38,7 @@ from typing import Any, ClassVar, Generic, TypeVar, get_args, get_origin
 
 from rich.console import Console
 
-from motorlab import trackers
+from motorlab import claims, trackers
 from motorlab.command import Command, Tracked
 from motorlab.envs import early_end_label, fold_env
 from motorlab.errors import MotorlabError
@@ -239,17 +239,17 @@ class StepKind(Command[S], Generic[S, R]):
 
     # ---- the ending every run shares ------------------------------------------------------
 
-    @staticmethod
-    def refuse_finished_out(out: Path | None) -> None:
-        """Refuse a finished run's --out (see `refuse_finished`) before the work: a kind calls it once
-        its inputs are checked (so an input mistake is still named first) and before its episodes.
-        `start` checks again; this one saves the work a refusal would waste."""
+    def refuse_finished_out(self, out: Path | None) -> None:
+        """Refuse an --out this run may not write (a finished run, another kind's, a folder that is not
+        motorlab's: see `refuse_finished`) before the work: a kind calls it once its inputs are checked
+        (so an input mistake is still named first) and before its episodes. `start` checks again, as
+        the folder's locked writer; this one saves the work a refusal would waste."""
         if out is not None:
-            refuse_finished(Path(out))
+            refuse_finished(Path(out), kind=self.name)
 
     def start(self, out: Path | None) -> Path:
-        """The run folder, created and marked unfinished (call once the settings are checked); a
-        tracked run starts here."""
+        """The run folder, created, marked as this kind's and unfinished, and locked until `run` returns
+        (call once the settings are checked); a tracked run starts here."""
         run_dir = prepare_run_dir(out, self.name)
         trackers.folder_ready(run_dir)
         return run_dir
@@ -287,7 +287,8 @@ def _tracked(run):
     def tracked_run(self, settings, out=None, *args, **kwargs):
         if out is not None:
             refuse_input_folder(self, settings, Path(out))
-        with trackers.step(self.name, settings) as tracked:
+        # the run folder's lock (motorlab.claims), taken when `start` makes it, is held to the run's end
+        with claims.lock_scope(), trackers.step(self.name, settings) as tracked:
             summary = run(self, settings, out, *args, **kwargs)
             if tracked:
                 tracked.done(summary.run_dir, summary.keys())

@@ -68,9 +68,17 @@ def test_read_config_errors(tmp_path):
         read_config(tmp_path)
 
 
+def _run_folder(path, kind: str = "train"):
+    """A folder a motorlab run of `kind` made (its marker), as these tests build runs by hand."""
+    from motorlab import claims
+
+    path.mkdir(parents=True)
+    claims.mark(path, kind)
+    return path
+
+
 def test_prepare_run_dir_refuses_a_finished_run_and_resume_marks_it_unfinished(tmp_path):
-    run = tmp_path / "run"
-    run.mkdir()
+    run = _run_folder(tmp_path / "run")
     write_summary(run, {"x": 1})
     (run / "artifact.bin").write_bytes(b"keep")
     before = snapshot(run)
@@ -84,8 +92,7 @@ def test_prepare_run_dir_refuses_a_finished_run_and_resume_marks_it_unfinished(t
 
 
 def test_a_damaged_summary_is_no_finished_run(tmp_path):
-    run = tmp_path / "run"
-    run.mkdir()
+    run = _run_folder(tmp_path / "run")
     (run / "summary.json").write_text('{"x": 1')  # cut short
     assert not is_complete(run)
     (run / "summary.json").write_text("[1, 2]")  # JSON, but not a summary
@@ -94,7 +101,7 @@ def test_a_damaged_summary_is_no_finished_run(tmp_path):
 
 
 def test_overwrite_replaces_the_folder_whole_once_the_new_run_finished(tmp_path):
-    run = tmp_path / "run"
+    run = _run_folder(tmp_path / "run")
     (run / "tensorboard").mkdir(parents=True)
     (run / "tensorboard" / "events.old").write_bytes(b"old curves")
     write_summary(run, {"x": 1})
@@ -108,8 +115,7 @@ def test_overwrite_replaces_the_folder_whole_once_the_new_run_finished(tmp_path)
 
 @pytest.mark.parametrize("failure", [RuntimeError, KeyboardInterrupt])
 def test_overwrite_puts_the_old_run_back_when_the_new_one_fails(tmp_path, failure):
-    run = tmp_path / "run"
-    run.mkdir()
+    run = _run_folder(tmp_path / "run")
     (run / "policy.json").write_text("{}")
     write_summary(run, {"x": 1})
     before = snapshot(tmp_path)
@@ -123,10 +129,9 @@ def test_overwrite_puts_the_old_run_back_when_the_new_one_fails(tmp_path, failur
 def test_a_killed_overwrite_is_settled_by_the_next_command(tmp_path):
     # what a SIGKILL leaves: the old run aside (its process gone), the new one unfinished
     run = tmp_path / "run"
-    aside = tmp_path / ".run.replaced-20260101-000000-999999999"
-    aside.mkdir()
+    aside = _run_folder(tmp_path / ".run.replaced-20260101-000000-999999999")
     write_summary(aside, {"x": 1})
-    run.mkdir()
+    _run_folder(run)
     (run / "metrics.csv").write_text("half")
     with pytest.raises(MotorlabError, match="finished run"):
         prepare_run_dir(run, "train")  # the old run is back, and finished: refused as ever
@@ -181,7 +186,8 @@ def test_read_metrics_missing(tmp_path):
 
 def test_atomic_writes_get_normal_file_permissions(tmp_path):
     """Plots, videos and summaries are as readable as any file the user writes (not mkstemp's 0600)."""
-    from motorlab.runs import atomic_write_text, current_umask
+    from motorlab.claims import current_umask
+    from motorlab.runs import atomic_write_text
 
     atomic_write_text(tmp_path / "a.txt", "x")
     with open(tmp_path / "b.txt", "w") as f:  # what plain open() gives under this umask

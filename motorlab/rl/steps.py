@@ -194,7 +194,7 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
 
         if not progress:
             settings = settings.model_copy(update={"progress": False})
-        summary = TrainSummary.model_validate(done := train(settings, out, resume=resume))
+        summary = TrainSummary.model_validate(done := train(settings, out, resume=resume, kind=self.name))
         write_run_results(Path(done["run_dir"]), self.results(settings, summary))
         return summary
 

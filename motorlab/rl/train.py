@@ -30,10 +30,12 @@ from motorlab.rl.monitor import EVAL_SEED_OFFSET, TrainingMonitor, monitor_recor
 from motorlab.runs import prepare_run_dir, run_path, write_config, write_summary
 
 
-def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> dict[str, Any]:
+def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False, *, kind: str) -> dict[str, Any]:
     """Train one policy as `cfg` says and write its run folder.
 
     Args:
+        kind: the kind its run folder is marked with (motorlab.claims): the train kind's name
+            (`motorlab.rl.steps.TRAIN.name`), so that `motorlab train --resume` continues it.
         resume: continue the run in `out` from its last checkpoint (SB3 algorithms; an LQR
             run, or one killed before its first checkpoint, starts over).
 
@@ -66,7 +68,7 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False) -> di
         model = build_model(cfg, run_dir)  # SB3 checks its settings here, before the folder is touched
         if resume and has_checkpoint(run_dir):
             record = load_checkpoint(run_dir, model)
-    prepare_run_dir(run_dir, f"train-{cfg.algo}")
+    prepare_run_dir(run_dir, f"train-{cfg.algo}", kind=kind)
     trackers.folder_ready(run_dir)  # a tracked run (--track) starts now, before the first scalar
     if record is None:
         shutil.rmtree(run_dir / "checkpoint", ignore_errors=True)  # another run's, not to be resumed into this one

@@ -53,6 +53,7 @@ from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import (
     atomic_write_bytes,
     atomic_write_text,
+    claim_folder,
     finished_with,
     folder_mode,
     inside,
@@ -71,6 +72,7 @@ from motorlab.stats import steps_to_success
 from motorlab.studies.schedule import Overlaps, run_overlapped
 
 STEP_FILE = "recipe_step.toml"  # what the study asked of a step, for resuming
+STUDY = "study"  # the kind a study's folder is marked with: only `motorlab run` resumes or replaces it
 COLUMNS = ["step", "what", "results", "setup", "notes"]
 
 
@@ -195,7 +197,9 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
     resuming = {d for d, _ in todo if toml_holds(d / STEP_FILE, asked[d]) and k.can_resume(d)}
     for d, _ in todo:
         # What the study asks is written first, and any older summary removed: a summary.json
-        # from now on is this run's, even when Ctrl-C lands between it and the run's exit.
+        # from now on is this run's, even when Ctrl-C lands between it and the run's exit. The
+        # folder is marked as the step's kind first (its run, here or in a worker, locks it).
+        claim_folder(d, k.name)
         (d / "summary.json").unlink(missing_ok=True)
         write_toml(d / STEP_FILE, asked[d])
     if k.trains and (detached or len(runs) > 1) and todo:
@@ -296,7 +300,7 @@ def run_study(recipe: Recipe, out: Path | None = None, console: Console | None =
         parallel_steps = 1
     finished = {f: (Path(out) / f).read_bytes() for f in ("summary.json", "config.toml")} \
         if out is not None and is_complete(Path(out)) else {}
-    study_dir = prepare_run_dir(out, recipe.name, resumable=True)  # a finished study needs --resume
+    study_dir = prepare_run_dir(out, recipe.name, resumable=True, kind=STUDY)  # a finished study needs --resume
     config = {"recipe": recipe.name, "source": recipe.source, "steps": [s.name for s in recipe.steps]}
     write_config(study_dir, config)
     outputs = _Outputs(recipe.steps)

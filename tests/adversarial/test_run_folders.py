@@ -48,9 +48,12 @@ def collected(tmp_path_factory) -> Path:
     ["dynamics", "collect", ENV_ID, "--episodes", "2"],
     ["export", "{run}"],
 ], ids=["train", "evaluate", "dynamics-collect", "export"])
-def test_writing_into_a_finished_run_is_refused(finished, tmp_path, command):
+def test_writing_into_a_finished_run_is_refused(finished, tmp_path, command, request):
+    from motorlab import claims
+
     target = tmp_path / "target"
     target.mkdir()
+    claims.mark(target, request.node.callspec.id)  # a finished run of the command's own kind
     (target / "summary.json").write_text('{"finished": true}\n')
     (target / "policy.json").write_text('{"type": "precious"}\n')
     before = snapshot(target)
@@ -63,6 +66,7 @@ def test_writing_into_a_finished_run_is_refused(finished, tmp_path, command):
 def test_a_finished_out_is_refused_before_the_work(finished, collected, tmp_path, monkeypatch):
     """The steps whose work comes before their folder (episodes, a fit) refuse a finished --out once
     their inputs are checked, before that work starts: each one's work here fails the test if run."""
+    from motorlab import claims
     from motorlab.api.steps import run_kind
     from motorlab.dynamics import open_loop
     from motorlab.errors import MotorlabError
@@ -85,13 +89,14 @@ def test_a_finished_out_is_refused_before_the_work(finished, collected, tmp_path
     target = tmp_path / "target"
     target.mkdir()
     (target / "summary.json").write_text('{"finished": true}\n')
-    before = snapshot(target)
     for kind, fields in [("evaluate", {"policy": "pid", "env": ENV_ID, "episodes": 1}),
                          ("zeroshot", {"runs": [finished], "envs": [ENV_ID], "episodes": 1}),
                          ("robustness", {"policies": [finished], "vary": ["delay=0,0.1"], "episodes": 1}),
                          ("collect", {"run": finished, "episodes": 2, "preview": 2}),
                          ("fit", {"activations": activations_run, "n_synergies": 1}),
                          ("dynamics-check", {"model": model, "episodes": 1})]:
+        claims.mark(target, kind)  # a finished run of this very kind
+        before = snapshot(target)
         with pytest.raises(MotorlabError, match="finished run"):
             run_kind(KINDS[kind], out=target, progress=False, **fields)
         assert snapshot(target) == before, kind
@@ -248,7 +253,9 @@ def test_resume_of_a_finished_study_that_stops_early_leaves_it_finished(tmp_path
     proc = run_here("run", bad, "--out", study, "--resume")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert read_summary(study)  # still a finished study
-    assert {k: v for k, v in snapshot(study).items() if "/late" not in k} == before
+    # (its marker now names the late step's folder too: what an --overwrite of it would delete)
+    assert {k: v for k, v in snapshot(study).items() if "/late" not in k and ".motorlab-run" not in k} == \
+        {k: v for k, v in before.items() if ".motorlab-run" not in k}
 
 
 def test_run_check_says_what_it_imports_before_importing(tmp_path):
