@@ -37,7 +37,7 @@ import tomli_w
 from motorlab import claims
 from motorlab.claims import SUMMARY, atomic_path, atomic_write_bytes, atomic_write_text, is_complete  # noqa: F401
 from motorlab.environment import describe
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_secrets
 from motorlab.user_modules import imported_names, remember
 
 CONFIG = "config.toml"
@@ -97,13 +97,16 @@ def first_line(e: Exception) -> str:
 
 
 def _plain(value: Any) -> Any:
-    """JSON-safe value: numpy scalars to Python, NaN/Inf to null."""
+    """JSON-safe value: numpy scalars to Python, NaN/Inf to null, and every string as motorlab records it,
+    credentials masked (`mask_secrets`): whatever a run folder's JSON and TOML hold passes here."""
+    if isinstance(value, str):
+        return mask_secrets(value)
     if hasattr(value, "item") and getattr(value, "ndim", 1) == 0:
         value = value.item()
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
+        return {mask_secrets(str(k)): _plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
     if hasattr(value, "tolist"):
@@ -485,10 +488,10 @@ class MetricsWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if keep_until is not None and self.path.is_file():
             atomic_write_text(self.path, _rows_until(self.path, fields, keep_until))
-            self._f = open(self.path, "a", newline="")
+            self._f = _open_no_follow(self.path, os.O_APPEND)
             self._writer = csv.DictWriter(self._f, fieldnames=fields, extrasaction="ignore")
             return
-        self._f = open(self.path, "w", newline="")
+        self._f = _open_no_follow(self.path, os.O_TRUNC)
         self._writer = csv.DictWriter(self._f, fieldnames=fields, extrasaction="ignore")
         self._writer.writeheader()
         self._f.flush()
@@ -499,6 +502,13 @@ class MetricsWriter:
 
     def close(self) -> None:
         self._f.close()
+
+
+def _open_no_follow(path: Path, how: int):
+    """A text file opened for writing that is never a link's target (ELOOP where `path` is a link: a
+    write through it would land outside the run folder)."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | how, 0o666)
+    return os.fdopen(fd, "a" if how == os.O_APPEND else "w", newline="")
 
 
 def _rows_until(path: Path, fields: list[str], steps: int) -> str:

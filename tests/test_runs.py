@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from motorlab.errors import MotorlabError
 from motorlab.runs import (
@@ -22,6 +24,7 @@ from motorlab.runs import (
     write_config,
     write_json,
     write_summary,
+    write_toml,
 )
 from tests.helpers import snapshot
 
@@ -194,3 +197,23 @@ def test_atomic_writes_get_normal_file_permissions(tmp_path):
         f.write("y")
     mode = (tmp_path / "a.txt").stat().st_mode & 0o777
     assert mode == (tmp_path / "b.txt").stat().st_mode & 0o777 == 0o666 & ~current_umask()
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, database=None)
+@given(password=st.text(st.characters(codec="ascii", exclude_characters="/@?#[]\\ \t\n\r\x0b\x0c\"'"), min_size=4,
+                        max_size=16).filter(lambda p: p.strip() and "***" not in p),
+       where=st.sampled_from(["setting", "key", "list", "nested"]))
+def test_no_credential_reaches_a_run_folders_json_or_toml(tmp_path_factory, password, where):
+    """Whatever a run records (settings, targets, commands, summaries) passes one masking function."""
+    from urllib.parse import quote
+
+    url = f"http://user:{quote(password, safe='')}@host:5000"
+    text = f"train X --track mlflow={url} --seed 1"
+    data = {"setting": {"target": text}, "key": {text: 1}, "list": {"commands": [text, "plain"]},
+            "nested": {"a": {"b": [{"c": text}]}}}[where]
+    folder = tmp_path_factory.mktemp("masked")
+    write_json(folder / "summary.json", data)
+    write_toml(folder / "config.toml", data)
+    for name in ("summary.json", "config.toml"):
+        written = (folder / name).read_text()
+        assert quote(password, safe="") not in written and "user:***@host:5000" in written.replace("\\", "")
