@@ -1,17 +1,22 @@
 """The `motorlab` command: one sub-command per `Command` in motorlab.commands, each made from its
 settings model by motorlab.commandline. Nothing here knows a command's options.
 
-User mistakes (motorlab.errors.MotorlabError, invalid settings, Click's usage errors) print one
-line and exit with status 2; an interrupted step exits with 130 and leaves its run folder
-without summary.json, i.e. visibly unfinished.
+User mistakes (motorlab.errors.MotorlabError, invalid settings, Click's usage errors) and what the
+system refuses (a full disk, a name too long, a symlink loop: motorlab.errors.StorageError) print
+one line and exit with status 2. A stopped step leaves its run folder without summary.json, i.e.
+visibly unfinished (a training's checkpoint kept for --resume): SIGINT (Ctrl-C), SIGTERM and SIGHUP
+stop a command alike (motorlab.processes), and it exits with 128 + the signal's number, as a shell
+shows a process that signal ended: 130 for Ctrl-C, 143 for SIGTERM (`timeout`, `kill`, Slurm), 129
+for SIGHUP.
 """
 
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # offscreen rendering works without a display
 
@@ -22,7 +27,8 @@ from rich.markup import escape  # noqa: E402
 from motorlab.command import Command  # noqa: E402
 from motorlab.commandline import Given, click_command  # noqa: E402
 from motorlab.commands import COMMANDS, GROUPS  # noqa: E402
-from motorlab.errors import MotorlabError  # noqa: E402
+from motorlab.errors import MotorlabError, StorageError  # noqa: E402
+from motorlab.processes import stopped_by_signals  # noqa: E402
 from motorlab.user_modules import import_modules  # noqa: E402
 
 HELP = (
@@ -89,18 +95,26 @@ def main() -> None:
 
 
 @contextmanager
-def one_line_errors() -> Iterator[None]:
-    """A user's mistake as one line and status 2; Ctrl-C as status 130 (also for motorlab.worker)."""
-    try:
-        yield
-    except MotorlabError as e:
-        _error(str(e))
-    except PermissionError as e:  # a folder or file this user may not write (or read), wherever it was met
-        _error(f"permission denied: {e.filename or e}; check its permissions, or choose an --out folder you can "
-               "write to.")
-    except KeyboardInterrupt:
-        err.print("[yellow]interrupted[/yellow]: the run folder has no summary.json, so it stays marked unfinished.")
-        sys.exit(130)
+def one_line_errors(take: tuple[int, ...] = (), grace: float = 60.0) -> Iterator[None]:
+    """A user's mistake, or an error of the system about a path (disk full, permission, name too long),
+    as one line and status 2; SIGINT, SIGTERM and SIGHUP as a stop with status 128 + the signal, its
+    cleanup given `grace` seconds (the launcher gives its trials 20). Also for motorlab.worker, which
+    gives `take`: the signals its parent stops it with, even if ignored."""
+    with stopped_by_signals(take, grace) as stop:
+        try:
+            yield
+        except MotorlabError as e:
+            _error(str(e))
+        except (OSError, RuntimeError) as e:  # a file or folder the system refused, wherever: one table of causes
+            if (known := StorageError.of(e)) is None:
+                raise
+            _error(str(known))
+        except KeyboardInterrupt:
+            what = "interrupted" if stop.signum == signal.SIGINT else f"interrupted by {stop.name}"
+            with suppress(OSError):  # after SIGHUP the terminal may be gone
+                err.print(f"[yellow]{what}[/yellow]: the run folder has no summary.json, so it stays marked "
+                          "unfinished.", highlight=False, soft_wrap=True)
+            sys.exit(stop.status)
 
 
 def _take_imports(argv: list[str]) -> list[str]:

@@ -18,7 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, ClassVar, Generic, TypeVar, get_args, get_origin
 
-from pydantic import Field, ValidationError, field_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator
 from rich.console import Console
 
 from motorlab import trackers
@@ -128,7 +128,7 @@ class Command(Generic[S]):
         try:
             return self.validate(given if how is None else self.fields_for(how, given))
         except ValidationError as e:
-            raise MotorlabError(option_error(e)) from None
+            raise MotorlabError(option_error(e, self.settings)) from None
 
     def fields_for(self, how: Any, given: dict[str, Any]) -> dict[str, Any]:
         """The fields `make` validates: `given` (flat, as given), over what the invocation `how`
@@ -159,11 +159,13 @@ class Command(Generic[S]):
         """What the command line prints when the command has run."""
 
 
-def option_error(e: ValidationError) -> str:
-    """One line from a pydantic ValidationError, naming the option as the CLI spells it."""
+def option_error(e: ValidationError, model: type[BaseModel] | None = None) -> str:
+    """One line from a pydantic ValidationError, naming the option as the CLI spells it: with the settings
+    `model`, the deepest field of a model along the error's path (a list's position or a table's key names
+    no option: `--hidden`, not `--0`)."""
     first = e.errors()[0]
-    loc = [str(x) for x in first["loc"]]
-    name = loc[-1] if loc else "?"
+    loc = list(first["loc"])
+    name = _option(loc, model) if model is not None else (str(loc[-1]) if loc else "?")
     if name == "id":
         name = "env"
     label = f"--{name.replace('_', '-')}"
@@ -172,3 +174,16 @@ def option_error(e: ValidationError) -> str:
     given = first.get("input")
     shown = f" {given!r}" if isinstance(given, (int, float, str)) and first["type"] != "missing" else ""
     return f"{label}{shown}: {first['msg']}"
+
+
+def _option(loc: list[Any], model: type[BaseModel] | None) -> str:
+    """The option an error's path `loc` falls under: its last step that is a field of a settings model."""
+    name = str(loc[0]) if loc else "?"
+    for key in loc:
+        info = model.model_fields.get(key) if isinstance(key, str) and model is not None else None
+        if info is None:
+            break
+        name = key
+        model = next((m for m in (*get_args(info.annotation), info.annotation)
+                      if isinstance(m, type) and issubclass(m, BaseModel)), None)
+    return name

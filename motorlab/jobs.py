@@ -10,13 +10,14 @@ context holds and a fresh interpreter would not: the user's env modules and the 
 from __future__ import annotations
 
 import json
+import os
 import sys
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from motorlab import trackers
-from motorlab.runs import atomic_write_text
+from motorlab.runs import atomic_path
 from motorlab.user_modules import imported_names
 
 JOB_SUFFIX = ".job.json"
@@ -45,7 +46,11 @@ class Job:
         return asdict(self)
 
     def write(self, path: Path) -> Path:
-        atomic_write_text(Path(path), json.dumps(self.as_dict(), indent=1, default=str))
+        """The job file, readable by its owner only: it carries what the child needs as given, a tracker's
+        credentials included, which every file motorlab records elsewhere masks (errors.mask_secrets)."""
+        with atomic_path(Path(path)) as tmp:
+            os.chmod(tmp, 0o600)
+            tmp.write_text(json.dumps(self.as_dict(), indent=1, default=str))
         return Path(path)
 
 

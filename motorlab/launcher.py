@@ -25,11 +25,11 @@ from typing import Any, Callable, Literal
 
 from pydantic import Field
 
-from motorlab import jobs
+from motorlab import jobs, processes
 from motorlab.errors import MotorlabError, mask_url, redact
 from motorlab.extras import missing
 from motorlab.kinds import KINDS
-from motorlab.runs import finished_with, is_complete, toml_holds, write_toml
+from motorlab.runs import STUDY, claim_folder, finished_with, is_complete, toml_holds, write_toml
 from motorlab.settings import Settings
 from motorlab.user_modules import ENV_VAR, imported_names
 
@@ -59,6 +59,10 @@ def mark_finished(t: dict[str, Any]) -> None:
 
 
 def mark_started(t: dict[str, Any]) -> None:
+    """The trial's folder, marked as its run's kind (motorlab.claims: the worker then writes into it,
+    and a folder that is not that kind's run is refused here), and what started it."""
+    command = jobs.from_dict(t["job"]).command
+    claim_folder(Path(t["run_dir"]), KINDS[command].name if command in KINDS else STUDY)
     write_toml(Path(t["run_dir"]) / STARTED_FILE, _marker(t))
 
 
@@ -81,7 +85,8 @@ OnDone = Callable[[dict[str, Any], int, float], None]  # (trial, exit status, se
 def _start(t: dict[str, Any]) -> subprocess.Popen:
     log = Path(t["log"])
     log.parent.mkdir(parents=True, exist_ok=True)
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **t["env"]}
+    # the child dies with this process (motorlab.processes), even with one killed outright
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **t["env"], **processes.child_env()}
     job = jobs.tracked(launch_job(t))  # resumed where an interrupted start left a checkpoint
     path = job.write(log.with_name(log.stem + jobs.JOB_SUFFIX))  # beside the log: on the shared file system
     mark_started(t)
@@ -113,7 +118,8 @@ def run_one(t: dict[str, Any]) -> int:
 
 
 def _stop(procs: list[subprocess.Popen], grace: float = 20.0) -> None:
-    """Ask running trials to stop as Ctrl-C would (they leave their folders visibly unfinished), then kill."""
+    """Ask running trials to stop as Ctrl-C would (they leave their folders visibly unfinished, their
+    checkpoints kept), then kill. Whatever stopped this process (SIGINT, SIGTERM, SIGHUP) asks the same."""
     for p in procs:
         if p.poll() is None:
             p.send_signal(signal.SIGINT)

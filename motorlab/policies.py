@@ -91,6 +91,10 @@ class RandomPolicy:
             self.start, self.n = int(action_space.start), int(action_space.n)
         else:
             require_actions(action_space, "the random policy", "Box or Discrete actions", env_id=env_id)
+            if not (np.isfinite(action_space.low).all() and np.isfinite(action_space.high).all()):
+                raise MotorlabError(f"the random policy draws actions between the action bounds, and "
+                                    f"{env_id or 'this env'}'s are unbounded ({action_space}); give your env finite "
+                                    "action bounds, or evaluate the zero policy or a trained one.")
             self.low, self.high = action_space.low, action_space.high
         self.rng = np.random.default_rng(seed)
 
@@ -133,11 +137,23 @@ def encode_classes(value: Any) -> Any:
 
 
 def decode_classes(value: Any) -> Any:
+    """The torch classes `encode_classes` wrote, imported again: only torch.nn / torch.optim ones.
+
+    Raises:
+        MotorlabError: any other name, or one torch does not have (a tampered policy.json).
+    """
     if isinstance(value, dict) and set(value) == {"class"}:
-        module, _, name = value["class"].rpartition(".")
-        if not module.startswith(("torch.nn", "torch.optim")):
-            raise MotorlabError(f"policy.json names class {value['class']!r}; only torch.nn / torch.optim classes are allowed.")
-        return getattr(importlib.import_module(module), name)
+        path = value["class"]
+        module, _, name = path.rpartition(".") if isinstance(path, str) else ("", "", "")
+        if not module.startswith(("torch.nn", "torch.optim")) or module.split(".")[1] not in ("nn", "optim"):
+            raise MotorlabError(f"policy.json names class {path!r}; only torch.nn / torch.optim classes are allowed.")
+        try:
+            cls = getattr(importlib.import_module(module), name)
+        except (ImportError, AttributeError):
+            cls = None
+        if not isinstance(cls, type):
+            raise MotorlabError(f"policy.json names class {path!r}, which torch does not have.")
+        return cls
     if isinstance(value, dict):
         return {k: decode_classes(v) for k, v in value.items()}
     if isinstance(value, list):
@@ -276,15 +292,21 @@ def _load_sb3(run_dir: Path, meta: dict) -> SB3Policy:
     from safetensors.numpy import load_file
 
     classes = policy_classes()
-    cls = classes.get(meta.get("policy_class", ""))
+    cls = classes.get(meta["policy_class"])
     if cls is None:
-        raise MotorlabError(f"{run_dir / POLICY_JSON}: unknown policy class {meta.get('policy_class')!r}.")
-    kwargs = decode_classes(meta.get("policy_kwargs") or {})
+        raise MotorlabError(f"{run_dir / POLICY_JSON}: key 'policy_class' names an unknown policy class "
+                            f"{meta['policy_class']!r} (motorlab saves {', '.join(classes)}); re-run training.")
+    try:
+        kwargs = decode_classes(meta.get("policy_kwargs") or {})
+    except MotorlabError as e:
+        raise MotorlabError(f"{run_dir / POLICY_JSON}: key 'policy_kwargs': {e}") from None
+    if not isinstance(kwargs, dict):
+        raise _bad_key(run_dir, "policy_kwargs", kwargs, "an object")
     kwargs["optimizer_class"] = _NoOptimizer  # the networks only (the run's optimizer class is still checked above)
     if meta.get("use_sde") is not None:
         kwargs["use_sde"] = meta["use_sde"]
+    spaces = tuple(_space(run_dir, meta, key) for key in ("observation_space", "action_space"))
     try:
-        spaces = decode_space(meta["observation_space"]), decode_space(meta["action_space"])
         policy = cls(*spaces, lambda _: 0.0, **kwargs)
     except (RuntimeError, MemoryError, TypeError, ValueError, KeyError, AssertionError) as e:
         # a damaged policy.json (a negative or absurd layer width, a wrong keyword) fails in torch or SB3
@@ -325,7 +347,11 @@ def load_policy_files(run_dir: Path) -> Policy:
     """The policy in `run_dir` (policy.json, policy.safetensors), finished run or not."""
     run_dir = Path(run_dir)
     meta = read_json(run_dir / POLICY_JSON)
+    if not isinstance(meta, dict):
+        raise MotorlabError(f"{run_dir / POLICY_JSON} holds a JSON {type(meta).__name__}, not a policy (an object "
+                            "with its type and settings); re-run training.")
     kind = meta.get("type")
+    check_keys(run_dir, meta, POLICY_KEYS.get(kind, {}) if isinstance(kind, str) else {})
     try:
         if kind == "sb3":
             return _load_sb3(run_dir, meta)
@@ -336,9 +362,69 @@ def load_policy_files(run_dir: Path) -> Policy:
 
             return PIDController(meta["kp"], meta["ki"], meta["kd"], dt=meta["dt"],
                                  low=np.asarray(meta["low"]), high=np.asarray(meta["high"]))
-    except (KeyError, TypeError, ValueError) as e:
-        raise MotorlabError(f"{run_dir / POLICY_JSON} is incomplete or corrupt ({e!r}); re-run training.") from None
-    raise MotorlabError(f"{run_dir / POLICY_JSON} has unknown policy type {kind!r}.")
+    except KeyError as e:
+        raise MotorlabError(f"{run_dir / POLICY_JSON}: key {e.args[0]!r} is missing; re-run training.") from None
+    except (TypeError, ValueError, AttributeError, IndexError, OverflowError) as e:
+        raise MotorlabError(f"{run_dir / POLICY_JSON} is incomplete or corrupt ({type(e).__name__}: "
+                            f"{' '.join(str(e).split())}); re-run training.") from None
+    raise MotorlabError(f"{run_dir / POLICY_JSON}: key 'type' is {kind!r}, not a policy type motorlab saves "
+                        f"({', '.join(POLICY_KEYS)}); re-run training.")
+
+
+# What each policy type's policy.json must hold, key by key (checked before anything is built from it,
+# so a tampered or damaged file is one line naming the key): "str", "int", "number", "numbers" (an
+# array of finite numbers), "object".
+POLICY_KEYS: dict[str, dict[str, str]] = {
+    "sb3": {"policy_class": "str", "observation_space": "object", "action_space": "object"},
+    "lqr": {"K": "numbers", "obs_dim": "int", "act_dim": "int", "obs_lags": "int", "act_lags": "int",
+            "low": "numbers", "high": "numbers"},
+    "pid": {"kp": "numbers", "ki": "numbers", "kd": "numbers", "dt": "number", "low": "numbers", "high": "numbers"},
+}
+KEY_TYPES = {"str": "a string", "int": "a whole number", "number": "a number", "numbers": "numbers",
+             "object": "an object"}
+
+
+def _fits(value: Any, kind: str) -> bool:
+    if kind == "str":
+        return isinstance(value, str)
+    if kind == "object":
+        return isinstance(value, dict)
+    if kind in ("int", "number"):
+        numeric = isinstance(value, int) if kind == "int" else isinstance(value, (int, float))
+        return numeric and not isinstance(value, bool) and bool(np.isfinite(value))
+    try:  # numbers: a number or a (nested, rectangular) list of them, which bounds may hold as +-inf
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        return False
+    return array.size > 0 and not np.isnan(array).any() and not isinstance(value, (str, bool, dict))
+
+
+def check_keys(run_dir: Path, meta: dict, keys: dict[str, str]) -> None:
+    """Refuse a policy.json that lacks a key its type needs or holds the wrong type there.
+
+    Raises:
+        MotorlabError: "runs/x/policy.json: key 'obs_dim' is missing; re-run training."
+    """
+    for key, kind in keys.items():
+        if key not in meta:
+            raise MotorlabError(f"{run_dir / POLICY_JSON}: key {key!r} is missing; re-run training.")
+        if not _fits(meta[key], kind):
+            raise _bad_key(run_dir, key, meta[key], KEY_TYPES[kind])
+
+
+def _space(run_dir: Path, meta: dict, key: str) -> gym.Space:
+    """The space policy.json records under `key`, one line naming the key where it is damaged."""
+    try:
+        return decode_space(meta[key])
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError, OverflowError, AssertionError) as e:
+        raise MotorlabError(f"{run_dir / POLICY_JSON}: key {key!r} does not describe a space ({type(e).__name__}: "
+                            f"{' '.join(str(e).split())}); re-run training.") from None
+
+
+def _bad_key(run_dir: Path, key: str, value: Any, wanted: str) -> MotorlabError:
+    shown = repr(value)
+    shown = shown if len(shown) <= 40 else shown[:37] + "..."
+    return MotorlabError(f"{run_dir / POLICY_JSON}: key {key!r} holds {shown}, not {wanted}; re-run training.")
 
 
 def load_policy(spec: str, env: gym.Env, env_id: str, seed: int = 0) -> Policy:

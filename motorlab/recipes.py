@@ -69,7 +69,7 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError,
 from motorlab.envs import ENV_KEYS, EnvConfig
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.kinds import DEFAULT_KIND, KINDS, kind, providers
-from motorlab.settings import Settings
+from motorlab.settings import Settings, UserCode, check_user_code
 from motorlab.stepkind import StepKind
 from motorlab.user_modules import import_modules
 
@@ -270,18 +270,31 @@ def check_step_name(name: str, where: str) -> None:
 
 
 def code_it_imports(data: dict[str, Any]) -> list[str]:
-    """The Python code validating a recipe runs (see docs/concepts.md, Safety): its `imports`, the
-    modules of env ids written MODULE:ID, and reward functions (a module's, or a .py file's)."""
-    steps = [data.get("defaults") or {}, *(s for s in data.get("steps") or [] if isinstance(s, dict))]
+    """The Python code validating a recipe runs (see docs/concepts.md, Safety): its `imports`, and
+    the modules (or .py files) of every field that names the user's code (UserCode: env ids written
+    MODULE:ID, reward functions, a planner's reward and termination, zero-shot envs)."""
+    every = set().union(*map(code_fields, KINDS.values()))
+    steps = [(data.get("defaults") or {}, every),
+             *((s, code_fields(k) if (k := KINDS.get(str(s.get("kind", DEFAULT_KIND)))) else every)
+               for s in data.get("steps") or [] if isinstance(s, dict))]
     found = [str(m) for m in data.get("imports") or []]
-    for fields in steps:
-        env = fields.get("env")
-        if isinstance(env, str) and ":" in env:
-            found.append(env.split(":", 1)[0])
-        reward = fields.get("reward")
-        if isinstance(reward, str) and ":" in reward:
-            found.append(reward.rsplit(":", 1)[0])
+    for fields, names in steps:
+        for name in names & set(fields):
+            values = fields[name] if isinstance(fields[name], list) else [fields[name]]
+            found += [v.rsplit(":", 1)[0] for v in values if isinstance(v, str) and ":" in v and not v.startswith("@")]
     return list(dict.fromkeys(found))
+
+
+def code_fields(step_kind: StepKind) -> set[str]:
+    """A kind's recipe fields that name the user's code (marked UserCode; its flat env settings' too),
+    and env and reward, which name it written MODULE:NAME."""
+    def marked(info: Any) -> bool:
+        return any(isinstance(m, UserCode) for m in info.metadata)
+
+    model = step_kind.settings
+    own = {name for name, info in model.model_fields.items() if marked(info)}
+    flat = {key for key, field in ENV_KEYS.items() if key in model.aliases and marked(EnvConfig.model_fields[field])}
+    return own | flat | ({"env", "reward"} & model.fields())
 
 
 def parse_recipe(text: str, source: str = "<recipe>", announce: Announce | None = None) -> Recipe:
@@ -342,7 +355,9 @@ def parse_recipe(text: str, source: str = "<recipe>", announce: Announce | None 
             seeds = _seeds(fields.pop(SEEDS, None))
             fields = step_kind.prepare(fields, referenced)
             settings = step_kind.validate(fields)
-            step_kind.check(step_kind.validate(_without_refs(step_kind, fields)))
+            checked = step_kind.validate(_without_refs(step_kind, fields))
+            check_user_code(checked)  # every field naming the user's code, of any kind: its module and name
+            step_kind.check(checked)
         except ValidationError as e:
             raise MotorlabError(_explain(e, where, known)) from None
         except MotorlabError as e:

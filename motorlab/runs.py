@@ -35,9 +35,16 @@ import numpy as np
 import tomli_w
 
 from motorlab import claims
-from motorlab.claims import SUMMARY, atomic_path, atomic_write_bytes, atomic_write_text, is_complete  # noqa: F401
+from motorlab.claims import (  # noqa: F401 - re-exported: run folders are written through runs
+    SUMMARY,
+    atomic_path,
+    atomic_write_bytes,
+    atomic_write_text,
+    current_umask,
+    is_complete,
+)
 from motorlab.environment import describe
-from motorlab.errors import MotorlabError, mask_secrets
+from motorlab.errors import MotorlabError, StorageError, mask_secrets
 from motorlab.user_modules import imported_names, remember
 
 CONFIG = "config.toml"
@@ -188,7 +195,8 @@ def write_summary(run_dir: Path, summary: dict[str, Any]) -> None:
     """summary.json (the run is finished), then the marker names what the folder holds: what a later
     --overwrite may delete with it (files it writes after, plots, are added when its lock is given back)."""
     write_json(Path(run_dir) / SUMMARY, summary)
-    claims.record_entries(run_dir)
+    with contextlib.suppress(OSError):  # the run has finished: a full disk here costs the list, not the run
+        claims.record_entries(run_dir)
 
 
 def run_path(out: Path | None, step: str) -> Path:
@@ -201,6 +209,7 @@ def run_path(out: Path | None, step: str) -> Path:
 
 # ---- what a command may do to a folder: only what its marker allows --------------------------
 
+STUDY = "study"  # the kind a study's folder is marked with (`motorlab run`; a sweep or tune trial of a recipe)
 FolderMode = Literal["new", "resume", "overwrite"]
 _MODE: ContextVar[FolderMode] = ContextVar("motorlab_run_folder_mode", default="new")
 _REPLACED: ContextVar[list[tuple[Path, Path]] | None] = ContextVar("motorlab_replaced_runs", default=None)
@@ -432,14 +441,11 @@ def make_folder(path: Path) -> Path:
         path.mkdir(parents=True, exist_ok=True)
         if not os.access(path, os.W_OK | os.X_OK):
             raise PermissionError(errno.EACCES, "permission denied", str(path))
-    except OSError as e:
-        raise MotorlabError(unwritable_message(path, e)) from None
+    except OSError as e:  # the one table of what the system refused (errors.StorageError), else in words here
+        raise StorageError.of(e) or MotorlabError(
+            f"cannot write {e.filename or path}: {os.strerror(e.errno).lower() if e.errno else type(e).__name__}; "
+            "choose an --out folder you can write to.") from None
     return path
-
-
-def unwritable_message(path: Path, e: OSError) -> str:
-    reason = os.strerror(e.errno).lower() if e.errno else type(e).__name__
-    return f"cannot write {e.filename or path}: {reason}; choose an --out folder you can write to."
 
 
 def inside(root: Path, path: Path, what: str) -> Path:

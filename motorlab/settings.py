@@ -4,7 +4,9 @@ them; another types the summary.json its run writes."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+import math
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from types import UnionType
 from typing import Annotated, Any, ClassVar, Union, get_args, get_origin
@@ -12,7 +14,15 @@ from typing import Annotated, Any, ClassVar, Union, get_args, get_origin
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError, PydanticUndefined
 
+from motorlab.errors import MotorlabError
+
 Loc = tuple[str | int, ...]
+
+# The largest seed a setting takes: numpy's legacy seeds and SB3's stop at 2**32 - 1, and episode seeds
+# (seed + i) must stay far from int64's end, where numpy's arithmetic overflows
+MAX_SEED = 2**32 - 1
+# Integers past int64 fit no array, tensor or C library motorlab hands them to
+MAX_INT = 2**63 - 1
 
 
 class StrictModel(BaseModel):
@@ -22,9 +32,14 @@ class StrictModel(BaseModel):
     true` (or `--set episodes=true`) would run one episode. Its strict mode would also refuse the
     conversions settings rely on (`"3"` from a command line, `1e3` from TOML as 1000), so only
     booleans are refused, before pydantic converts anything: in this model's fields and in those of
-    the plain pydantic models nested in it (a StrictModel nested in it checks its own)."""
+    the plain pydantic models nested in it (a StrictModel nested in it checks its own).
 
-    model_config = ConfigDict(extra="forbid")
+    Numbers must be finite (pydantic's `allow_inf_nan=False` for its own float fields, and
+    `_finite_numbers` for floats anywhere in it, tables of keyword arguments and nested models
+    included): NaN and infinity have no TOML form, so config.toml could not repeat the run, and no
+    setting of motorlab's means anything by them."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     @model_validator(mode="before")
     @classmethod
@@ -39,6 +54,56 @@ class StrictModel(BaseModel):
             raise ValidationError.from_exception_data(cls.__name__, [InitErrorDetails(
                 type=error, loc=loc, input=_at(data, loc))])
         return data
+
+    @model_validator(mode="after")
+    def _finite_numbers(self):
+        found = unusable_number(self)
+        if found is not None:
+            loc, inner, value, why = found
+            # a number inside a table or list (--set gamma=nan, --env-arg x=inf) is named by its field,
+            # the option, with its place inside said in the message
+            text = f"{'.'.join(map(str, inner))} = {value}: {why}" if inner else why
+            error = PydanticCustomError("unusable_number", "{text}", {"text": text})
+            given: Any = self if inner else value  # inside a table or list: the option's whole value
+            for name in loc if inner else ():
+                given = getattr(given, str(name))
+            raise ValidationError.from_exception_data(type(self).__name__, [InitErrorDetails(
+                type=error, loc=loc, input=given)])
+        return self
+
+
+def unusable_number(value: Any, loc: Loc = (), inner: Loc = ()) -> tuple[Loc, Loc, Any, str] | None:
+    """Where `value` (validated settings, however nested: models, tables, lists) holds what no run can
+    use or config.toml cannot record: (the field's place, the value's place inside that field's value,
+    the value, why). NaN or infinity; an integer past int64; inside a table or list (keyword arguments
+    for an env or an algorithm), a value TOML has no form for (none/null, a Python object). None: nowhere."""
+    if isinstance(value, float) and not math.isfinite(value) or _non_finite_text(value, inner):
+        return loc, inner, value, "give a finite number (NaN and infinity cannot be written to config.toml, nor used)"
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > MAX_INT:
+        return loc, inner, value, f"give a number of at most {MAX_INT:,} (64 bits)"
+    if isinstance(value, BaseModel) and not inner:  # a model's fields are places of their own
+        found = ((unusable_number(getattr(value, n, None), (*loc, n))) for n in type(value).model_fields)
+    elif isinstance(value, Mapping):
+        found = (unusable_number(v, loc, (*inner, k)) for k, v in value.items())
+    elif isinstance(value, (list, tuple)):
+        found = (unusable_number(v, loc, (*inner, i)) for i, v in enumerate(value))
+    elif inner and not isinstance(value, (str, int, float, Path)):  # bool is an int; a path is written as text
+        return loc, inner, value, ("give text, a number, true/false, a list or a table (config.toml records it: "
+                                   "TOML has no null, leave the key out for its default)")
+    else:
+        return None
+    return next((f for f in found if f is not None), None)
+
+
+def _non_finite_text(value: Any, inner: Loc) -> bool:
+    """"nan" or "inf" as text inside a table (`--set gamma=inf`, `--env-arg x=nan` from a command line):
+    the algorithm or env reading it as a number would get NaN or infinity."""
+    if not (isinstance(value, str) and inner and isinstance(inner[0], str)):
+        return False
+    try:
+        return not math.isfinite(float(value))
+    except ValueError:
+        return False
 
 
 def bool_for_number(model: type[BaseModel], data: Mapping[str, Any], loc: Loc = ()) -> tuple[Loc, str] | None:
@@ -121,8 +186,51 @@ class Settings(StrictModel):
         return set(cls.model_fields) | set(cls.aliases)
 
     def config(self) -> dict[str, Any]:
-        """What config.toml records of these settings."""
-        return self.model_dump()
+        """What config.toml records of these settings: plain values (a path as text), which read
+        back give the same settings."""
+        return self.model_dump(mode="json")
+
+
+@dataclass(frozen=True)
+class UserCode:
+    """A field's mark (`Annotated[str, UserCode(check)]`, or on a list of them): its value names the
+    user's code or what that code registers (MODULE:FUNCTION, FILE.py:FUNCTION, a MODULE:EnvId env
+    id), which `check(value)` finds or refuses with a MotorlabError. `check_user_code` calls it for
+    every field so marked, of any kind, nested models' too, when settings are checked before any work
+    (a recipe's validation, `motorlab run --check`): a new kind's field is checked by being marked."""
+
+    check: Callable[[str], None]
+
+
+def user_code(settings: BaseModel, loc: Loc = ()) -> Iterator[tuple[Loc, str, UserCode]]:
+    """Every value of `settings` (nested models included) that names the user's code: (the field's
+    place, the value, its mark); each item of a marked list."""
+    for name, info in type(settings).model_fields.items():
+        value = getattr(settings, name, None)
+        mark = next((m for m in info.metadata if isinstance(m, UserCode)), None)
+        if mark is not None:
+            yield from (((*loc, name), item, mark) for item in (value if isinstance(value, (list, tuple)) else [value])
+                        if isinstance(item, str))
+        elif isinstance(value, BaseModel):
+            yield from user_code(value, (*loc, name))
+
+
+def check_user_code(settings: BaseModel) -> None:
+    """Find the code every marked field of `settings` names (see UserCode); a recipe's "@step"
+    reference names a step's output, not code, and is left to the study.
+
+    Raises:
+        MotorlabError: one line naming the field and what is missing (the module, the function).
+    """
+    for loc, value, mark in user_code(settings):
+        if value.startswith("@"):
+            continue
+        try:
+            mark.check(value)
+        except MotorlabError as e:
+            field = ".".join(map(str, loc))
+            text = str(e)
+            raise MotorlabError(text if field in text else f"{field}: {text}") from None
 
 
 class Summary(BaseModel):

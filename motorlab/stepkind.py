@@ -329,10 +329,15 @@ def seeds_headline(all_scores: list[Scores]) -> dict[str, Any]:
         "return_mean": statistics.fmean(means),
         "return_std": statistics.stdev(means),
         "return_min": min(s.return_min for s in all_scores),
-        "success_rate": statistics.fmean(s.success_rate for s in all_scores),
+        "success_rate": _mean_of_known([s.success_rate for s in all_scores]),  # None: the env defines no success
         "episodes": sum(s.episodes for s in all_scores),
     }
     return {**out, **iqm_keys("return", means)}
+
+
+def _mean_of_known(values: list[float | None]) -> float | None:
+    known = [v for v in values if v is not None]
+    return statistics.fmean(known) if known else None
 
 
 def iqm_keys(name: str, values: list[float]) -> dict[str, float]:

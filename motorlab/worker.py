@@ -3,7 +3,8 @@
 A study's seeds, a sweep's or search's trials and Ray's workers each run one job (motorlab.jobs):
 the command it names, from its settings, through the same `Command.invoke` the CLI calls, then
 the same printout, into the process's log. Mistakes are one line and status 2, as on the command
-line; Ctrl-C (a stopped trial) is status 130.
+line; SIGINT (a stopped trial: the launcher's request), SIGTERM (its parent died, or `kill`) and
+SIGHUP stop it as Ctrl-C stops the CLI, with status 128 + the signal (130 for SIGINT).
 """
 
 from __future__ import annotations
@@ -12,15 +13,18 @@ import os
 import signal
 import sys
 
+from motorlab import processes
+
 # Ray's workers block SIGINT, and a process they start inherits the blocked mask: a trial would
-# never see the Ctrl-C that stops it early (motorlab.sweeps.launcher.stop), only the kill after it.
-if hasattr(signal, "pthread_sigmask"):
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+# never see the Ctrl-C that stops it early (motorlab.launcher._stop), only the kill after it.
+processes.unblock()
 # A shell without job control starts a background command (`motorlab tune ... &`, nohup in a
 # script) with SIGINT ignored, and children inherit that: the Ctrl-C that stops a pruned trial
 # would be lost and the seed would train to its budget. This process is stopped only by its parent.
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
+# A parent killed outright (SIGKILL, the OOM killer) cannot stop us: the kernel sends SIGTERM then.
+processes.die_with_launcher()
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from pathlib import Path  # noqa: E402
@@ -53,7 +57,8 @@ def run_job(job: jobs.Job, console: Console) -> None:
 
 
 def main() -> None:
-    with one_line_errors():
+    # its parent's stop requests, even if ignored; a cleanup that hangs ends before the launcher's kill would
+    with one_line_errors(take=(signal.SIGINT, signal.SIGTERM), grace=15.0):
         if len(sys.argv) != 2:
             raise MotorlabError("usage: python -m motorlab.worker JOB.json (a job file a study, sweep or search wrote).")
         run_job(jobs.read(Path(sys.argv[1])), Console(width=150))

@@ -530,3 +530,128 @@ def test_steps_after_a_five_seed_arm_take_every_seed(every_recipe, tmp_path):
                     arm = f.key.split(".")[0]
                     assert sorted(per_seed) == sorted((f"seed{k}", rate[f"{arm}/seed{k}"]) for k in range(seeds[arm]))
                     assert headline[f.key] == pytest.approx(sum(v for _, v in per_seed) / seeds[arm]), (name, f.key)
+
+
+# ---- the user's code a recipe names, found at the door (issue 52) ----------------------------
+
+# One step of each kind that validates as it is (earlier steps give what it reads)
+CODE_STEPS = {
+    "train": {"env": "InvertedPendulum-v5", "algo": "lqr", "timesteps": 300},
+    "evaluate": {"policy": "@t", "env": "InvertedPendulum-v5"},
+    "video": {"run": "@t"}, "collect": {"run": "@c0"}, "vaf": {"activations": "@c"}, "fit": {"activations": "@c"},
+    "zeroshot": {"runs": ["@t"], "envs": ["InvertedPendulum-v5"]},
+    "robustness": {"policies": ["@t"], "vary": ["delay=0,0.1"]}, "compare": {"groups": {"a": ["@t"]}},
+    "dynamics-collect": {"env": "InvertedPendulum-v5", "episodes": 2}, "dynamics-fit": {"transitions": "@dc"},
+    "dynamics-check": {"model": "@df"}, "mpc": {"env": "InvertedPendulum-v5", "model": "@df"},
+    "mbrl": {"env": "InvertedPendulum-v5"},
+}
+EARLIER = [{"name": "t", "kind": "train", **CODE_STEPS["train"]}, {"name": "c0", "kind": "train", **CODE_STEPS["train"]},
+           {"name": "c", "kind": "collect", "run": "@t"}, {"name": "dc", "kind": "dynamics-collect", "env": "Reacher-v5"},
+           {"name": "df", "kind": "dynamics-fit", "transitions": "@dc"}]
+
+
+def _code_cases() -> list[tuple[str, str]]:
+    from motorlab.kinds import KINDS
+    from motorlab.recipes import code_fields
+
+    return [(name, field) for name, k in KINDS.items() for field in sorted(code_fields(k))]
+
+
+def test_every_kind_has_a_step_that_validates():
+    import tomli_w
+
+    from motorlab.kinds import KINDS
+
+    assert set(CODE_STEPS) == set(KINDS)
+    steps = EARLIER + [{"name": f"s-{k}", "kind": k, **fields} for k, fields in CODE_STEPS.items()]
+    parse_recipe(tomli_w.dumps({"name": "every-kind", "steps": steps}))
+
+
+def test_the_code_fields_are_found_from_the_marks():
+    """The fields checked are found from the settings models (UserCode marks), not listed: mpc's and mbrl's
+    reward and termination and zeroshot's envs among them."""
+    cases = set(_code_cases())
+    assert {("mpc", "termination"), ("mbrl", "termination"), ("mpc", "reward"), ("zeroshot", "envs"),
+            ("train", "env"), ("train", "reward")} <= cases
+
+
+
+@pytest.mark.parametrize(("kind", "field"), _code_cases())
+def test_a_recipe_naming_missing_code_is_refused_at_the_door(kind, field):
+    """A recipe naming a module that does not import, or a function (or env id) its module lacks, in any
+    field that names the user's code, of any kind, fails validation (`run --check`) in one line naming
+    the field and the module, never a late failure when the step runs."""
+    import math
+
+    import tomli_w
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    modules = st.from_regex(r"nosuch_[a-z]{1,8}", fullmatch=True).map(lambda m: (m, "Thing"))
+    names = st.from_regex(r"[a-z][a-z0-9_]{0,10}", fullmatch=True).filter(lambda n: not hasattr(math, n))
+    missing = st.one_of(modules, names.map(lambda n: ("math", n)))
+
+    @settings(max_examples=4, deadline=None, derandomize=True, database=None)
+    @given(missing=missing)
+    def check(missing):
+        module, name = missing
+        value = f"{module}:{name}-v0" if field in ("env", "envs") else f"{module}:{name}"
+        step = {"name": "s", "kind": kind, **CODE_STEPS[kind], field: [value] if field == "envs" else value}
+        with pytest.raises(MotorlabError) as e:
+            parse_recipe(tomli_w.dumps({"name": "x", "steps": [*EARLIER, step]}))
+        text = str(e.value)
+        assert "\n" not in text and field in text and module in text, text
+        if module == "math":
+            assert name in text, text
+
+    check()
+
+
+@pytest.mark.parametrize(("field", "value", "named"), [
+    ("termination", "nosuch_terminations:fell", "nosuch_terminations"),
+    ("reward", "math:nosuch_reward", "nosuch_reward"),
+])
+def test_run_check_finds_an_mpc_recipes_functions(tmp_path, field, value, named):
+    """Listed: `run --check` called a recipe valid when its mpc termination module did not exist."""
+    from tests.helpers import assert_one_line_error, run_here
+
+    recipe = tmp_path / "mpc.toml"
+    recipe.write_text(textwrap.dedent(f"""
+        name = "mpc"
+        [[steps]]
+        name = "dc"
+        kind = "dynamics-collect"
+        env = "Reacher-v5"
+        [[steps]]
+        name = "df"
+        kind = "dynamics-fit"
+        transitions = "@dc"
+        [[steps]]
+        name = "plan"
+        kind = "mpc"
+        env = "Reacher-v5"
+        model = "@df"
+        {field} = "{value}"
+    """))
+    assert_one_line_error(run_here("run", recipe, "--check", cwd=tmp_path), field, named)
+
+
+def test_run_check_finds_a_zeroshot_recipes_envs(tmp_path):
+    """Listed: `run --check` called a recipe valid when its zeroshot envs' module did not exist."""
+    from tests.helpers import assert_one_line_error, run_here
+
+    recipe = tmp_path / "zeroshot.toml"
+    recipe.write_text(textwrap.dedent("""
+        name = "zeroshot"
+        [[steps]]
+        name = "t"
+        env = "InvertedPendulum-v5"
+        algo = "lqr"
+        timesteps = 300
+        [[steps]]
+        name = "z"
+        kind = "zeroshot"
+        runs = ["@t"]
+        envs = ["InvertedPendulum-v5", "nosuch_envs_pkg:Arm-v0"]
+    """))
+    assert_one_line_error(run_here("run", recipe, "--check", cwd=tmp_path), "envs", "nosuch_envs_pkg")

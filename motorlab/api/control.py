@@ -6,11 +6,13 @@ from pathlib import Path
 from typing import Any
 
 from motorlab.api import steps
+from motorlab.api.checks import api_function
 from motorlab.api.steps import Track
 from motorlab.api.views import Result
 from motorlab.control.steps import MBRL, MPC
 
 
+@api_function
 def mpc(env: str, model: str | Path | Result, *, episodes: int | None = None, out: str | Path | None = None,
         progress: bool = True, track: Track = None, **settings: Any) -> Result:
     """Model-predictive control of `env` on a learned forward model (`motorlab mpc`).
@@ -29,6 +31,7 @@ def mpc(env: str, model: str | Path | Result, *, episodes: int | None = None, ou
     return steps.run_kind(MPC, out, progress, track, env=env, model=model, episodes=episodes, **settings)
 
 
+@api_function
 def mbrl(env: str, rounds: int | None = None, *, out: str | Path | None = None, progress: bool = True,
          track: Track = None, **settings: Any) -> Result:
     """The model-based RL loop (PETS, `motorlab mbrl`): plan with the ensemble, collect, refit, evaluate.

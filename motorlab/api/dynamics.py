@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from motorlab.api import steps
+from motorlab.api.checks import api_function
 from motorlab.api.steps import Track
 from motorlab.api.views import Result
 from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
@@ -21,6 +22,7 @@ from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_F
 __all__ = ["collect", "fit", "check"]
 
 
+@api_function
 def collect(env: str, episodes: int | None = None, *, out: str | Path | None = None, progress: bool = True,
             **settings: Any) -> Result:
     """Record transitions (state, action, next state, reward, done) to transitions.npz.
@@ -35,6 +37,7 @@ def collect(env: str, episodes: int | None = None, *, out: str | Path | None = N
     return steps.run_kind(DYNAMICS_COLLECT, out, progress, env=env, episodes=episodes, **settings)
 
 
+@api_function
 def fit(transitions: str | Path | Result, *, epochs: int | None = None, out: str | Path | None = None,
         progress: bool = True, track: Track = None, **settings: Any) -> Result:
     """Fit a forward model of the normalized state delta: model.safetensors + model.json.
@@ -48,6 +51,7 @@ def fit(transitions: str | Path | Result, *, epochs: int | None = None, out: str
     return steps.run_kind(DYNAMICS_FIT, out, progress, track, transitions=transitions, epochs=epochs, **settings)
 
 
+@api_function
 def check(model: str | Path | Result, *, episodes: int | None = None, out: str | Path | None = None,
           progress: bool = True, **settings: Any) -> Result:
     """The model against the simulator under the same actions, open loop: error vs horizon,

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from motorlab.api import steps
+from motorlab.api.checks import api_function
 from motorlab.api.steps import Track
 from motorlab.api.views import FOLDER_TYPES, PolicyFunction, Result
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
@@ -24,6 +25,7 @@ if TYPE_CHECKING:
 PolicyLike = str | Path | Result
 
 
+@api_function
 def train(env: str, algo: str | None = None, timesteps: int | None = None, *, preset: str | None = None,
           seed: int | None = None, out: str | Path | None = None, progress: bool = True, track: Track = None,
           overwrite: bool = False, **settings: Any) -> Run:
@@ -59,6 +61,7 @@ def train(env: str, algo: str | None = None, timesteps: int | None = None, *, pr
     return steps.run(TRAIN, checked, out, progress, track, overwrite)  # type: ignore[return-value]
 
 
+@api_function
 def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None = None, seed: int | None = None,
              workers: int | None = None, out: str | Path | None = None, progress: bool = True,
              overwrite: bool = False, **env_settings: Any) -> Result:
@@ -84,6 +87,7 @@ def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None
     return steps.run(EVALUATE, checked, out, progress, overwrite=overwrite)
 
 
+@api_function
 def video(run: PolicyLike, episodes: int | None = None, *, out: str | Path | None = None,
           **settings: Any) -> Result:
     """Render episodes of a run's policy to MP4 files (`motorlab video RUN`), offscreen.
@@ -100,6 +104,7 @@ def video(run: PolicyLike, episodes: int | None = None, *, out: str | Path | Non
     return steps.run_kind(VIDEO, out, run=run, episodes=episodes, **settings)
 
 
+@api_function
 def zeroshot(runs: list[PolicyLike], envs: list[str], *, episodes: int | None = None, seed: int | None = None,
              workers: int | None = None, out: str | Path | None = None, progress: bool = True) -> Result:
     """Zero-shot success of trained policies on envs they never saw (`motorlab zeroshot`)."""
@@ -107,6 +112,7 @@ def zeroshot(runs: list[PolicyLike], envs: list[str], *, episodes: int | None = 
                           workers=workers)
 
 
+@api_function
 def robustness(policies: list[PolicyLike], vary: str | list[str] | dict[str, Any], *, env: str | None = None,
                episodes: int | None = None, seed: int | None = None, workers: int | None = None,
                out: str | Path | None = None, progress: bool = True, **env_settings: Any) -> Result:
@@ -129,6 +135,7 @@ def robustness(policies: list[PolicyLike], vary: str | list[str] | dict[str, Any
                           seed=seed, workers=workers, env=fixed or None)
 
 
+@api_function
 def compare(groups: dict[str, list[PolicyLike]], *, title: str | None = None, out: str | Path | None = None) -> Result:
     """Learning curves of settings across seeds, with rliable's IQMs (`motorlab compare`).
 
@@ -164,6 +171,7 @@ class Run(Result):
 
         return PolicyFunction(load_run_policy(self.path))
 
+    @api_function
     def env(self, **env_settings: Any) -> gym.Env:
         """The env the run trained on, with its wrappers; `env_settings` (delay, history, kwargs,
         ...) change it."""
@@ -173,6 +181,7 @@ class Run(Result):
 
         return make_env(EnvConfig.model_validate(merge_env(trained_env_settings(self.path), env_settings)))
 
+    @api_function
     def evaluate(self, env: str | None = None, episodes: int | None = None, seed: int | None = None,
                  workers: int | None = None, out: str | Path | None = None, progress: bool = True,
                  **env_settings: Any) -> Result:
@@ -181,10 +190,12 @@ class Run(Result):
         return evaluate(self, env, episodes=episodes, seed=seed, workers=workers, out=out, progress=progress,
                         **env_settings)
 
+    @api_function
     def video(self, episodes: int | None = None, out: str | Path | None = None, **settings: Any) -> list[Path]:
         """Render episodes of the policy to MP4 (`motorlab video RUN`); returns the video files."""
         return video(self, episodes=episodes, out=out, **settings).videos
 
+    @api_function
     def plot(self) -> list[Path]:
         """Draw plots/learning_curve.png and plots/observation_trace.png (`motorlab plot RUN`)."""
         from motorlab.evaluation.figures import plot_run

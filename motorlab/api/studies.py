@@ -6,10 +6,12 @@ from pathlib import Path
 from typing import Any
 
 from motorlab import trackers
+from motorlab.api.checks import api_function
 from motorlab.api.steps import Track, console, folders
 from motorlab.api.views import Study, Sweep, Tune
 
 
+@api_function
 def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: str = "local",
                address: str | None = None, max_parallel: int | None = None, parallel_steps: int | None = None,
                track: Track = None, resume: bool = False, overwrite: bool = False, **fields: Any) -> Study:
@@ -45,6 +47,7 @@ def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: st
     return Study(summary["study_dir"])
 
 
+@api_function
 def sweep(target: str | Path, seeds: int | list[int] = 5, grid: list[str] | dict[str, list[Any]] | None = None, *,
           backend: str = "local", address: str | None = None, max_parallel: int | None = None,
           out: str | Path | None = None, track: Track = None, resume: bool = False, overwrite: bool = False) -> Sweep:
@@ -71,6 +74,7 @@ def sweep(target: str | Path, seeds: int | list[int] = 5, grid: list[str] | dict
     return Sweep(summary["sweep_dir"])
 
 
+@api_function
 def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int = 20, seeds: int = 3,
          objective: str = "steps_to_success", direction: str | None = None, out: str | Path | None = None,
          storage: str | None = None, study_name: str | None = None, sampler: str = "tpe",

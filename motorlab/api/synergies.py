@@ -15,12 +15,14 @@ from pathlib import Path
 from typing import Any
 
 from motorlab.api import steps
+from motorlab.api.checks import api_function
 from motorlab.api.views import Result
 from motorlab.synergies.steps import COLLECT, FIT, VAF
 
 __all__ = ["collect", "vaf", "fit", "import_sklearn", "export_sklearn", "load_sar"]
 
 
+@api_function
 def collect(run: str | Path | Result, episodes: int | None = None, *, out: str | Path | None = None,
             progress: bool = True, **settings: Any) -> Result:
     """Record muscle activations of a trained policy's good episodes (`motorlab synergies collect`).
@@ -38,6 +40,7 @@ def collect(run: str | Path | Result, episodes: int | None = None, *, out: str |
     return steps.run_kind(COLLECT, out, progress, run=run, episodes=episodes, **settings)
 
 
+@api_function
 def vaf(activations: str | Path | Result, *, threshold: float | None = None, out: str | Path | None = None,
         **settings: Any) -> Result:
     """Variance accounted for by 1..N synergies (`motorlab synergies vaf`): vaf.png and the
@@ -50,6 +53,7 @@ def vaf(activations: str | Path | Result, *, threshold: float | None = None, out
     return steps.run_kind(VAF, out, activations=activations, threshold=threshold, **settings)
 
 
+@api_function
 def fit(activations: str | Path | Result, n_synergies: int | None = None, *, out: str | Path | None = None,
         **settings: Any) -> Result:
     """Fit a Synergistic Action Representation (`motorlab synergies fit`): sar.npz, no pickle.
@@ -65,6 +69,7 @@ def fit(activations: str | Path | Result, n_synergies: int | None = None, *, out
     return steps.run_kind(FIT, out, activations=activations, n_synergies=n_synergies, **settings)
 
 
+@api_function
 def import_sklearn(folder: str | Path, out: str | Path, *, trust: bool = False) -> Path:
     """Convert a published scikit-learn SAR (MyoSuite's joblib pickles) to sar.npz, checked
     against scikit-learn's own inverse chain (`motorlab synergies import-sklearn`).
@@ -84,6 +89,7 @@ def import_sklearn(folder: str | Path, out: str | Path, *, trust: bool = False) 
     return Path(out)
 
 
+@api_function
 def export_sklearn(sar: str | Path | Result, out: str | Path) -> Path:
     """Write a SAR as a MyoSuite 3.0 SynergyModel folder (`motorlab synergies export-sklearn`)."""
     from motorlab.synergies.sklearn_export import export_sklearn as write
@@ -92,6 +98,7 @@ def export_sklearn(sar: str | Path | Result, out: str | Path) -> Path:
     return Path(out)
 
 
+@api_function
 def load_sar(sar: str | Path | Result):
     """The SAR of a sar.npz or a `fit` result: `.decode(z)` maps synergies to muscle activations."""
     from motorlab.synergies.sar import load_sar as read

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from motorlab.api.checks import api_function
 from motorlab.errors import MotorlabError
 from motorlab.report.results import DEMO_LABEL, Number, read_run_results, read_study_results
 from motorlab.rl.steps import TRAIN
@@ -90,6 +91,7 @@ class Result:
         """The MP4 videos of the folder (videos/*.mp4)."""
         return sorted(self.path.glob("videos/*.mp4")) + sorted(self.path.glob("*.mp4"))
 
+    @api_function
     def report(self, out: str | Path | None = None) -> Path:
         """Write the self-contained HTML report of this folder (`motorlab report`); returns its path."""
         from motorlab.report.html import build_report
@@ -233,6 +235,7 @@ class Tune(Study):
             return list(csv.DictReader(f))
 
 
+@api_function
 def load(path: str | Path) -> Result:
     """Open a finished run, study, sweep or tune folder as the object the API returned for it.
 

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, Literal
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -17,11 +18,24 @@ from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, check_env_id, env_re
 from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric
 from motorlab.runs import MetricsWriter, atomic_write_npz
-from motorlab.settings import Settings, Summary
+from motorlab.settings import MAX_SEED, Settings, Summary, UserCode
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
 
 if TYPE_CHECKING:  # the planner's domain code (torch) is imported where a run needs it
     from motorlab.control.mpc import FaultCounts
+
+
+def _planner_function(what: str) -> Callable[[str], None]:
+    """The check of a planner's --reward or --termination (UserCode): a MODULE:FUNCTION is imported
+    and found before any work; the names the planner knows itself (auto, builtin, ...) are its own."""
+
+    def check(spec: str) -> None:
+        if ":" in spec:
+            from motorlab.dynamics.rewards import load_function  # torch: only where a function is named
+
+            load_function(spec, what)
+
+    return check
 
 
 class PlannerSettings(Settings):
@@ -30,13 +44,13 @@ class PlannerSettings(Settings):
 
     # Tuned on Reacher-v5 (benchmarks/mpc.py): ~4 ms per control step on one core, return ~-3.6.
     # The horizon matters most (10 steps: ~-4.6); population x iterations buys precision at ~0.6 us per row.
-    reward: str = Field("auto", description="What the planner maximizes: builtin (motorlab's torch reward for "
+    reward: Annotated[str, UserCode(_planner_function("reward"))] = Field("auto", description="What the planner maximizes: builtin (motorlab's torch reward for "
                         "Reacher, Pusher, InvertedPendulum, ...), MODULE:FUNCTION (your torch function (obs, action, "
                         "next_obs) -> reward), learned (the model's reward head: fit with --learn-reward), goal "
                         "(minus the distance from achieved_goal to desired_goal, for an env with a Dict observation "
                         "holding both), auto (builtin where there is one, else learned where the model has the head, "
                         "else goal where the env has one)")
-    termination: str = Field("auto", description="When a planned episode ends (rewards after it count nothing): "
+    termination: Annotated[str, UserCode(_planner_function("termination"))] = Field("auto", description="When a planned episode ends (rewards after it count nothing): "
                              "builtin, MODULE:FUNCTION (obs, action, next_obs) -> bool, learned (--learn-termination), "
                              "none, auto (the builtin reward's termination, else the learned head, else none)")
     horizon: int = Field(15, gt=0, description="Planning horizon in control steps")
@@ -158,7 +172,7 @@ class MpcSettings(PlannerSettings, EnvSettings):
     episodes: int = Field(50, gt=0, description="Episodes to control")
     parallel: int = Field(1, gt=0, description="Episodes run side by side, planned in one batched call")
     video: bool = Field(False, description="Also render the first episode to videos/episode_0.mp4")
-    seed: int = Field(0, ge=0, description="Random seed (env resets and the planner)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (env resets and the planner)")
 
 
 class MpcSummary(PlannerFaultsSummary):
@@ -349,7 +363,7 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
                                       "collection reaches it (--rounds stays a cap)")
     state: Literal["auto", "reacher", "observation"] = Field(
         "auto", description="State layout: auto (Reacher: the arm's 8-number state; else the observation)")
-    seed: int = Field(0, ge=0, description="Random seed (resets, random actions, fitting, the planner)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (resets, random actions, fitting, the planner)")
     device: str = Field("auto", description="Where the model trains and the planner runs: auto (a GPU where torch "
                         "sees one, else the CPU), cpu, cuda, cuda:N")
     resume: bool = Field(False, description="Continue the loop in --out after an interruption: finished rounds are "

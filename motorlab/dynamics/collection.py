@@ -25,6 +25,7 @@ import numpy as np
 import torch
 from rich.progress import Progress
 
+from motorlab import processes
 from motorlab.dynamics.reacher_sim import arm_models, closed_form_arm, rollout_reacher, sample_initial_states
 from motorlab.dynamics.state import StateLayout, env_layout
 from motorlab.dynamics.transitions import Transitions
@@ -106,7 +107,9 @@ def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers
 _worker: dict[str, Any] = {}
 
 
-def _init_worker(env_cfg: dict, policy_dir: str | None) -> None:
+def _init_worker(env_cfg: dict, policy_dir: str | None, parent: int | None = None) -> None:
+    if parent is not None:  # a pool process: stopped by the parent's terminate(), or its death, not by Ctrl-C
+        processes.serve_parent(parent)
     torch.set_num_threads(1)
     _worker["env"] = make_env(EnvConfig.model_validate(env_cfg))
     _worker["policy"] = load_policy_files(Path(policy_dir)) if policy_dir else None
@@ -149,7 +152,7 @@ def _collect_pool(env_cfg: EnvConfig, policy_dir: str | None, episodes: int, see
         _init_worker(*init_args)
         episode_iter = map(_run_episode, seeds)
     else:  # spawn: a fresh interpreter per worker is safe with torch and MuJoCo state
-        pool = mp.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=init_args)
+        pool = mp.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=(*init_args, os.getpid()))
         episode_iter = pool.imap(_run_episode, seeds, chunksize=max(1, min(64, episodes // (4 * workers))))
     try:
         for r in episode_iter:

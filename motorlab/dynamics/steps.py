@@ -18,7 +18,7 @@ from motorlab.envs.spaces import decode_space, require_actions
 from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric, Number
 from motorlab.runs import atomic_write_npz
-from motorlab.settings import Settings, Summary
+from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
 
 # ---- dynamics-collect -------------------------------------------------------------------------
@@ -52,7 +52,7 @@ class DynamicsCollectSettings(EnvSettings):
         "of motion in NumPy, all episodes at once, equal to MuJoCo's to its solver tolerance); mujoco "
         "(mujoco.rollout in C on every core, bit for bit Gymnasium's joints); gymnasium (the env itself, in a "
         "process pool)")
-    seed: int = Field(0, ge=0, description="Random seed (initial states and actions)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (initial states and actions)")
 
 
 class DynamicsCollectSummary(Summary):
@@ -179,7 +179,7 @@ class ModelSettings(Settings):
 
 class DynamicsFitSettings(ModelSettings):
     transitions: str = Field(description="transitions.npz (or its folder) from `dynamics collect`")
-    seed: int = Field(0, ge=0, description="Random seed (initialization, batch order, validation split)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (initialization, batch order, validation split)")
 
 
 class DynamicsFitSummary(Summary):
@@ -277,7 +277,7 @@ class DynamicsCheckSettings(Settings):
     model: str = Field(description="A model folder from `dynamics fit`")
     episodes: int = Field(5, gt=0, description="Open-loop episodes (random actions)")
     steps: int | None = Field(None, gt=0, description="Steps per episode (default: the env's time limit)")
-    seed: int = Field(0, ge=0, description="Random seed (initial states and actions)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (initial states and actions)")
 
 
 class DynamicsCheckSummary(Summary):

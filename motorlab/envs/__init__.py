@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import logging
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import gymnasium as gym
 from pydantic import ConfigDict, Field, field_validator, model_validator
@@ -28,13 +29,23 @@ from motorlab.envs.disturbances import (
     parse_span,
     span_text,
 )
-from motorlab.envs.rewards import resolve_reward
-from motorlab.envs.spaces import is_dict, obs_layout, require_actions
+from motorlab.envs.rewards import check_reward, resolve_reward
+from motorlab.envs.spaces import check_spaces, is_dict, obs_layout, require_actions
 from motorlab.envs.upkie import make_upkie, register_upkie
-from motorlab.envs.wrappers import DelayOn, LowPassDelay, NumericalGuard, RewardShaping, delay_alpha, env_dt_of
+from motorlab.envs.wrappers import (
+    DelayOn,
+    EpisodeCap,
+    LowPassDelay,
+    NumericalGuard,
+    RewardShaping,
+    delay_alpha,
+    env_dt_of,
+    has_time_limit,
+    user_code_error,
+)
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.extras import missing
-from motorlab.settings import Settings, StrictModel
+from motorlab.settings import Settings, StrictModel, UserCode
 from motorlab.user_modules import (
     import_inherited,
     import_modules,
@@ -83,7 +94,9 @@ class EnvConfig(StrictModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    id: str = Field("InvertedPendulum-v5", description="Gymnasium env id, e.g. InvertedPendulum-v5")
+    # UserCode: `run --check` finds the user's module an id or a reward names (motorlab.settings.check_user_code)
+    id: Annotated[str, UserCode(lambda v: check_env_id(v))] = Field(
+        "InvertedPendulum-v5", description="Gymnasium env id, e.g. InvertedPendulum-v5")
     delay: float | str | None = Field(None, description="Low-pass delay time constant TAU in seconds (alpha = "
                                       "dt/TAU must be in (0, 1)), e.g. 0.2, or a range drawn per episode, e.g. "
                                       "0.05..0.3")
@@ -117,7 +130,7 @@ class EnvConfig(StrictModel):
     fatigue: Literal["off", "fresh", "random"] = Field(
         "off", description="MyoSuite: 3CC-r muscle fatigue, muscles rested at each reset (fresh) or in a random "
         "fatigue state (random)")
-    reward: str | None = Field(None, description="Reward shaping: task, alive, quadratic, action-penalty, or "
+    reward: Annotated[str | None, UserCode(check_reward)] = Field(None, description="Reward shaping: task, alive, quadratic, action-penalty, or "
                                "module:function (fn(next_obs, action, reward, terminated, info) -> float)")
     sar: str | None = Field(None, description="Act in synergy space: a sar.npz from `motorlab synergies fit` or "
                             "`import-sklearn`")
@@ -258,6 +271,8 @@ def fold_env(fields: dict[str, Any], keep: frozenset[str] = frozenset()) -> dict
     are the settings' own fields, left where they are."""
     data = dict(fields)
     env = data.get("env")
+    if env is not None and not isinstance(env, (str, Mapping, EnvConfig)):
+        raise MotorlabError(f"--env {env!r}: give an env id (e.g. InvertedPendulum-v5) or a table of env settings.")
     env = {"id": env} if isinstance(env, str) else dict(env or {})
     for key, field in ENV_KEYS.items():
         if key != "env" and key in data and key not in keep:
@@ -367,6 +382,12 @@ def check_user_env(env: gym.Env, env_id: str) -> None:
     _checked.add(env_id)
 
 
+# Steps an episode of an env without a time limit may run before the run stops with one line
+# saying how to give it one (--env-arg max_episode_steps=N): an env that ends its episodes itself
+# runs as it is, one that never ends no longer hangs evaluation.
+UNLIMITED_EPISODE_CAP = 100_000
+
+
 def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None, dict_obs: bool = False,
              **kwargs: Any) -> gym.Env:
     """Build the env described by `cfg`.
@@ -381,9 +402,15 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
             observation). Otherwise a Dict observation is flattened
             as `gymnasium.spaces.flatten` does (motorlab.envs.spaces: the layout of its keys).
 
+    An env with no time limit (no max_episode_steps) gets `EpisodeCap`: an episode past
+    UNLIMITED_EPISODE_CAP steps stops the run with one line; `--env-arg max_episode_steps=N`
+    gives it Gymnasium's TimeLimit. What the env (or a --reward function) raises while it runs is
+    one MotorlabError line naming it, the exception and where (`wrappers.user_code_error`).
+
     Raises:
         MotorlabError: unknown id, bad delay, unknown reward, an env that cannot render (with
-            render_mode), a setting that acts on Box actions on an env whose actions are not.
+            render_mode), a setting that acts on Box actions on an env whose actions are not,
+            observations no motorlab policy reads or actions none acts in (`spaces.check_spaces`).
     """
     check_env_id(cfg.id)
     name = split_env_id(cfg.id)[1]
@@ -394,15 +421,18 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
         if name in user_env_ids():
             check_user_env(env, cfg.id)
     try:
+        check_spaces(env, cfg.id)  # what no motorlab policy reads or acts in: refused at every kind's door
         _require_box_wrappers(env, cfg)
     except MotorlabError:
         env.close()
         raise
+    if not has_time_limit(env) and facts(cfg.id).extra != "upkie":  # Upkie's envs end on their time_limit
+        env = EpisodeCap(env, cfg.id, UNLIMITED_EPISODE_CAP)
     if cfg.motor_noise is not None:
         env = MotorNoise(env, cfg.motor_noise)  # MyoSuite's own wrappers, on the muscle excitations
     if cfg.fatigue != "off":
         env = muscle_fatigue(env, cfg.fatigue)
-    env = NumericalGuard(env)
+    env = NumericalGuard(env, cfg.id)  # also: the env's own exceptions as one line naming it
     if is_dict(env.observation_space) and not (dict_obs and not reads_observations(cfg)):
         obs_layout(env.observation_space)  # Box entries only: one line naming the key otherwise
         env = gym.wrappers.FlattenObservation(env)
@@ -441,14 +471,18 @@ def _gym_make(cfg: EnvConfig, name: str, render_mode: str | None, kwargs: dict[s
                                     "MuJoCo env, or an env that takes render_mode='rgb_array' and returns frames "
                                     "from render().") from None
             raise MotorlabError(f"{cfg.id} does not take these settings: {e}.") from None
-        except AssertionError:
+        except AssertionError as e:
             if not facts(name).broken:
-                raise
+                raise user_code_error(f"making {cfg.id}", e) from None
             import mujoco
 
             raise MotorlabError(f"{cfg.id} fails to build inside Gymnasium-Robotics with MuJoCo {mujoco.__version__} "
                                 "(an upstream incompatibility of its Fetch, Shadow-hand and Kitchen models); "
                                 "its mazes (PointMaze_*, AntMaze_*) and the Adroit hand (AdroitHand*) work.") from None
+        except MotorlabError:
+            raise
+        except Exception as e:  # the env's constructor (often a user's) may raise anything
+            raise user_code_error(f"making {cfg.id}", e) from None
 
 
 def _require_box_wrappers(env: gym.Env, cfg: EnvConfig) -> None:

@@ -81,3 +81,13 @@ def resolve_reward(spec: str) -> RewardFn:
     if not callable(fn):
         raise MotorlabError(f"reward {spec!r}: {module_name} has no function {func_name!r}.")
     return fn
+
+
+def check_reward(spec: str) -> None:
+    """The check of an env's --reward before any work (settings.UserCode): a built-in name, or the
+    module (or .py file) and function it names, imported and found.
+
+    Raises:
+        MotorlabError: as `resolve_reward`.
+    """
+    resolve_reward(spec)

@@ -170,3 +170,61 @@ def decode_space(d: dict[str, Any]) -> gym.Space:
     if kind == "Dict":
         return gym.spaces.Dict({k: decode_space(v) for k, v in d["spaces"].items()})
     raise ValueError(f"unknown space type {kind!r}")
+
+
+# ---- what motorlab can read and act in: checked when an env is made -----------------------------
+
+# action spaces some motorlab policy acts in (each component then declares its own: rl/algos)
+ACTION_SPACES = ("Box", "Discrete", "MultiDiscrete", "MultiBinary")
+READABLE = "a Box of numbers (not an image), or a Dict of such Boxes"
+FLATTEN_HINT = "wrap your env in gymnasium.wrappers.FlattenObservation (or give it vector observations)"
+
+
+def is_image(space: gym.Space) -> bool:
+    """A Box of pixels as SB3 reads one: uint8 with 2 or 3 dimensions. motorlab trains MLPs, which
+    would learn from raw pixels as numbers, and SB3 turns such a space into a channel-first image
+    on its own, which evaluation then no longer matches."""
+    return isinstance(space, gym.spaces.Box) and space.dtype == np.uint8 and len(space.shape) >= 2
+
+
+def observation_problem(space: gym.Space) -> str | None:
+    """Why no motorlab policy reads observations of `space` (None: they are fine).
+
+    motorlab's policies read one vector of numbers (a Dict's keys flattened into it): a Box that
+    is not an image, or a Dict of those.
+    """
+    if is_dict(space):
+        for key, sub in space.spaces.items():
+            if is_image(sub) or not isinstance(sub, gym.spaces.Box) or observation_problem(sub):
+                what = "an image" if is_image(sub) else f"a {type(sub).__name__}"
+                return f"a Dict whose key {key!r} is {what} ({describe_space(sub)})"
+        return None
+    if is_image(space):
+        return f"an image ({describe_space(space)} uint8)"
+    if not isinstance(space, gym.spaces.Box):
+        return f"{describe_space(space)}"
+    if space.shape == () or int(np.prod(space.shape)) == 0:
+        return f"{describe_space(space)}, which holds no vector"
+    return None
+
+
+def check_spaces(env: gym.Env, env_id: str) -> None:
+    """Refuse, in one line naming the space and what would work, an env whose observations no
+    motorlab policy reads or whose actions none acts in. `make_env` calls it on every env it makes,
+    so every kind refuses such an env at its door, before any work or file; what one component
+    needs beyond this (Box actions, bounded ones) it declares itself (`require_actions`,
+    motorlab.rl.algos' `actions`).
+
+    Raises:
+        MotorlabError: e.g. "MyEnv-v0's observations are Tuple(...); motorlab reads a Box of numbers
+            (not an image), or a Dict of such Boxes: wrap your env in ...FlattenObservation ...".
+    """
+    problem = observation_problem(env.observation_space)
+    if problem:
+        raise MotorlabError(f"{env_id}'s observations are {problem}; motorlab's policies read {READABLE}: "
+                            f"{FLATTEN_HINT}.")
+    act = env.action_space
+    if type(act).__name__ not in ACTION_SPACES or (isinstance(act, gym.spaces.Box) and act.shape == ()):
+        raise MotorlabError(f"{env_id}'s actions are {describe_space(act)}; motorlab's policies act in "
+                            f"{', '.join(ACTION_SPACES[:-1])} or {ACTION_SPACES[-1]} actions: give your env one "
+                            "of those (gymnasium.spaces.flatten_space makes a Box of a Tuple or Dict).")

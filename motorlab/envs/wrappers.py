@@ -6,7 +6,10 @@ Observation history uses Gymnasium's own FrameStackObservation + FlattenObservat
 
 from __future__ import annotations
 
+import sys
+import traceback
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, Literal
 
 import gymnasium as gym
@@ -131,7 +134,12 @@ class RewardShaping(gym.Wrapper, gym.utils.RecordConstructorArgs):
     def step(self, action):
         obs, reward, terminated, truncated, info = self.env.step(action)
         info["task_reward"] = float(reward)
-        shaped = float(self.fn(obs, np.asarray(action), float(reward), bool(terminated), info))
+        try:
+            shaped = float(self.fn(obs, np.asarray(action), float(reward), bool(terminated), info))
+        except MotorlabError:
+            raise
+        except Exception as e:  # the user's function may raise anything: one line naming it
+            raise user_code_error(f"--reward {self.name}", e) from None
         return obs, shaped, terminated, truncated, info
 
 
@@ -144,9 +152,10 @@ class NumericalGuard(gym.Wrapper, gym.utils.RecordConstructorArgs):
     and `info["numerical_fault"]` names the cause so the run can count it.
     """
 
-    def __init__(self, env: gym.Env):
-        gym.utils.RecordConstructorArgs.__init__(self)
+    def __init__(self, env: gym.Env, env_id: str | None = None):
+        gym.utils.RecordConstructorArgs.__init__(self, env_id=env_id)
         super().__init__(env)
+        self.env_id = env_id or (env.spec.id if env.spec else type(env.unwrapped).__name__)
         self._data = getattr(env.unwrapped, "mj_data", None) or getattr(env.unwrapped, "data", None)
         self._warnings = self._warning_count()
 
@@ -161,12 +170,22 @@ class NumericalGuard(gym.Wrapper, gym.utils.RecordConstructorArgs):
             return 0
 
     def reset(self, **kwargs: Any):
-        obs, info = self.env.reset(**kwargs)
+        obs, info = self._call("reset", self.env.reset, **kwargs)
         self._warnings = self._warning_count()
         return obs, info
 
+    def _call(self, what: str, method: Callable, *args: Any, **kwargs: Any) -> Any:
+        """The env's own method; whatever it raises (other than motorlab's own errors) becomes one
+        line naming the env, the exception and where it was raised (`user_code_error`)."""
+        try:
+            return method(*args, **kwargs)
+        except MotorlabError:
+            raise
+        except Exception as e:  # the env's code (often a user's) may raise anything
+            raise user_code_error(f"{self.env_id}'s {what}", e) from None
+
     def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
+        obs, reward, terminated, truncated, info = self._call("step", self.env.step, action)
         fault = None
         arrays = obs.values() if isinstance(obs, dict) else (obs,)  # a Dict observation: every key
         if not all(np.all(np.isfinite(a)) for a in arrays):
@@ -188,3 +207,71 @@ class NumericalGuard(gym.Wrapper, gym.utils.RecordConstructorArgs):
 def _finite(a: Any) -> np.ndarray:
     """`a` with its non-finite entries zeroed, in its own dtype."""
     return np.where(np.isfinite(a), a, 0.0).astype(np.asarray(a).dtype)
+
+
+class EpisodeCap(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """An env with no time limit (registered without max_episode_steps): an episode that runs
+    `cap` steps without ending stops the run with one line saying how to give it a limit, instead
+    of evaluation waiting forever. Envs that end their episodes themselves never meet it."""
+
+    def __init__(self, env: gym.Env, env_id: str, cap: int):
+        gym.utils.RecordConstructorArgs.__init__(self, env_id=env_id, cap=cap)
+        super().__init__(env)
+        self.env_id, self.cap, self.t = env_id, cap, 0
+
+    def reset(self, **kwargs: Any):
+        self.t = 0
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        out = self.env.step(action)
+        self.t = 0 if (out[2] or out[3]) else self.t + 1
+        if self.t >= self.cap:
+            raise MotorlabError(f"{self.env_id} has no time limit and an episode ran {self.cap:,} steps without "
+                                "ending; give it one: --env-arg max_episode_steps=N (a recipe's env_kwargs), or "
+                                "register it with max_episode_steps=N.")
+        return out
+
+
+def has_time_limit(env: gym.Env) -> bool:
+    """Whether a TimeLimit wrapper ends `env`'s episodes (Gymnasium adds one for an id registered
+    with max_episode_steps, or made with max_episode_steps=N), anywhere in its wrapper chain."""
+    layer: Any = env
+    while layer is not None:
+        if isinstance(layer, gym.wrappers.TimeLimit):
+            return True
+        layer = getattr(layer, "env", None)
+    return False
+
+
+# ---- the user's code failing ------------------------------------------------------------------
+
+_LIBRARIES = tuple(str(Path(p).resolve()) for p in {sys.prefix, sys.base_prefix, sys.exec_prefix})
+_OURS = str(Path(__file__).resolve().parents[1])
+
+
+def where_raised(e: BaseException) -> str:
+    """Where `e` was raised, as "file.py:12 in step": the innermost frame of code that is neither
+    motorlab's nor an installed library's (the user's), else the innermost frame."""
+    frames = traceback.extract_tb(e.__traceback__)
+    if not frames:
+        return "unknown place"
+
+    def theirs(frame: traceback.FrameSummary) -> bool:
+        path = str(Path(frame.filename).resolve())
+        return not path.startswith(_LIBRARIES) and not path.startswith(_OURS)
+
+    frame = next((f for f in reversed(frames) if theirs(f)), frames[-1])
+    return f"{frame.filename}:{frame.lineno} in {frame.name}"
+
+
+class UserCodeError(MotorlabError):
+    """A user's env or function raised: one line naming it (an env worker adds which worker)."""
+
+
+def user_code_error(what: str, e: BaseException) -> UserCodeError:
+    """One line for an exception raised by a user's env or function (`what`: "MyArm-v0's step",
+    "--reward mypkg:shaped"): its type, its message's first line, and where it was raised."""
+    message = " ".join(str(e).split()) or "(no message)"
+    return UserCodeError(f"{what} raised {type(e).__name__}: {message} (at {where_raised(e)}); fix it there, "
+                         "then run the command again.")

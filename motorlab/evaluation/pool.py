@@ -28,7 +28,6 @@ import contextlib
 import contextvars
 import multiprocessing as mp
 import os
-import signal
 import time
 from collections.abc import Sequence
 from typing import Any, NamedTuple
@@ -36,8 +35,10 @@ from typing import Any, NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from motorlab import processes
 from motorlab.envs import EnvConfig, env_dt, facts, make_env
 from motorlab.envs.catalog import SUCCESS_KEYS
+from motorlab.envs.wrappers import UserCodeError
 from motorlab.errors import MotorlabError
 from motorlab.faults import fault_of
 from motorlab.user_modules import ENV_VAR, import_modules, imported_names
@@ -163,10 +164,11 @@ class SerialPool:
 
 # ---- worker processes -------------------------------------------------------------------------
 
-def _serve(conn, imports: list[str]) -> None:
+def _serve(conn, imports: list[str], parent: int) -> None:
     """A worker: answer ("build", (env_cfg, count)), ("reset", seeds), ("step", (rows, actions,
     offset)) and ("close", None) until told to close or the parent goes away."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent stops us
+    # Ctrl-C and a hangup reach the whole group: the parent stops us (SIGTERM), and its death does too
+    processes.serve_parent(parent)
     envs: list[gym.Env] = []
     keys = SUCCESS_KEYS
     try:
@@ -194,8 +196,9 @@ def _serve(conn, imports: list[str]) -> None:
         pass  # the parent went away (or stopped us): nothing to report to
     except Exception as e:  # an env's own code may raise anything: report it in one line
         text = str(e) if isinstance(e, MotorlabError) else f"{type(e).__name__}: {e}"
+        own = isinstance(e, MotorlabError) and not isinstance(e, UserCodeError)  # the env's own: name the worker
         try:
-            conn.send(("error", (isinstance(e, MotorlabError), " ".join(text.split()))))
+            conn.send(("error", (own, " ".join(text.split()))))
         except OSError:
             pass
     finally:
@@ -253,8 +256,9 @@ class ProcessPool:
     A worker that raises gives one MotorlabError line; one that dies gives one too, with its exit
     code, never a hang (its pipe closes). Leaving the `with` block closes the workers (or, inside
     `keep_workers()`, keeps them for the next pool); on an exception (Ctrl-C included) they are
-    terminated at once. Workers ignore SIGINT themselves, so a Ctrl-C is handled in one place,
-    and a worker whose parent died exits when its pipe closes.
+    terminated at once. Workers ignore SIGINT and SIGHUP themselves, so a Ctrl-C or a hangup is
+    handled in one place, and a worker whose parent died gets SIGTERM from the kernel (Linux) or
+    exits when its pipe closes (motorlab.processes.serve_parent).
     """
 
     def __init__(self, env_cfg: EnvConfig, size: int, workers: int):
@@ -270,7 +274,7 @@ class ProcessPool:
             for k in range(1, self.workers):
                 parent, child = ctx.Pipe()
                 # not a daemon: a worker may start processes of its own (Upkie's second PyBullet env)
-                proc = ctx.Process(target=_serve, args=(child, imports), name=f"motorlab-env-{k}", daemon=False)
+                proc = ctx.Process(target=_serve, args=(child, imports, os.getpid()), name=f"motorlab-env-{k}", daemon=False)
                 proc.start()
                 child.close()
                 self._procs.append(proc)

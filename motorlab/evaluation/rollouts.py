@@ -41,22 +41,33 @@ class Rollouts:
     actions: list[np.ndarray] = field(default_factory=list)
     dt: float = 0.0
     success_key: str | None = None  # the info key of the env's success flag (None: it has none)
+    # episodes whose success is known: the env flagged it or the task has a maximum return (None: all)
+    judged: np.ndarray | None = None
 
     @property
     def faults(self) -> int:
-        """Episodes ended by a numerical fault (NaN/Inf, diverging simulation)."""
+        """Episodes ended by a numerical fault (NaN/Inf, diverging simulation, a non-finite return)."""
         return len(self.fault_log)
 
+    @property
+    def success_rate(self) -> float | None:
+        """The share of judged episodes that succeeded; None where success means nothing (an env
+        with no success flag and no maximum return), never a 0% nobody measured."""
+        judged = np.ones(len(self.success), bool) if self.judged is None else self.judged
+        return float(np.mean(self.success[judged])) if judged.any() else None
+
     def summary(self) -> dict:
-        r = self.returns
+        """The headline numbers; non-finite returns (counted as faults) are left out of the return's
+        statistics, so a blow-up is a counted fault, not "inf ± nan"."""
+        r = self.returns[np.isfinite(self.returns)]
         return {
-            "episodes": int(len(r)),
+            "episodes": int(len(self.returns)),
             "return_mean": float(np.mean(r)) if len(r) else None,
             "return_std": float(np.std(r)) if len(r) else None,
             "return_min": float(np.min(r)) if len(r) else None,
             "return_max": float(np.max(r)) if len(r) else None,
-            "success_rate": float(np.mean(self.success)) if len(r) else None,
-            "episode_length_mean": float(np.mean(self.lengths)) if len(r) else None,
+            "success_rate": self.success_rate,
+            "episode_length_mean": float(np.mean(self.lengths)) if len(self.lengths) else None,
             "episode_lengths": [int(x) for x in self.lengths],
             "falls": int(self.falls),
             "numerical_faults": int(self.faults),
@@ -196,6 +207,7 @@ class Evaluator:
         returns = np.zeros(n)
         lengths = np.zeros(n, dtype=int)
         success = np.zeros(n, dtype=bool)
+        judged = np.zeros(n, dtype=bool)  # success known: a flag, or a maximum return to reach
         done = np.zeros(n, dtype=bool)
         outcome = EpisodeSuccess(rows, self.target, success_mode(self.env_cfg))
         key: str | None = None  # the env's success flag, once a step reports one
@@ -225,15 +237,16 @@ class Evaluator:
                     obs[r] = steps.obs[j]
                     continue
                 done[i] = True
-                success[i] = bool(outcome.end(r, returns[i]))
-                fault = steps.fault.get(int(r))
+                result = outcome.end(r, returns[i])
+                success[i], judged[i] = bool(result), result is not None
+                fault = steps.fault.get(int(r)) or return_fault(returns[i])
                 if fault:
                     faults.append((i, fault_line(first + i, lengths[i], fault)))
                 falls += bool(steps.terminated[j]) and not fault
                 if stop_below is not None and returns[i] < stop_below:
                     return Rollouts(returns[done], lengths[done], success[done], aborted=True,
                                     falls=falls, fault_log=[line for _, line in sorted(faults)], dt=self.dt,
-                                    success_key=key)
+                                    success_key=key, judged=judged[done])
                 if steps.restarted[j]:
                     episode[r] = following[r]
                     obs[r] = steps.first_obs[j]
@@ -245,7 +258,7 @@ class Evaluator:
         return Rollouts(
             returns, lengths, success, falls=falls, fault_log=[line for _, line in sorted(faults)], dt=self.dt,
             observations=[np.array(t) for t in traces_o], actions=[np.array(t) for t in traces_a],
-            success_key=key,
+            success_key=key, judged=judged,
         )
 
     def close(self) -> None:
@@ -295,7 +308,15 @@ def join_rollouts(parts: list[Rollouts]) -> Rollouts:
                     falls=sum(p.falls for p in parts), fault_log=[line for p in parts for line in p.fault_log],
                     observations=[o for p in parts for o in p.observations],
                     actions=[a for p in parts for a in p.actions], dt=parts[0].dt,
-                    success_key=next((p.success_key for p in parts if p.success_key), None))
+                    success_key=next((p.success_key for p in parts if p.success_key), None),
+                    judged=np.concatenate([np.ones(len(p.success), bool) if p.judged is None else p.judged
+                                           for p in parts]))
+
+
+def return_fault(ret: float) -> str | None:
+    """A numerical fault of an episode whose return is not a finite number (rewards that each
+    passed the guard but whose sum overflowed): counted and logged like the guard's faults."""
+    return None if np.isfinite(ret) else f"non-finite return ({ret}): the rewards' sum left the float range"
 
 
 def trained_env_settings(run_dir: Path) -> dict:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import statistics
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
 from pydantic import Field, model_validator
 from rich.console import Console
@@ -14,6 +14,7 @@ from rich.table import Table
 from motorlab.envs import (
     ENV_KEYS,
     EnvSettings,
+    check_env_id,
     describe_env,
     early_end_label,
     fold_env,
@@ -24,9 +25,9 @@ from motorlab.envs import (
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.rollouts import evaluate, success_by, success_mode, trained_env_settings
 from motorlab.policies import BUILTIN_POLICIES, load_policy, unknown_policy_message
-from motorlab.report.results import Metric, Number, show
+from motorlab.report.results import Metric, Number, fixed, show
 from motorlab.runs import require_run_dir
-from motorlab.settings import Settings, Summary
+from motorlab.settings import MAX_SEED, Settings, Summary, UserCode
 from motorlab.stepkind import (
     SCORED_METRICS,
     Artifact,
@@ -48,7 +49,7 @@ class EvaluateSettings(EnvSettings):
     policy: str = Field(description="A run folder, or a built-in controller: pid, pid:kp=[..],ki=[..],kd=[..], "
                         "zero, random")
     episodes: int = Field(10, gt=0, description="Evaluation episodes")
-    seed: int = Field(0, ge=0, description="Random seed (env resets: episode i starts from seed + i)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (env resets: episode i starts from seed + i)")
     workers: int | None = Field(None, ge=1, description="Processes stepping the envs, this one included "
                                 "(default: every core when the evaluation is large enough to pay for starting "
                                 "the others; 1: this process only); results are the same for any number")
@@ -206,8 +207,9 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
         for col in ("episodes", "return mean ± std", "min", "max", "success", "mean length",
                     early_end_label(env_cfg.id)):
             table.add_column(col, justify="right")
-        table.add_row(str(s.episodes), f"{s.return_mean:.1f} ± {s.return_std:.1f}", f"{s.return_min:.1f}",
-                      f"{s.return_max:.1f}", f"{s.success_rate:.0%}", f"{s.episode_length_mean:.0f}", str(s.falls))
+        table.add_row(str(s.episodes), f"{fixed(s.return_mean, '.1f')} ± {fixed(s.return_std, '.1f')}",
+                      fixed(s.return_min, ".1f"), fixed(s.return_max, ".1f"), fixed(s.success_rate, ".0%"),
+                      fixed(s.episode_length_mean, ".0f"), str(s.falls))
         console.print(table)
         super().report(s, settings, console)  # written: summary.json, and a warning on numerical faults
 
@@ -222,9 +224,10 @@ RESULT_KEYS = ("success_rate", "return_mean", "return_std", "numerical_faults")
 
 class ZeroshotSettings(Settings):
     runs: list[str] = Field(min_length=1, description="Training run folders to compare")
-    envs: list[str] = Field(min_length=1, description="Env ids the policies never trained on")
+    envs: Annotated[list[str], UserCode(check_env_id)] = Field(min_length=1, description="Env ids the policies "
+                                                                "never trained on")
     episodes: int = Field(500, gt=0, description="Episodes per run and env")
-    seed: int = Field(0, ge=0, description="Random seed (env resets)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (env resets)")
     workers: int | None = Field(None, ge=1, description="Processes stepping the envs, this one included "
                                 "(default: every core when the evaluation is large enough to pay for starting "
                                 "the others; 1: this process only); results are the same for any number")
@@ -240,8 +243,8 @@ class ZeroshotSettings(Settings):
         """
         if not isinstance(data, dict) or "runs" not in data:
             return data  # nothing to sort (a missing field is the model's own error)
-        runs = [str(r) for r in _listed(data.get("runs"))]
-        envs = [e for item in _listed(data.get("envs")) for e in str(item).split(",") if e]
+        runs = [str(r) for r in _listed(data.get("runs"), "runs")]
+        envs = [e for item in _listed(data.get("envs"), "envs") for e in str(item).split(",") if e]
         maybe_env = [r for r in runs if not r.startswith("@") and not Path(r).exists()]
         if maybe_env:
             import gymnasium as gym
@@ -251,15 +254,24 @@ class ZeroshotSettings(Settings):
             runs = [r for r in runs if r not in moved]
             envs = [*envs, *(e for r in moved for e in r.split(",") if e)]
         if not runs or not envs:
-            raise MotorlabError("give at least one run folder and one env (--envs ID ...).")
+            raise MotorlabError(f"{'--runs' if not runs else '--envs'}: give at least one run folder and one env "
+                                "(--envs ID ...).")
         return {**data, "runs": runs, "envs": envs}
 
 
-def _listed(value: Any) -> list[Any]:
-    """A list field's value as a list (one value: a list of it; none: empty)."""
+def _listed(value: Any, field: str) -> list[str | Path]:
+    """A list field's value as a list (one value: a list of it; none: empty).
+
+    Raises:
+        MotorlabError: an item that is no text (a number, a table): folder names and env ids are text.
+    """
     if value is None:
         return []
-    return list(value) if isinstance(value, (list, tuple)) else [value]
+    items = list(value) if isinstance(value, (list, tuple)) else [value]
+    wrong = next((item for item in items if not isinstance(item, (str, Path))), None)
+    if wrong is not None:
+        raise MotorlabError(f"--{field} {wrong!r}: give {'run folders' if field == 'runs' else 'env ids'} as text.")
+    return items
 
 
 class ZeroshotSummary(Summary):
@@ -290,7 +302,7 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
         t = transfer([Path(r) for r in settings.runs], settings.envs, settings.episodes, settings.seed,
                      workers=settings.workers, before_work=lambda: self.refuse_finished_out(out))
         run_dir = self.start(out)
-        grouped_bars(t.envs, {n: [t.results[n][e]["success_rate"] for e in t.envs] for n in t.names},
+        grouped_bars(t.envs, {n: [_or_nan(t.results[n][e]["success_rate"]) for e in t.envs] for n in t.names},
                      "success rate", run_dir / "plots" / "zeroshot.png",
                      f"Zero-shot success ({settings.episodes} episodes per env)",
                      f"Success rate of each trained policy on envs it never trained on, {settings.episodes} "
@@ -302,8 +314,8 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
             table.add_column("return", justify="right")
         for n in t.names:
             table.add_row(n, *[cell for env_id in t.envs for cell in
-                               (f"{t.results[n][env_id]['success_rate']:.1%}",
-                                f"{t.results[n][env_id]['return_mean']:.1f}")])
+                               (fixed(t.results[n][env_id]['success_rate'], ".1%"),
+                                fixed(t.results[n][env_id]['return_mean'], ".1f"))])
         (console or Console()).print(table)
         per_run = {f"{n}.{env_id}.{key}": t.results[n][env_id][key]
                    for n in t.names for env_id in t.envs for key in RESULT_KEYS}
@@ -356,3 +368,8 @@ class ZeroshotKind(StepKind[ZeroshotSettings, ZeroshotSummary]):
 
 
 ZEROSHOT = ZeroshotKind()
+
+
+def _or_nan(value: float | None) -> float:
+    """A bar's height: NaN (no bar) where the env defines no success."""
+    return float("nan") if value is None else value

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from motorlab.environment import describe
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_secrets
 from motorlab.intervals import across_seeds
 from motorlab.report.plots import figure_caption
 from motorlab.report.results import DEMO_LABEL, Finding, Number, StepResults, read_run_results, read_study_results
@@ -413,7 +413,8 @@ def build_report(paths: list[Path], out: Path | None = None) -> Path:
     comparison = _comparison(all_runs)
     env = jinja2.Environment(loader=jinja2.PackageLoader("motorlab.report", "templates"),
                              # report.html.j2: select_autoescape() alone matches .html, not .html.j2 (text was inserted raw)
-                             autoescape=jinja2.select_autoescape(["html", "htm", "xml", "html.j2"]), undefined=jinja2.StrictUndefined)
+                             autoescape=jinja2.select_autoescape(["html", "htm", "xml", "html.j2"]), undefined=jinja2.StrictUndefined,
+                             finalize=mask_secrets)  # every value the page shows, before escaping: no credential
     html = env.get_template("report.html.j2").render(
         title=" · ".join(s.name for s in studies) or " · ".join(r.label for r in runs),
         created=datetime.datetime.now().strftime("%Y-%m-%d %H:%M"), studies=studies, runs=runs,

@@ -58,6 +58,14 @@ def show(value: Any, form: Form = "number") -> str:
     return f"{value:,.4g}" if abs(value) >= 1e-3 or value == 0 else f"{value:.2e}"
 
 
+def fixed(value: Any, spec: str) -> str:
+    """`value` in a format spec (".1f", ".0%") for a printout's table cell; "–" where there is no
+    number (a success rate where the env defines no success, a mean of no finite return)."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return format(value, spec)
+
+
 @dataclass(frozen=True)
 class Metric:
     """One headline number of a step kind.
@@ -83,7 +91,9 @@ class Metric:
     def text(self, value: Any, values: dict[str, Any]) -> str:
         scaled = value * self.scale if self.scale != 1 and _numeric(value) else value
         out = show(scaled, self.form)
-        if self.spread and _numeric(values.get(self.spread)):  # "12.3 ± 2.0 mm": the unit once, at the end
+        spread = values.get(self.spread) if self.spread else None
+        if _numeric(spread) and math.isfinite(spread) and _numeric(value) and math.isfinite(value):
+            # "12.3 ± 2.0 mm": the unit once, at the end; never "inf ± nan"
             number, _, unit = out.partition(" ")
             spread = show(values[self.spread] * self.scale, self.form).partition(" ")[0]
             out = f"{number} ± {spread}" + (f" {unit}" if unit else "")

@@ -12,7 +12,7 @@ from rich.console import Console
 from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric, Number, show
 from motorlab.runs import require_run_dir
-from motorlab.settings import Settings, Summary
+from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Ref, StepKind
 
 # ---- video ------------------------------------------------------------------------------------
@@ -25,7 +25,7 @@ class VideoSettings(Settings):
                                "camera)")
     width: int = Field(640, ge=16, le=4096, description="Frame width in pixels")
     height: int = Field(480, ge=16, le=4096, description="Frame height in pixels")
-    seed: int = Field(0, ge=0, description="Random seed (episode k starts from seed + k)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (episode k starts from seed + k)")
 
 
 class VideoSummary(Summary):

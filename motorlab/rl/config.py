@@ -17,6 +17,7 @@ from motorlab.envs import EnvSettings, fold_env
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.rl import algos
 from motorlab.rl.schedules import schedule_ends
+from motorlab.settings import MAX_SEED
 
 # Every algorithm's presets, from its own module (motorlab/rl/algos/<name>.py).
 PRESETS: dict[str, dict[str, Any]] = algos.presets()
@@ -30,7 +31,7 @@ class TrainConfig(EnvSettings):
     preset_file: str | None = Field(None, description="TOML file of these fields (e.g. best.toml of motorlab tune), "
                                     "applied over the named preset and under the given settings")
     timesteps: int = Field(100_000, gt=0, description="Env-step budget")
-    seed: int = Field(0, ge=0, description="Random seed (training, env resets, evaluation)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (training, env resets, evaluation)")
     lr: str | None = Field(None, description="Learning-rate schedule: 3e-4 (constant) or linear:START,END (over "
                            "the budget)")
     clip_range: str | None = Field(None, description=algos.titles_with("clip_range") + " clip-range schedule, e.g. "
@@ -62,7 +63,11 @@ class TrainConfig(EnvSettings):
     @classmethod
     def _check_schedule(cls, v, info):
         if v is not None:
-            schedule_ends(v, "learning-rate" if info.field_name == "lr" else "clip-range")
+            flag = f"--{info.field_name.replace('_', '-')}"
+            try:
+                schedule_ends(v, "learning-rate" if info.field_name == "lr" else "clip-range")
+            except MotorlabError as e:  # named as the option, as pydantic's errors are
+                raise MotorlabError(f"{flag}: {e}") from None
         return v
 
 
@@ -87,6 +92,7 @@ def resolve(settings: dict[str, Any]) -> TrainConfig:
     Raises:
         MotorlabError: unknown preset, unreadable preset file; pydantic.ValidationError for bad fields.
     """
+    _named(settings)
     from_file = read_preset_file(settings["preset_file"]) if settings.get("preset_file") else {}
     preset = settings.get("preset", from_file.get("preset"))
     merged: dict[str, Any] = {}
@@ -101,6 +107,15 @@ def resolve(settings: dict[str, Any]) -> TrainConfig:
     return TrainConfig.model_validate(merged)
 
 
+def _named(settings: dict[str, Any]) -> None:
+    """The preset and the preset file are names, read before the model judges the rest: anything else
+    (a number, a table) is refused here, in one line, before it is looked up."""
+    for key, what in (("preset", f"a preset's name ({', '.join(PRESETS)})"), ("preset_file", "a TOML file's path")):
+        value = settings.get(key)
+        if value is not None and not isinstance(value, (str, Path)):
+            raise MotorlabError(f"--{key.replace('_', '-')} {value!r}: give {what}.")
+
+
 def read_preset_file(path: str | Path) -> dict[str, Any]:
     """A preset file's fields (TrainConfig fields; env fields flat or in an [env] table).
 
@@ -109,12 +124,12 @@ def read_preset_file(path: str | Path) -> dict[str, Any]:
     """
     try:
         data = tomllib.loads(Path(path).read_text())
-    except (OSError, UnicodeDecodeError) as e:
-        raise MotorlabError(f"cannot read preset file {path}: {getattr(e, 'strerror', None) or e}.") from None
     except tomllib.TOMLDecodeError as e:
-        raise MotorlabError(f"preset file {path} is not valid TOML: {e}.") from None
+        raise MotorlabError(f"--preset-file {path}: not valid TOML: {e}.") from None
+    except (OSError, ValueError) as e:  # ValueError: undecodable text, a NUL in the path
+        raise MotorlabError(f"--preset-file {path}: cannot read it: {getattr(e, 'strerror', None) or e}.") from None
     if "preset_file" in data:
-        raise MotorlabError(f"preset file {path} names another preset file; write its fields in {path} instead.")
+        raise MotorlabError(f"--preset-file {path} names another preset file; write its fields in {path} instead.")
     return data
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import gymnasium as gym
 
 from motorlab.envs import EnvConfig, make_env, reads_observations
-from motorlab.envs.spaces import describe_space, is_dict, is_goal_conditioned, require_actions
+from motorlab.envs.spaces import describe_space, is_dict, is_goal_conditioned
 from motorlab.errors import MotorlabError
 from motorlab.rl import algos
 from motorlab.rl.config import TrainConfig
@@ -42,16 +42,9 @@ def check_train_env(cfg: TrainConfig) -> None:
 
 
 def check_actions(cfg: TrainConfig, space: gym.Space) -> None:
-    """One line naming the space and the algorithms that fit it, when `cfg.algo` does not."""
-    algo = algos.get(cfg.algo)
-    if algo.acts_in(space):
-        return
-    fitting = [a.name for a in algos.registry().values() if a.acts_in(space)]
-    instead = "use " + " or ".join(f"--algo {name}" for name in fitting) if fitting else ""
-    if algo.actions == ("Box",):
-        require_actions(space, algo.title, instead=instead, env_id=cfg.env.id)
-    raise MotorlabError(f"{algo.title} needs {', '.join(algo.actions[:-1])} or {algo.actions[-1]} actions, and "
-                        f"{cfg.env.id}'s actions are {describe_space(space)}" + (f"; {instead}." if instead else "."))
+    """One line naming the space and the algorithms that fit it, when `cfg.algo` does not (the algorithm's
+    own declaration: motorlab.rl.algos.base.Algorithm.check_actions)."""
+    algos.get(cfg.algo).check_actions(space, cfg.env.id)
 
 
 def check_her(env_cfg: EnvConfig, env: gym.Env) -> None:

@@ -118,6 +118,8 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
     def validate(self, fields: dict[str, Any]) -> TrainConfig:
         fields = dict(fields)
         if isinstance(fields.get("preset_file"), (str, Path)):  # config.toml records where it was read
+            if "\x00" in str(fields["preset_file"]):
+                raise MotorlabError(f"--preset-file {str(fields['preset_file'])!r}: a path holds no NUL character.")
             fields["preset_file"] = str(Path(fields["preset_file"]).resolve())
         return resolve(fields)  # the named preset under the given settings
 

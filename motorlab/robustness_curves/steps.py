@@ -12,7 +12,7 @@ from rich.table import Table
 from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, given_env
 from motorlab.report.results import Metric, Number, show
 from motorlab.robustness_curves.grid import VARIABLES, parse_axes
-from motorlab.settings import Summary
+from motorlab.settings import MAX_SEED, Summary
 from motorlab.stepkind import Ref, StepKind, warn_faults
 
 
@@ -29,7 +29,7 @@ class RobustnessSettings(EnvSettings):
                             "KEY=V1,V2,...; KEY: " + ", ".join(k.replace("_", "-") for k in VARIABLES)
                             + "; e.g. delay=0:0.3:7")
     episodes: int = Field(20, gt=0, description="Episodes per policy and grid value")
-    seed: int = Field(0, ge=0, description="Random seed (episode i of every point resets with seed + i)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (episode i of every point resets with seed + i)")
     workers: int | None = Field(None, ge=1, description="Processes that step the envs (default: every core "
                                 "when the work is large enough)")
     env: EnvConfig = Field(default_factory=EnvConfig, description="The env every policy is tested in, under "

@@ -51,6 +51,7 @@ from motorlab.report.results import (
 )
 from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import (
+    STUDY,
     atomic_write_bytes,
     atomic_write_text,
     claim_folder,
@@ -72,7 +73,6 @@ from motorlab.stats import steps_to_success
 from motorlab.studies.schedule import Overlaps, run_overlapped
 
 STEP_FILE = "recipe_step.toml"  # what the study asked of a step, for resuming
-STUDY = "study"  # the kind a study's folder is marked with: only `motorlab run` resumes or replaces it
 COLUMNS = ["step", "what", "results", "setup", "notes"]
 
 

@@ -14,7 +14,8 @@ from motorlab.launcher import ExecutionSettings
 class SweepSettings(ExecutionSettings):
     target: str = Field(description=(
         "A recipe (bundled name or .toml file: each trial runs the whole study) or a motorlab command line in quotes "
-        "(train, evaluate, mpc, dynamics fit, ...); the sweep sets each trial's seed and folder"))
+        "(train, evaluate, mpc, dynamics fit, ...); the sweep sets each trial's seed and folder. Its --config and "
+        "--track apply to every trial; --out, --overwrite and --resume are the sweep's own"))
     seeds: int = Field(5, ge=1, description="Seeds per setting: 0..N-1")
     grid: list[str] | None = Field(None, description=(
         "KEY=V1,V2 (every combination runs). Commands: KEY is a setting (lr, n_envs, delay, normalize=true,false) "
@@ -28,7 +29,8 @@ class SweepCommand(Command[SweepSettings]):
     Aggregates with rliable: interquartile mean (IQM) and 95% stratified-bootstrap confidence
     intervals of final return, success rate and steps-to-success; probability of improvement
     between settings; performance profiles. Writes summary.json, aggregate.json, table.txt,
-    plots/ and report.html in the sweep folder, and one run folder per trial (<setting>/seed<k>/).
+    plots/ and report.html in the sweep folder, and one run folder per trial (<setting>/seed<k>/,
+    <setting> a slug of the grid values and their hash: lr=3e-4-3ddbad7f).
     Run the same command again (same --out) to resume: finished trials are kept.
     """
 

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import hashlib
 import itertools
+import json
 import re
 
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, mask_secrets
 
 EXAMPLE = "--grid lr=3e-4,1e-3 (values with commas: separate them with |, e.g. --grid lr='linear:1e-3,0|3e-4')"
 
@@ -42,9 +44,33 @@ def settings(grid: dict[str, list[str]]) -> list[dict[str, str]]:
     return [dict(zip(keys, combo)) for combo in itertools.product(*(grid[k] for k in keys))]
 
 
-def label(setting: dict[str, str]) -> str:
-    """A setting's name, also its folder name: "lr=0.001,n_envs=2" ("default" with no grid)."""
+SLUG_CHARS = 60  # of a folder name's readable part: a long value is cut there (its hash keeps it apart)
+HASH_CHARS = (8, 16, 64)  # of its hash: longer only where two settings of one sweep share the shorter
+
+
+def label(setting: dict[str, str], digits: int = HASH_CHARS[0]) -> str:
+    """A setting's name, also its folder name: a readable slug of its values and a hash of them as given,
+    "lr=0.001,n_envs=2-85f7d7a1" ("default" with no grid). Slugs alone collide ("a b" and "a_b",
+    unicode, long values cut short), and two settings in one folder would mix their runs; the hash of the
+    exact text keeps every setting apart, and gives the same name for the same values (--resume finds
+    its trials by it). Credentials in a value are masked in the slug, never written into a path."""
     if not setting:
         return "default"
     text = ",".join(f"{k.lstrip('-')}={v}" for k, v in setting.items())
-    return re.sub(r"[^A-Za-z0-9=.,:+_-]", "_", text)  # no "/" or spaces in folder names
+    slug = re.sub(r"[^A-Za-z0-9=.,:+_-]", "_", mask_secrets(text))[:SLUG_CHARS]  # no "/" or spaces in folder names
+    digest = hashlib.sha256(json.dumps(list(setting.items())).encode()).hexdigest()[:digits]
+    return f"{slug}-{digest}"
+
+
+def labels(settings: list[dict[str, str]]) -> list[str]:
+    """Each setting's name (`label`), distinct for distinct settings: the hash is lengthened in the rare
+    sweep where two settings share its first digits (the whole SHA-256 at most).
+
+    Raises:
+        MotorlabError: a setting given twice (one folder would hold both).
+    """
+    for digits in HASH_CHARS:
+        names = [label(s, digits) for s in settings]
+        if len(set(names)) == len(names):
+            return names
+    raise MotorlabError("a setting of the grid is given twice; give each combination of values once.")

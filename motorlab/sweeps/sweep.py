@@ -1,7 +1,8 @@
 """`motorlab sweep TARGET --seeds N [--grid key=v1,v2 ...]`: every seed of every setting, then
 statistics across seeds.
 
-    <sweep>/<setting>/seed<k>/   one run folder per trial (a study folder when TARGET is a recipe)
+    <sweep>/<setting>/seed<k>/   one run folder per trial (a study folder when TARGET is a recipe); <setting>
+                                 is the grid values' slug and their hash, lr=3e-4-3ddbad7f (sweeps.grid.label)
     <sweep>/logs/<setting>-seed<k>.log   each trial's output
     <sweep>/recipes/             the recipe variant each trial ran (recipe targets)
     <sweep>/summary.json         "<setting>.<metric>_mean", "_iqm" (4+ seeds), "_iqm_ci_low"/"_mean_ci_low", ...
@@ -10,6 +11,9 @@ statistics across seeds.
     <sweep>/ray/                 Ray Tune's own records (ray backend)
 
 Run the same command again into the same --out to resume: finished trials are kept.
+
+The target's own invocation options are applied (--config, --track: its trials are tracked there, nested
+under the sweep) or refused in one line (--out, --overwrite, --resume: the sweep's); see sweeps.trials.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from motorlab import jobs, launcher, trackers
-from motorlab.errors import MotorlabError, mask_url
+from motorlab.errors import MotorlabError, mask_secrets
 from motorlab.launcher import is_finished
 from motorlab.report import sweep_plots
 from motorlab.report.html import build_report
@@ -56,19 +60,21 @@ def _seeds(seeds: int | list[int]) -> list[int]:
 
 
 def plan(target: str, seeds: int | list[int], grid: list[str] | None, sweep_dir: Path,
-         threads: dict[str, str] | None = None) -> list[dict[str, Any]]:
-    """The sweep's trials, every command line checked before any runs.
+         threads: dict[str, str] | None = None) -> tuple[list[dict[str, Any]], tuple[str, ...]]:
+    """The sweep's trials, every command line checked before any runs, and the target's own --track
+    (its trials are tracked there too).
 
     Raises:
         MotorlabError: bad grid syntax, an option or recipe field the target does not have,
-            an unknown command or recipe.
+            an unknown command or recipe, an invocation option the sweep does not apply per trial.
     """
     combos = settings(parse_grid(grid))
     seed_list = _seeds(seeds)
     recipe = recipe_path(target)
     if recipe is not None:
-        return recipe_trials(recipe, combos, seed_list, sweep_dir, threads or {})
-    return command_trials(parse_target(target), combos, seed_list, sweep_dir, threads or {})
+        return recipe_trials(recipe, combos, seed_list, sweep_dir, threads or {}), ()
+    command = parse_target(target)
+    return command_trials(command, combos, seed_list, sweep_dir, threads or {}), command.track
 
 
 def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = None, backend: str = "local",
@@ -90,11 +96,18 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
     # Several trials per machine: one math thread each, or they fight over the cores.
     threads = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if parallel != 1 else {}
     sweep_dir = run_path(out, "sweep")
-    refuse_finished(sweep_dir, resumable=True)  # a finished sweep is continued (--resume) or replaced, never by accident
-    trials = plan(target, seeds, grid, sweep_dir, threads)
+    refuse_finished(sweep_dir, resumable=True, kind="sweep")  # a finished sweep is continued (--resume) or replaced, never by accident
+    trials, track = plan(target, seeds, grid, sweep_dir, threads)
+    with trackers.also(track, "the sweep's target"):  # checked before anything is written
+        return _run(target, trials, grid, backend, address, max_parallel, parallel, sweep_dir, console)
+
+
+def _run(target: str, trials: list[dict[str, Any]], grid: list[str] | None, backend: str, address: str | None,
+         max_parallel: int | None, parallel: int | None, sweep_dir: Path, console: Console) -> dict[str, Any]:
+    """The planned trials run (those not finished yet), then aggregated."""
     labels = list(dict.fromkeys(t["setting"] for t in trials))
-    config = {"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [], "settings": labels,
-              "backend": backend, "address": mask_url(address) if address else None, "max_parallel": max_parallel}
+    config = mask_secrets({"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [],
+                           "settings": labels, "backend": backend, "address": address, "max_parallel": max_parallel})
     prepare_run_dir(sweep_dir, "sweep", resumable=True)  # unfinished until the aggregate is written (--overwrite: a fresh folder)
     write_config(sweep_dir, config)
     todo = [t for t in trials if not is_finished(t)]
@@ -152,6 +165,7 @@ def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[st
     scores = {s: v for s, v in scores.items() if v}
     flat, details = aggregate(scores) if scores else ({}, {"metrics": {}, "probability_of_improvement": {},
                                                             "profiles": {}})
+    target = mask_secrets(target)  # the sweep's files, plots and report record it
     summary = {"sweep": target, "description": f"{len(labels)} settings × {len(trials) // max(1, len(labels))} "
                "seeds; IQM from 4 seeds (else the mean), 95% stratified-bootstrap CIs from 3 (rliable)",
                "steps": labels, "trials": len(trials),
@@ -167,7 +181,7 @@ def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[st
     if details["profiles"]:
         sweep_plots.performance_profiles(details["profiles"], sweep_dir / "plots" / "profiles.png", title)
     rows = _rows(details["metrics"])
-    atomic_write_text(sweep_dir / "table.txt", plain_table(COLUMNS, rows))
+    atomic_write_text(sweep_dir / "table.txt", plain_table(COLUMNS, mask_secrets(rows)))
     write_summary(sweep_dir, summary)
     console.print(rich_table(f"{title}: across seeds", COLUMNS, rows, left=("setting", "metric", "per seed")))
     build_report([sweep_dir], sweep_dir / "report.html")

@@ -25,14 +25,14 @@ import tomli_w
 
 from motorlab import jobs
 from motorlab.commandline import Given, json_or_text, numbers, pairs, parse, value_kind
-from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.errors import MotorlabError, did_you_mean, mask_secrets
 from motorlab.kinds import KINDS, for_command
 from motorlab.launcher import trial
 from motorlab.recipes import SEEDS, bundled, find_recipe, parse_recipe, set_fields, step_fields
 from motorlab.runs import atomic_write_text
 from motorlab.settings import Settings
 from motorlab.stepkind import StepKind
-from motorlab.sweeps.grid import label
+from motorlab.sweeps.grid import labels
 
 # Commands of step kinds that take a seed (and --out): the ones a sweep can repeat.
 SWEEPABLE = tuple(k.command for k in KINDS.values() if k.command and "seed" in k.settings.model_fields)
@@ -55,9 +55,10 @@ def recipe_path(target: str) -> Path | None:
 class Target:
     """A sweep's or search's command line in its step kind's terms: the fields it gives."""
 
-    text: str
+    text: str  # as recorded: credentials masked
     kind: StepKind
     given: Given
+    track: tuple[str, ...] = ()  # its own --track: its trials are tracked there too (motorlab.trackers.also)
 
     @property
     def name(self) -> str:
@@ -124,17 +125,38 @@ class Target:
         return settings
 
 
-def parse_target(command: str) -> Target:
-    """The step kind a sweep or tune target runs, and the fields its command line gives.
+# A target's invocation options (--out, --track, train's --config, ...): each is applied or refused here,
+# never dropped. Applied: --config (that run's settings under the given ones) and --track (the sweep's or
+# search's trials are tracked there too: motorlab.trackers.also). Refused: what the sweep or search sets
+# itself, or owns for all its trials. Any option an invocation model gains later is refused until it is
+# given a meaning here.
+APPLIED = ("config", "track")
+OWN = {"out": "the {owner} sets --out of every trial itself; drop --out from the command (motorlab {owner} --out DIR "
+              "names the {owner}'s folder)."}
+
+
+def _refusal(option: str, owner: str) -> str:
+    """The one line refusing `option` inside a target of `owner` (sweep or tune), naming where it goes."""
+    if option in OWN:
+        return OWN[option].format(owner=owner)
+    flag = "--" + option.replace("_", "-")
+    return (f"{flag} inside a {owner} target is not applied per trial; give it to the {owner}: "
+            f"motorlab {owner} \"TARGET\" ... {flag}.")
+
+
+def parse_target(command: str, owner: str = "sweep") -> Target:
+    """The step kind a sweep or tune target runs, the fields its command line gives, and the
+    invocation options it applies (`owner`: "sweep" or "tune", named in errors).
 
     Raises:
         MotorlabError: the command line cannot be split into words, names no sweepable command,
-            does not parse, or sets --seed or --out (the sweep sets them).
+            does not parse, sets --seed (the sweep sets it), or gives an invocation option the
+            sweep does not apply per trial (--out, --resume, --overwrite).
     """
     try:
         words = shlex.split(command)
     except ValueError as e:
-        raise MotorlabError(f"cannot read the command {command!r}: {e}.") from None
+        raise MotorlabError(f"cannot read the command {mask_secrets(command)!r}: {e}.") from None
     if words[:1] == ["motorlab"]:
         words = words[1:]
     for n in (2, 1):
@@ -143,19 +165,20 @@ def parse_target(command: str) -> Target:
             kind = for_command(name)
             break
     else:
-        given = " ".join(words[:2])
-        raise MotorlabError(f"cannot sweep {given!r}: give a recipe (name or .toml file) or one of the commands "
-                            f"{', '.join(SWEEPABLE)}, quoted, e.g. motorlab sweep \"train InvertedPendulum-v5 "
+        given = mask_secrets(" ".join(words[:2]))
+        raise MotorlabError(f"cannot {owner} {given!r}: give a recipe (name or .toml file) or one of the commands "
+                            f"{', '.join(SWEEPABLE)}, quoted, e.g. motorlab {owner} \"train InvertedPendulum-v5 "
                             f"--preset fast\" --seeds 5{did_you_mean(given, SWEEPABLE)}")
-    for fixed in ("--seed", "--out"):
-        if any(a == fixed or a.startswith(fixed + "=") for a in words[n:]):
-            raise MotorlabError(f"the sweep sets {fixed} of every trial itself; drop {fixed} from the command.")
     given = parse(kind, words[n:], f"motorlab {name}")
+    if "seed" in given.fields:
+        raise MotorlabError(f"the {owner} sets --seed of every trial itself; drop --seed from the command.")
+    for option, value in given.how.items():
+        if option not in APPLIED and value not in (None, False):
+            raise MotorlabError(_refusal(option, owner))
+    fields = given.fields
     if given.how.get("config"):  # --config: a run's settings under the given ones, read here once
-        given = Given(kind.with_config(Path(given.how["config"]), given.fields), {})
-    elif given.how.get("resume") or given.how.get("overwrite"):
-        raise MotorlabError(f"{command!r}: --resume and --overwrite belong to the sweep, not to its command.")
-    return Target(command, kind, Given(given.fields, {}))
+        fields = kind.with_config(Path(given.how["config"]), given.fields)
+    return Target(mask_secrets(command), kind, Given(fields, {}), tuple(given.how.get("track") or ()))
 
 
 def takes_hyperparameters(algo: str | None) -> bool:
@@ -187,8 +210,7 @@ def command_trials(target: Target, settings: list[dict[str, str]], seeds: list[i
             algorithm does not have (before any trial is planned, let alone run).
     """
     out = []
-    for setting in settings:
-        name = label(setting)
+    for setting, name in zip(settings, labels(settings)):
         where = f"setting {name}" if flag == "--grid" else f"{flag} {name}"  # a sweep's, named as its folder
         fields = target.fields(setting, flag, hyperparams)
         target.settings({**fields, "seed": 0}, where)
@@ -229,8 +251,7 @@ def recipe_trials(path: Path, settings: list[dict[str, str]], seeds: list[int], 
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
         raise MotorlabError(f"cannot read recipe {path}: {e}") from None
     planned = []  # every variant is built (and the first of each setting validated) before any file is written
-    for setting in settings:
-        name = label(setting)
+    for setting, name in zip(settings, labels(settings)):
         for k, s in enumerate(seeds):
             text = tomli_w.dumps(recipe_variant(data, setting, s, str(path), flag))
             if k == 0:

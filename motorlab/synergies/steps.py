@@ -15,7 +15,7 @@ from rich.table import Table
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.activations import ACTIVATIONS, collect, load_activations, save_activations
 from motorlab.report.results import Metric, Number
-from motorlab.settings import Settings, Summary
+from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
 from motorlab.synergies.sar import fit_sar, require_sklearn, save_sar, smallest_n, vaf_curve
 
@@ -34,7 +34,7 @@ class CollectSettings(Settings):
     workers: int | None = Field(None, gt=0, description="Processes (default: all cores)")
     max_episodes: int | None = Field(None, gt=0, description="Give up after this many episodes past the preview "
                                      "(default: 20 x episodes)")
-    seed: int = Field(0, ge=0, description="Random seed (episode seeds and sampled actions)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (episode seeds and sampled actions)")
     signal: Literal["auto", "act", "ctrl", "action"] = Field(
         "auto", description="What to record: act (MuJoCo's muscle activations, data.act, in [0, 1]), ctrl (the "
         "actuator controls MuJoCo applied, data.ctrl clamped to its ctrlrange: a robot's motor commands), action "
@@ -222,7 +222,7 @@ class FitSettings(Settings):
     vaf: float | None = Field(None, gt=0, le=1, description="Or: the smallest N whose VAF reaches this, e.g. 0.8")
     method: Literal["pca-ica", "pca", "nmf"] = Field("pca-ica", description="pca-ica (PCA -> FastICA -> scale to "
                                                      "[-1,1], the reference), pca, or nmf")
-    seed: int = Field(0, ge=0, description="Random seed (FastICA, NMF)")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (FastICA, NMF)")
 
 
 class FitSummary(Summary):

@@ -40,7 +40,7 @@ identity of the open parent, as JSON. The child runs its work inside `adopted(ha
 turns those trackers on without checking them again (the parent did). A sweep, study or tune
 folder is a parent run: runs started inside `parent(...)`, in its process or in a child that
 adopted its handoff, nest under it (MLflow: one experiment, `mlflow.parentRunId`; W&B: one
-group), named by their folder inside the parent's ("lr=0.001/seed2", "trials/3/seed0", "ppo")
+group), named by their folder inside the parent's ("lr=0.001-f3b8f2fc/seed2", "trials/3/seed0", "ppo")
 and tagged with their kind and seed.
 
 A step kind's run is one tracked run (see StepKind in motorlab/stepkind.py: `step` opens it
@@ -66,7 +66,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator
 
-from motorlab.errors import MotorlabError, mask_url, redact
+from motorlab.errors import MotorlabError, mask_secrets, mask_url, redact
 from motorlab.extras import require
 
 BACKENDS = ("mlflow", "wandb")
@@ -173,6 +173,34 @@ def tracking(values: list[str] | tuple[str, ...] | str | None) -> Iterator[list[
         return
     with _on(found):
         yield found
+
+
+@contextlib.contextmanager
+def also(values: list[str] | tuple[str, ...] | str | None, where: str = "the target") -> Iterator[list[Target]]:
+    """Track the block's runs to the trackers in effect and to `values` too: a sweep's or search's target's
+    own --track, applied to its trials (and so to the sweep or search, the parent they nest under). Each is
+    checked first (see `check`); one the block already tracks to, at the same place, is the same tracker.
+
+    Yields:
+        The trackers in effect.
+
+    Raises:
+        MotorlabError: one line: what `check` refuses, or a tracker named both in `where` and outside it
+            with different places (two stores for one run).
+    """
+    found = check(values)
+    current = {t.backend: t for t in targets()}
+    for t in found:
+        have = current.get(t.backend)
+        if have is not None and have.where != t.where:
+            raise MotorlabError(f"--track {mask_secrets(t.text())} in {where} and --track {mask_secrets(have.text())} given to "
+                                f"it track one run to two places; give --track {t.backend} once.")
+    new = [t for t in found if t.backend not in current]
+    if not new:
+        yield targets()
+        return
+    with _on([*current.values(), *new]):
+        yield targets()
 
 
 def targets() -> list[Target]:
@@ -385,7 +413,7 @@ class _Run:
 
     def log_outputs(self, folder: Path | None, summary: dict[str, Any] | None) -> None:
         if summary:
-            self.submit("summary", summary)
+            self.submit("summary", mask_secrets(summary))
         if folder is not None:
             self.submit("files", run_files(folder))
 
@@ -452,8 +480,10 @@ def _info(kind: str, run_dir: Path | None, config: dict[str, Any], own_group: bo
     group = parent.get("group")
     if own_group and group is None:  # an outermost parent: every run under it shares its group
         group = f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
-    return RunInfo(name=name, kind=kind, run_dir=run_dir, config=config, tags=tags,
-                   parent={k: v for k, v in parent.items() if k in BACKENDS}, group=group, nested=bool(parent))
+    # what the trackers record (params, tags, names) holds no credential (a sweep target's --track URI)
+    return RunInfo(name=mask_secrets(name), kind=kind, run_dir=run_dir, config=mask_secrets(config),
+                   tags=mask_secrets(tags), parent={k: v for k, v in parent.items() if k in BACKENDS},
+                   group=mask_secrets(group), nested=bool(parent))
 
 
 class Step:

@@ -15,7 +15,7 @@ from motorlab.launcher import ExecutionSettings
 
 class TuneSettings(ExecutionSettings):
     target: str = Field(description="A motorlab command line in quotes (train ...) or a recipe; each trial sets the "
-                        "seed and folder")
+                        "seed and folder (its --config and --track apply to every trial)")
     space: list[str] | None = Field(None, description=(
         "KEY=DIST: loguniform:LOW,HIGH, uniform:LOW,HIGH, int:LOW,HIGH or choice:A,B,C. KEY: a setting (lr, n_envs, "
         "delay), a recipe FIELD or STEP.FIELD, or an SB3 hyperparameter (set.KEY, or any KEY that is not a setting)"))

@@ -6,6 +6,7 @@ import csv
 import io
 import json
 import shlex
+import tomllib
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +16,7 @@ import optuna
 import tomli_w
 from optuna.trial import FrozenTrial, TrialState
 
+from motorlab.errors import mask_secrets
 from motorlab.intervals import across_seeds
 from motorlab.rl.config import TrainConfig
 from motorlab.runs import atomic_write_text, write_summary
@@ -98,7 +100,7 @@ def write_trials_csv(trials: list[FrozenTrial], space: dict[str, Dist], path: Pa
                          "" if t.value is None else t.value, " ".join(f"{v:g}" for v, _ in scores),
                          " ".join(str(int(c)) for _, c in scores),
                          t.user_attrs.get("env_steps", ""), t.user_attrs.get("env_steps_saved", "")])
-    atomic_write_text(path, buf.getvalue())
+    atomic_write_text(path, mask_secrets(buf.getvalue()))
 
 
 COLUMNS = ["trial", "state", "settings", "value", "per seed", "env steps"]
@@ -161,7 +163,10 @@ def _value(text: str) -> Any:
 
 
 def write_best_toml(path: Path, fields: dict[str, Any], header: list[str]) -> None:
-    atomic_write_text(path, "".join(f"# {line}\n" for line in header) + tomli_w.dumps(fields))
+    """The preset file, credentials masked (its header quotes the target's command line); the fields masked
+    as data, so that the TOML stays valid."""
+    comments = "".join(f"# {line}\n" for line in mask_secrets(header))
+    atomic_write_text(path, comments + tomli_w.dumps(mask_secrets(fields)))
 
 
 def write_best_recipe(path: Path, trial_dir: Path, header: list[str]) -> None:
@@ -169,7 +174,8 @@ def write_best_recipe(path: Path, trial_dir: Path, header: list[str]) -> None:
     seed that seed), with the header and how to run it."""
     first = min((trial_dir / "recipes").glob("*-seed*.toml"), key=lambda p: int(p.stem.rpartition("-seed")[2]))
     lines = [*header, f"the recipe as trial {trial_dir.name} ran it on its first seed: motorlab run {path.name}"]
-    atomic_write_text(path, "".join(f"# {line}\n" for line in lines) + first.read_text())
+    recipe = tomli_w.dumps(mask_secrets(tomllib.loads(first.read_text())))  # masked as data: valid TOML
+    atomic_write_text(path, "".join(f"# {line}\n" for line in mask_secrets(lines)) + recipe)
 
 
 def reproduce_line(target: str, best_toml: Path, seed: int) -> str:
@@ -211,4 +217,4 @@ def write_plots(study: optuna.Study, space: dict[str, Dist], plots: Path, title:
 
 
 def write_tune_summary(out: Path, summary: dict[str, Any]) -> None:
-    write_summary(out, summary)
+    write_summary(out, mask_secrets(summary))

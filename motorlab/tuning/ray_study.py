@@ -30,7 +30,7 @@ from ray.tune.schedulers import AsyncHyperBandScheduler
 from ray.tune.search import Searcher
 from ray.tune.search.optuna import OptunaSearch
 
-from motorlab.errors import MotorlabError, mask_url
+from motorlab.errors import MotorlabError, mask_secrets, mask_url
 from motorlab.tuning.outputs import keep_seed_scores, trial_line
 from motorlab.tuning.ray_trial import JOB, STEPS
 from motorlab.tuning.search import COUNTED, HEARTBEAT_SECONDS, MAX_FAILURES_IN_A_ROW, Counters, counted
@@ -72,7 +72,8 @@ class StudySearch(OptunaSearch):
         the database URL, password and all; the search's state is the study itself (see `save`)."""
         unpickled = ("_planner", "_console", "_storage", "_ot_study", "_ot_trials")
         state = {k: v for k, v in self.__dict__.items() if k not in unpickled}
-        state["spec"] = dataclasses.replace(self.spec, storage=mask_url(self.spec.storage))
+        state["spec"] = dataclasses.replace(self.spec, storage=mask_url(self.spec.storage),
+                                            target=mask_secrets(self.spec.target))
         return state
 
     def save(self, checkpoint_path: str) -> None:
@@ -171,7 +172,7 @@ class StudySearch(OptunaSearch):
         elif "failed" in result or error:
             message = result.get("failed") or (f"Ray Tune's trial failed; see its error.txt under "
                                                 f"{self.spec.out / 'ray' / 'tune' / f'trial{n}'}")
-            trial.set_user_attr("error", message)
+            trial.set_user_attr("error", mask_secrets(message))
             self._ot_study.tell(trial, state=TrialState.FAIL)
             self._print(f"  [red]✗[/red] trial {n} failed: {message}")
             if result.get("fatal"):

@@ -35,7 +35,7 @@ from optuna.storages import RDBStorage, RetryHeartbeatStaleTrialCallback
 from optuna.trial import FrozenTrial, TrialState
 from sqlalchemy.exc import IntegrityError, OperationalError
 
-from motorlab.errors import MotorlabError, mask_url, redact
+from motorlab.errors import MotorlabError, mask_secrets, mask_url, redact
 from motorlab.runs import SUMMARY, read_json
 from motorlab.tuning import outputs
 from motorlab.tuning.objective import Objective, Reporter, budget_of, steps_run, trial_horizon
@@ -261,7 +261,7 @@ class Search:
         failed = seeds.failures()
         if failed:
             self.counters.failures_in_a_row += 1
-            trial.set_user_attr("error", failed[0])
+            trial.set_user_attr("error", mask_secrets(failed[0]))
             message = f"trial {trial.number} failed: {failed[0]}"
             self.console.print(f"  [red]✗[/red] {message}")
             if self.counters.failures_in_a_row >= MAX_FAILURES_IN_A_ROW:

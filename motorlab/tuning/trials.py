@@ -39,8 +39,9 @@ class Planner:
         self.space = space
         self.threads = threads
         self.recipe = recipe_path(target)
-        self.command = None if self.recipe else parse_target(target)  # read once; a mistake fails here
+        self.command = None if self.recipe else parse_target(target, "tune")  # read once; a mistake fails here
         self.options = self.command.options() if self.command else set()
+        self.track = self.command.track if self.command else ()  # the target's own --track: its trials', too
 
     def check(self) -> None:
         """Plan (not run) trials with every choice and both bounds of every key, so that a key the

@@ -23,14 +23,15 @@ from optuna.trial import TrialState
 from rich.console import Console
 
 from motorlab import launcher, trackers
-from motorlab.errors import MotorlabError, mask_url
+from motorlab.errors import MotorlabError, mask_secrets
 from motorlab.launcher import is_finished
 from motorlab.report.html import build_report
 from motorlab.report.tables import plain_table, rich_table
 from motorlab.runs import (
     SUMMARY,
+    atomic_write_text,
+    claim_folder,
     folder_mode,
-    make_folder,
     prepare_run_dir,
     read_json,
     refuse_finished,
@@ -93,16 +94,22 @@ def run_tune(spec: TuneSpec, console: Console | None = None) -> dict[str, Any]:
                else {})
     planner = Planner(spec.target, spec.space, threads)
     planner.check()
-    refuse_finished(spec.out, resumable=True)  # a finished search goes on with --resume, or is replaced
+    with trackers.also(planner.track, "the tune's target"):  # checked before anything is written
+        return _search(spec, planner, console)
+
+
+def _search(spec: TuneSpec, planner: Planner, console: Console) -> dict[str, Any]:
+    """The search, checked and planned, run into its folder; then its outputs."""
+    refuse_finished(spec.out, resumable=True, kind="tune")  # a finished search goes on with --resume, or is replaced
     if folder_mode() == "overwrite":
         prepare_run_dir(spec.out, "tune", resumable=True)  # the old folder (and its study.db) aside until this search ends
-    if spec.storage.startswith("sqlite:///") and spec.storage == f"sqlite:///{spec.out / 'study.db'}":
-        make_folder(spec.out)
-    config = {"tune": spec.target, "space": {k: d.describe() for k, d in spec.space.items()},
-              "objective": spec.objective.key, "direction": spec.objective.direction,
-              "trials": spec.trials, "seeds": spec.seeds, "storage": mask_url(spec.storage),  # no password in files
-              "study_name": spec.study_name, "sampler": spec.sampler, "pruner": spec.pruner,
-              **({"sampler_seed": spec.sampler_seed} if spec.sampler_seed is not None else {})}
+    else:  # marked as a search's folder, not locked: processes sharing the study's database share it too
+        claim_folder(spec.out, "tune")
+    config = mask_secrets({"tune": spec.target, "space": {k: d.describe() for k, d in spec.space.items()},
+                           "objective": spec.objective.key, "direction": spec.objective.direction,
+                           "trials": spec.trials, "seeds": spec.seeds, "storage": spec.storage,  # no password in files
+                           "study_name": spec.study_name, "sampler": spec.sampler, "pruner": spec.pruner,
+                           **({"sampler_seed": spec.sampler_seed} if spec.sampler_seed is not None else {})})
     # --track: the search is a parent run, each seed's run nests under it
     with trackers.parent("tune", spec.out, config):
         t0 = time.perf_counter()
@@ -172,15 +179,15 @@ def write_results(spec: TuneSpec, study: optuna.Study, planner: Planner, console
     rows = outputs.table_rows(trials, spec.space, best, fresh, spec.objective)
     title = (f"tune {spec.objective.key} ({spec.objective.direction}): each trial's "
              f"{spec.objective.statistic(spec.seeds)} over {spec.seeds} seeds")
-    (spec.out / "table.txt").write_text(plain_table(outputs.COLUMNS, rows))
+    atomic_write_text(spec.out / "table.txt", plain_table(outputs.COLUMNS, mask_secrets(rows)))
     console.print(rich_table(title, outputs.COLUMNS, rows, left=("trial", "state", "settings", "per seed")))
     outputs.write_plots(study, spec.space, spec.out / "plots", title)
     by_state = {s.name.lower(): sum(t.state == s for t in trials) for s in TrialState}
     saved = sum(t.user_attrs.get("env_steps_saved", 0) for t in trials)
     steps = sum(t.user_attrs.get("env_steps", 0) for t in trials)
     summary: dict[str, Any] = {
-        "tune": spec.target, "objective": spec.objective.key, "direction": spec.objective.direction,
-        "study_name": spec.study_name, "storage": mask_url(spec.storage), "trials": spec.trials, "seeds": spec.seed_list,
+        "tune": mask_secrets(spec.target), "objective": spec.objective.key, "direction": spec.objective.direction,
+        "study_name": spec.study_name, "storage": mask_secrets(spec.storage), "trials": spec.trials, "seeds": spec.seed_list,
         "n_trials": {k: v for k, v in by_state.items() if v}, "best_trial": best.number if best else None,
         "best_value": best.value if best else None, "best_params": best.params if best else None,
         "best_seed_values": best.user_attrs.get("seed_values") if best else None,

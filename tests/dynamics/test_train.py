@@ -351,10 +351,13 @@ def test_ts_rollout_equals_step_fn_trajectory_sampling(probabilistic, heads, non
     fast = model.ts_rollout(torch.Generator().manual_seed(7), reward=learned)(s, plans)
     fast_path, fast_rewards = fast if learned else (fast, None)
     assert fast_path.shape == (32, 7, 8)
-    rtol = 1e-4 if nonlinearity == "silu" else 1e-5  # float32 sums in another order, as above
-    torch.testing.assert_close(fast_path, path, rtol=rtol, atol=1e-4)
+    # float32 sums in another order, compounding over 6 steps through the members: on some CPUs one element
+    # in ~2,000 drifts past 1e-4 (absolute); a wrong draw or member would differ by the noise itself (~0.1-1)
+    rtol = 1e-4 if nonlinearity == "silu" else 1e-5
+    atol = 1e-4 * max(1.0, float(path.abs().max()))
+    torch.testing.assert_close(fast_path, path, rtol=rtol, atol=atol)
     if learned:
-        torch.testing.assert_close(fast_rewards, torch.stack(rewards, 1), rtol=rtol, atol=1e-4)
+        torch.testing.assert_close(fast_rewards, torch.stack(rewards, 1), rtol=rtol, atol=atol)
     if probabilistic:  # the draws differ between particles of one member: the noise is there
         assert not torch.allclose(fast_path[::k, 1], model.ts_rollout(None)(s, plans)[::k, 1])
 

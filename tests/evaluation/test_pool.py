@@ -213,7 +213,7 @@ def test_collect_does_not_depend_on_workers(pid_run, tmp_path):
 # ---- errors, Ctrl-C, the automatic choice --------------------------------------------------------
 
 @pytest.mark.parametrize(("mode", "fragments"), [
-    ("raise", ["env worker 2 of 2 (envs 3-5 of", "failed while stepping: RuntimeError: boom at step 2 (a second line)"]),
+    ("raise", ["env worker 2 of 2 (envs 3-5 of", "failed while stepping:", "RuntimeError: boom at step 2 (a second line)"]),
     ("exit", ["env worker 2 of 2 (envs 3-5 of", "stopped unexpectedly while stepping (exit code 3)"]),
 ])
 def test_a_failing_worker_is_one_clear_line(mode, fragments):

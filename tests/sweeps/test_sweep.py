@@ -12,10 +12,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import settings as settings_
+from hypothesis import strategies as st
 
 from motorlab.errors import MotorlabError
 from motorlab.stats import aggregate, trial_scores
-from motorlab.sweeps.grid import label, parse_grid, settings
+from motorlab.sweeps.grid import label, labels, parse_grid, settings
+from motorlab.sweeps.trials import SWEEPABLE
 from tests.helpers import (
     ENV_ID,
     TINY_PPO,
@@ -32,6 +36,7 @@ from tests.helpers import (
 TINY = " ".join(["train", ENV_ID, *TINY_PPO])  # ~3 s a trial
 LQR = f"train {ENV_ID} --preset fast --until-solved --timesteps 1500 --solve-episodes 2"  # ~1 s a trial
 GRID = ["--grid", "lr=3e-4,1e-3"]
+LR3, LR1 = label({"lr": "3e-4"}), label({"lr": "1e-3"})  # the settings' folders: slug and hash, lr=3e-4-<hash>
 
 
 def _run_folders(sweep: Path) -> set[str]:
@@ -49,11 +54,12 @@ def local_sweep(tmp_path_factory) -> Path:
 
 
 def test_local_sweep_writes_one_run_folder_per_trial(local_sweep):
-    assert _run_folders(local_sweep) == {"lr=3e-4/seed0", "lr=3e-4/seed1", "lr=1e-3/seed0", "lr=1e-3/seed1"}
+    assert _run_folders(local_sweep) == {f"{LR3}/seed0", f"{LR3}/seed1", f"{LR1}/seed0", f"{LR1}/seed1"}
+    assert LR3.startswith("lr=3e-4-") and LR1.startswith("lr=1e-3-")  # readable, then the hash of the values
     for run in local_sweep.glob("*/seed*"):
         config = (run / "config.toml").read_text()
         assert f"seed = {run.name.removeprefix('seed')}" in config  # the sweep set --seed
-        assert f'lr = "{run.parent.name.removeprefix("lr=")}"' in config  # ... and the grid's option
+        assert f'lr = "{run.parent.name.removeprefix("lr=").rpartition("-")[0]}"' in config  # ... and the grid's
         assert (local_sweep / "logs" / f"{run.parent.name}-{run.name}.log").is_file()
 
 
@@ -61,7 +67,7 @@ def test_local_sweep_aggregates_with_rliable(local_sweep):
     summary = read_summary(local_sweep)
     details = json.loads((local_sweep / "aggregate.json").read_text())
     assert summary["trials"] == summary["finished"] == 4 and summary["failed"] == 0
-    for setting in ("lr=3e-4", "lr=1e-3"):
+    for setting in (LR3, LR1):
         per_seed = [read_summary(local_sweep / setting / f"seed{s}")["eval_return_mean"] for s in (0, 1)]
         entry = details["metrics"]["final_return"][setting]
         assert entry["values"] == pytest.approx(per_seed)
@@ -78,22 +84,22 @@ def test_local_sweep_aggregates_with_rliable(local_sweep):
         assert summary[f"{setting}.steps_to_success_solved"] == 0
         assert summary[f"{setting}.steps_to_success_median"] is None
         assert details["metrics"]["steps_to_success"][setting]["text"] == "0 of 2 seeds; median > 256 (budget)"
-    p = summary["lr=3e-4.final_return_p_better_than[lr=1e-3]"]
-    a = details["metrics"]["final_return"]["lr=3e-4"]["values"]
-    b = details["metrics"]["final_return"]["lr=1e-3"]["values"]
+    p = summary[f"{LR3}.final_return_p_better_than[{LR1}]"]
+    a = details["metrics"]["final_return"][LR3]["values"]
+    b = details["metrics"]["final_return"][LR1]["values"]
     assert p == pytest.approx(np.mean([(x > y) + 0.5 * (x == y) for x in a for y in b]))
     pair = details["probability_of_improvement"]["final_return"][0]
     assert pair["ci"] is None and "too few" in pair["method"]  # 2 seeds a side: no interval
     assert set(details["profiles"]) == {"final_return", "success_rate"}
-    fractions = details["profiles"]["final_return"]["lr=3e-4"]["fraction"]
+    fractions = details["profiles"]["final_return"][LR3]["fraction"]
     assert fractions[0] == 1.0 and fractions[-1] == 0.0 and all(np.diff(fractions) <= 0)
     for name in ("iqm.png", "improvement.png", "profiles.png"):
         assert_png(local_sweep / "plots" / name)
-    assert "lr=3e-4" in (local_sweep / "table.txt").read_text()
+    assert LR3 in (local_sweep / "table.txt").read_text()
     table = (local_sweep / "table.txt").read_text()
     assert "mean " in table and "n = 2: too few seeds for an interval" in table
     html = (local_sweep / "report.html").read_text()
-    assert 'data-key="lr=3e-4.final_return_mean"' in html
+    assert f'data-key="{LR3}.final_return_mean"' in html
 
 
 def test_interrupted_sweep_resumes_without_rerunning_finished_trials(tmp_path):
@@ -246,15 +252,18 @@ def test_recipe_sweep_runs_whole_studies_with_the_setting_applied(tmp_path):
     recipe.write_text(RECIPE)
     out = tmp_path / "sweep"
     assert_ok(run_cli("sweep", recipe, "--seeds", "2", "--grid", "fast.timesteps=200,300", "--out", out))
-    assert _run_folders(out) == {f"fast.timesteps={t}/seed{s}" for t in (200, 300) for s in (0, 1)}
-    study = out / "fast.timesteps=200" / "seed1"
+    t200, t300 = (label({"fast.timesteps": t}) for t in ("200", "300"))
+    assert _run_folders(out) == {f"{t}/seed{s}" for t in (t200, t300) for s in (0, 1)}
+    study = out / t200 / "seed1"
     assert (study / "report.html").is_file() and (study / "fast" / "config.toml").is_file()
     config = (study / "fast" / "config.toml").read_text()
     assert "timesteps = 200" in config and "seed = 1" in config  # one seed per trial, not the recipe's 3
     summary = read_summary(out)
-    assert summary["fast.timesteps=200.fast.final_return_mean"] == pytest.approx(
-        np.mean([read_summary(out / "fast.timesteps=200" / f"seed{s}")["fast.return_mean"] for s in (0, 1)]))
-    assert "fast.timesteps=300.pid.final_return_mean" in summary
+    assert summary[f"{t200}.fast.final_return_mean"] == pytest.approx(
+        np.mean([read_summary(out / t200 / f"seed{s}")["fast.return_mean"] for s in (0, 1)]))
+    assert f"{t300}.pid.final_return_mean" in summary
+    assert sorted(p.name for p in (out / "recipes").iterdir()) == sorted(f"{t}-seed{s}.toml" for t in (t200, t300)
+                                                                         for s in (0, 1))
 
     assert_one_line_error(run_here("sweep", recipe, "--grid", "nope.timesteps=1,2", "--out", tmp_path / "x"),
                           "has no step 'nope'")
@@ -346,3 +355,123 @@ def test_ray_backend_gives_the_same_folders_and_aggregate(local_sweep, ray_addre
     assert keys and {k: ray_summary[k] for k in keys} == pytest.approx({k: local_summary[k] for k in keys})
     trained = [json.loads(p.read_text()) for p in (tmp_path / "user").rglob("summary.json")]
     assert [(s["env_id"], s["timesteps"]) for s in trained if "algo" in s] == [("ArmReachHeavy-v0", 256)]
+
+
+# ---- trial folders unique by construction; a target's own options applied or refused (issue 52) ----------
+
+VALUES = st.one_of(st.text(max_size=80), st.sampled_from(["1e-3", "0.001", "1E-3", "a b", "a_b", "a/b", "a\\b", "é",
+                                                          "e", "x" * 300, "http://u:pw@h/db", "http://u:PW@h/db"]),
+                   st.floats(allow_nan=False).map(repr))
+SETTINGS = st.dictionaries(st.sampled_from(["lr", "n_envs", "set.gamma", "fast.timesteps", "--delay"]), VALUES,
+                           min_size=1, max_size=3)
+
+
+@settings_(max_examples=300, deadline=None, derandomize=True, database=None)
+@given(st.lists(SETTINGS, min_size=1, max_size=6, unique_by=lambda d: json.dumps(list(d.items()))))
+def test_trial_folders_are_distinct_for_distinct_settings_and_equal_for_equal_ones(combos):
+    names = labels(combos)
+    assert len(set(names)) == len(combos)  # distinct values: distinct folders
+    assert labels([dict(c) for c in combos]) == names  # equal values, the same folders: --resume finds its trials
+    assert [label(c) for c in combos] == names  # lengthened only where a sweep's short hashes would collide
+    for name in names:
+        assert "/" not in name and "\\" not in name and " " not in name and name not in (".", "..")
+        assert len(name.encode()) < 100  # one path element, however long the value
+        assert ":pw_h" not in name and ":PW_h" not in name  # a password is masked before it makes a name
+    assert label({}) == "default"
+    with pytest.raises(MotorlabError, match="given twice"):
+        labels([combos[0], dict(combos[0])])
+
+
+def test_values_that_slugify_alike_get_their_own_folders(tmp_path):
+    from motorlab.sweeps.trials import command_trials, parse_target
+
+    combos = settings(parse_grid(["set.note=a b|a_b|a/b|http://u:s3cretpw@h/x"]))
+    trials = command_trials(parse_target(f"train {ENV_ID} --algo lqr"), combos, [0, 1], tmp_path, {})
+    dirs = [t["run_dir"] for t in trials]
+    assert len(set(dirs)) == len(dirs) == 8 and len({t["log"] for t in trials}) == 8
+    assert all(Path(d).parent.parent == tmp_path.resolve() for d in dirs)  # no "/" of a value makes a folder
+    assert not any("s3cretpw" in d for d in dirs)
+
+
+# what each sweepable command needs on its command line, and a value a user could give each invocation option
+ARGS = {"train": ENV_ID, "evaluate": "pid", "video": "r", "synergies collect": "r", "synergies fit": "a.npz",
+        "zeroshot": "r --envs E-v0", "robustness": "pid --vary delay=0,0.1", "dynamics collect": ENV_ID,
+        "dynamics fit": "t.npz", "dynamics check": "m", "mpc": f"{ENV_ID} --model m", "mbrl": ENV_ID}
+OPTION_WORDS = {"out": ["--out", "elsewhere"], "overwrite": ["--overwrite"], "track": ["--track", "mlflow"],
+                "config": ["--config", "CONFIG"], "resume": ["--resume", "r"]}
+
+
+@pytest.fixture(scope="module")
+def lqr_config(tmp_path_factory) -> Path:
+    """A train run's config.toml (what --config reads), as `motorlab train --algo lqr --timesteps 300` writes it."""
+    path = tmp_path_factory.mktemp("config") / "config.toml"
+    path.write_text(f'algo = "lqr"\ntimesteps = 300\nseed = 0\n[env]\nid = "{ENV_ID}"\n')
+    return path
+
+
+@settings_(max_examples=120, deadline=None, derandomize=True, database=None)
+@given(command=st.sampled_from(SWEEPABLE), owner=st.sampled_from(["sweep", "tune"]), data=st.data())
+def test_every_invocation_option_of_a_target_is_applied_or_refused(lqr_config, command, owner, data):
+    """Any set of a command's invocation options, in any order, in a sweep or tune target: each one applied
+    (--track, --config) or the target refused in one line naming an option given and where it goes."""
+    from motorlab.kinds import for_command
+    from motorlab.sweeps.trials import APPLIED, parse_target
+
+    options = data.draw(st.lists(st.sampled_from(list(for_command(command).invocation.model_fields)), unique=True))
+    words = [w.replace("CONFIG", str(lqr_config)) for o in options for w in OPTION_WORDS.get(o, [f"--{o}", "x"])]
+    assert set(OPTION_WORDS) >= set(for_command(command).invocation.model_fields)  # a new option: give it a value
+    try:
+        target = parse_target(" ".join([command, ARGS[command], *words]), owner)
+    except MotorlabError as e:
+        line = str(e)
+        refused = [o for o in options if o not in APPLIED]
+        assert refused and "\n" not in line and any(f"--{o}" in line for o in refused), line
+        assert f"motorlab {owner}" in line or f"the {owner} sets" in line, line
+        return
+    assert set(options) <= set(APPLIED)  # nothing given was dropped: each is in the target
+    assert target.track == (("mlflow",) if "track" in options else ())
+    if "config" in options:  # that run's settings, under the given ones
+        assert target.given.fields["timesteps"] == 300 and target.given.fields["algo"] == "lqr"
+
+
+@pytest.mark.parametrize("words, fragment", [
+    ("--out elsewhere", "sets --out of every trial itself"),
+    ("--overwrite", "--overwrite inside a {owner} target is not applied per trial; give it to the {owner}"),
+    ("--resume runs/x", "--resume inside a {owner} target is not applied per trial"),
+    ("--seed 2", "sets --seed of every trial itself"),
+])
+@pytest.mark.parametrize("owner", ["sweep", "tune"])
+def test_a_targets_refused_option_is_one_line_before_anything_is_written(tmp_path, words, fragment, owner):
+    out = tmp_path / "out"
+    extra = ["--space", "lr=loguniform:1e-4,1e-3"] if owner == "tune" else []
+    proc = run_here(owner, f"{LQR} {words}", *extra, "--out", out)
+    assert_one_line_error(proc, fragment.format(owner=owner))
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("owner", ["sweep", "tune"])
+def test_a_targets_unreachable_tracker_is_one_line_without_its_password(tmp_path, owner):
+    out = tmp_path / "out"
+    extra = ["--space", "lr=loguniform:1e-4,1e-3"] if owner == "tune" else []
+    proc = run_here(owner, f"{LQR} --track mlflow=http://me:s3cretpw@127.0.0.1:{free_port()}", *extra, "--out", out)
+    line = assert_one_line_error(proc, "no MLflow tracking server answers", "me:***@127.0.0.1")
+    assert "s3cretpw" not in line and not out.exists()
+
+
+def test_a_sweep_records_no_credential_of_its_target_or_grid(tmp_path):
+    """A credential in the target is in no file and no folder name the sweep writes (the job files excepted:
+    the trial's process needs its settings as given); two grid values that slugify alike run apart."""
+    out = tmp_path / "sweep"
+    target = f"train {ENV_ID} --algo lqr --timesteps 300 --solve-episodes 1 --set note=postgresql://me:s3cretpw@db/x"
+    proc = run_cli("sweep", target, "--seeds", "1", "--grid", "set.tag=a b|a_b", "--out", out)
+    assert_ok(proc)
+    assert len(list(out.glob("set.tag=a_b-*/seed0/summary.json"))) == 2  # they slugify alike: a folder each
+    for path in out.rglob("*"):
+        assert "s3cretpw" not in str(path)
+        if path.is_file() and not path.name.endswith(".job.json"):
+            data = path.read_bytes()
+            assert b"s3cretpw" not in data, path
+    assert "me:***@db" in (out / "config.toml").read_text()
+    again = run_cli("sweep", target, "--seeds", "1", "--grid", "set.tag=a b|a_b", "--out", out, "--resume")
+    assert_ok(again)  # the trials are found again by their folders and masked records: none runs twice
+    assert "2 already finished, kept" in again.stdout

@@ -377,3 +377,55 @@ def test_a_child_that_adopts_the_handoff_nests_under_the_parent(store, fresh_fai
     assert trial.info.run_name == "trials/0" and trial.data.tags["motorlab.parent"] == "sweep"
     assert trial.data.tags["mlflow.parentRunId"] == parent.info.run_id and trial.info.status == "FINISHED"
     assert trial.info.experiment_id == parent.info.experiment_id and parent.info.status == "FINISHED"
+
+
+# ---- a sweep's or tune's target names its own --track: applied to its trials (issue 52) -------------------
+
+
+def test_a_sweep_targets_own_track_tracks_its_trials(store, tmp_path):
+    out = tmp_path / "sweep"
+    target = f"train {ENV_ID} --algo lqr --timesteps 300 --solve-episodes 1 --track mlflow={store}"
+    assert_ok(run_cli("sweep", target, "--seeds", "1", "--out", out))  # no --track of the sweep's own
+    runs = runs_of(store, out)
+    (parent,) = [r for r in runs if r.data.tags["motorlab.kind"] == "sweep"]
+    (child,) = [r for r in runs if r is not parent]
+    assert child.info.run_name == "default/seed0" and child.data.tags["mlflow.parentRunId"] == parent.info.run_id
+    assert child.info.status == "FINISHED" and "eval/return_mean" in child.data.metrics
+
+
+def test_a_tune_targets_own_track_tracks_its_trials(store, tmp_path):
+    out = tmp_path / "tune"
+    target = f"train {ENV_ID} --algo lqr --timesteps 300 --solve-episodes 1 --track mlflow={store}"
+    assert_ok(run_cli("tune", target, "--space", "delay=uniform:0.05,0.2", "--trials", "1", "--seeds", "1",
+                      "--fresh-seeds", "0", "--sampler", "random", "--pruner", "none", "--out", out))
+    runs = runs_of(store, out)
+    (parent,) = [r for r in runs if r.data.tags["motorlab.kind"] == "tune"]
+    (child,) = [r for r in runs if r is not parent]
+    assert child.info.run_name == "trials/0/seed0" and child.data.tags["mlflow.parentRunId"] == parent.info.run_id
+
+
+@pytest.mark.fast
+def test_a_targets_track_joins_the_outer_trackers_or_is_refused_when_they_disagree(tmp_path):
+    one, other = f"mlflow=sqlite:///{tmp_path / 'one.db'}", f"mlflow=sqlite:///{tmp_path / 'other.db'}"
+    with trackers.also([one]) as found:  # alone: it is the tracking
+        assert [t.text() for t in found] == [one]
+    assert trackers.targets() == []
+    with trackers.tracking(one) as outer:
+        with trackers.also([one]) as found:  # the same store, named twice: one tracker
+            assert found == outer
+        with trackers.also(["wandb"]) as found:  # another tracker: both
+            assert [t.backend for t in found] == ["mlflow", "wandb"]
+        with pytest.raises(MotorlabError, match="track one run to two places") as e:
+            with trackers.also([other], "the sweep's target"):
+                pytest.fail("the block ran")
+        assert "\n" not in str(e.value) and "the sweep's target" in str(e.value)
+        assert trackers.targets() == outer
+
+
+@pytest.mark.fast
+def test_what_a_tracker_records_holds_no_credential():
+    """Params, tags and names of a tracked run pass through mask_secrets: a sweep's target quoting a password."""
+    target = "train X --track mlflow=http://me:s3cretpw@host:5000"
+    info = trackers._info("sweep", None, {"sweep": target, "grid": [f"note={target}"], target: 1})
+    assert "s3cretpw" not in json.dumps([info.name, info.config, info.tags])
+    assert info.config["sweep"] == "train X --track mlflow=http://me:***@host:5000"

@@ -289,3 +289,17 @@ def test_steps_objective_censors_unsolved_seeds_and_never_shows_the_budget_as_a_
     returns = Objective.make("final_return", None)
     assert returns.statistic(3) == "mean" and returns.statistic(4) == "IQM"
     assert Fresh([100, 101], [(10.0, False), (20.0, False)], returns).to_summary()["fresh_ci"] is None
+
+
+def test_a_search_records_no_credential_of_its_target(tmp_path):
+    """A credential in the target (here an ignored LQR hyperparameter) is in none of the files the search
+    writes: config.toml, summary.json, best.toml (its header quotes the target), table.txt, report.html, the
+    trials' run folders (the job files excepted: a trial's process needs its settings as given)."""
+    out = tmp_path / "t"
+    target = f"{QUICK} --set note=postgresql://me:s3cretpw@db/x"
+    proc = run_cli("tune", target, *SEARCH, "--trials", "1", "--out", out)
+    assert proc.returncode == 0, proc.stderr + proc.stdout
+    assert "me:***@db" in (out / "best.toml").read_text() and "me:***@db" in (out / "config.toml").read_text()
+    for path in out.rglob("*"):
+        if path.is_file() and not path.name.endswith(".job.json") and path.name != "study.db":
+            assert b"s3cretpw" not in path.read_bytes(), path

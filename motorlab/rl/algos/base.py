@@ -71,6 +71,8 @@ class Algorithm:
     summary: str  # one line for --help
     presets: dict[str, Preset] = field(default_factory=dict)
     actions: tuple[str, ...] = CONTINUOUS  # gymnasium.spaces class names it acts in
+    bounded_actions: bool = False  # squashes or clips its Box actions into finite bounds, low < high
+    vector_actions: bool = False  # its Box actions are one vector (a linear model's, LQR): 1-dim shape
     dict_obs: bool = False  # trains on a Dict observation kept as a Dict
     her: bool = False  # takes --her (a replay buffer whose goals can be relabelled)
     clip_range: bool = False  # takes --clip-range
@@ -93,11 +95,50 @@ class Algorithm:
         raise NotImplementedError(f"{self.name} trains in motorlab.rl.sb3")
 
     def acts_in(self, space: gym.Space) -> bool:
-        return type(space).__name__ in self.actions
+        """Whether it acts in `space`: a class it declares (`actions`), with finite bounds where it
+        squashes or clips into them (`bounded_actions`), a vector where it needs one (`vector_actions`)."""
+        return (type(space).__name__ in self.actions and (not self.bounded_actions or bounded(space))
+                and (not self.vector_actions or len(getattr(space, "shape", ())) == 1))
+
+    def check_actions(self, space: gym.Space, env_id: str) -> None:
+        """Refuse, in one line naming the env's action space and the algorithms that do fit it, an
+        action space this algorithm does not act in: the one door every training run passes
+        (rl.envcheck), driven by what each algorithm declares.
+
+        Raises:
+            MotorlabError: e.g. "SAC needs Box actions with finite bounds (low < high), and X's
+                actions are Box(-inf, inf, (2,), float32); use --algo ppo."
+        """
+        if self.acts_in(space):
+            return
+        fitting = [a.name for a in _package().registry().values() if a.acts_in(space)]
+        box = isinstance(space, _box_class())  # a Box: its shape or bounds are what does not fit
+        needs = (("continuous (Box)" if self.actions == CONTINUOUS else " or ".join(self.actions)) + " actions"
+                 + (" of one dimension" if self.vector_actions and box else "")
+                 + (" with finite bounds (low < high)" if self.bounded_actions and box else ""))
+        instead = "; use " + " or ".join(f"--algo {name}" for name in fitting) if fitting else (
+            "; no algorithm fits them: give your env a Box, Discrete, MultiDiscrete or MultiBinary action space"
+            + (" with finite bounds" if isinstance(space, _box_class()) else ""))
+        raise MotorlabError(f"{self.title} needs {needs}, and {env_id}'s actions are {space}{instead}.")
 
     @property
     def sb3(self) -> bool:
         return False
+
+
+def bounded(space: gym.Space) -> bool:
+    """A Box with finite bounds and room between them (an algorithm that squashes its actions into
+    the bounds divides by high - low); any other space counts as bounded."""
+    if not isinstance(space, _box_class()):
+        return True
+    low, high = np.asarray(space.low, dtype=np.float64), np.asarray(space.high, dtype=np.float64)
+    return bool(np.isfinite(low).all() and np.isfinite(high).all() and (high > low).all())
+
+
+def _box_class() -> type:
+    import gymnasium as gym  # only where a space is checked: this module is read by --help
+
+    return gym.spaces.Box
 
 
 def _names_with(flag: str) -> list[str]:
@@ -120,6 +161,7 @@ class SB3Algorithm(Algorithm):
     networks: dict[str, str] = field(default_factory=dict)  # policy.json's class name -> "module:Class"
     zip_modules: tuple[str, ...] = ()  # the policy modules an SB3 zip of it names (export)
     dict_obs: bool = True
+    bounded_actions: bool = True  # SB3 clips (on-policy) or squashes (off-policy) Box actions into the bounds
 
     @property
     def sb3(self) -> bool:

@@ -55,6 +55,8 @@ ALGORITHM = LQR(
     title="LQR",
     summary="model-based: a least-squares linear model + LQR, refitted every 100 steps; Box actions",
     eval_cadence="each LQR refit",
+    bounded_actions=True,  # its controller clips to the action bounds, and acts on one vector of them
+    vector_actions=True,
     presets={
         # motorlab's most sample-efficient configuration for balance/regulation tasks:
         # least-squares linear model + LQR, refitted every 100 steps (see controllers/lqr.py).
