@@ -4,7 +4,7 @@ STAMP  := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: demo test test-fast lint docs bench setup clean screenshots
+.PHONY: demo test test-fast test-long lint docs bench setup clean screenshots
 
 $(STAMP): pyproject.toml requirements.lock scripts/setup.sh
 	@VENV=$(VENV) bash scripts/setup.sh
@@ -53,6 +53,12 @@ docs: $(STAMP)  ## the documentation site in site/ (open site/index.html, offlin
 
 test-fast: lint  ## the edit loop: unit tests and one end-to-end test per workflow (under 3 min; no browser needed)
 	$(VENV)/bin/python -m pytest -q -m fast
+
+# The generated tests (Hypothesis) with many more examples than make test runs: the run-folder lifecycle and
+# every kind's settings (about 10 min on 2 cores)
+test-long: $(STAMP)  ## the generated tests at length: more run-folder lifecycles and settings values per field
+	MOTORLAB_LIFECYCLE_EXAMPLES=400 MOTORLAB_SETTINGS_EXAMPLES=100 $(VENV)/bin/python -m pytest -q \
+	  tests/adversarial/test_run_folder_lifecycle.py tests/adversarial/test_settings_generated.py
 
 bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/pendulum_steps_to_success.py

@@ -1,10 +1,14 @@
-"""The one exception type for mistakes a user can make.
+"""The one exception type for mistakes a user can make, its kinds, and credentials masked.
 
 The CLI prints a `MotorlabError` as a single line and exits nonzero; anything
-else is a bug and keeps its traceback.
+else is a bug and keeps its traceback. Its subclasses are also the builtin a caller
+may catch (`SettingsError` a ValueError, `StorageError` an OSError with the line the
+CLI prints). `mask_secrets` is what every recorded string passes through.
 """
 
 import difflib
+import errno
+import os
 import re
 from collections.abc import Iterable
 from typing import Any
@@ -136,9 +140,6 @@ def mask_secrets(value: Any) -> Any:
 
 
 # ---- the kinds of user mistakes (each a MotorlabError, and the builtin callers may catch) -------
-
-import errno  # noqa: E402 - this section's own imports (the lead may move them to the top)
-import os  # noqa: E402
 
 
 class SettingsError(MotorlabError, ValueError):

@@ -29,7 +29,7 @@ from motorlab import jobs, processes
 from motorlab.errors import MotorlabError, mask_url, redact
 from motorlab.extras import missing
 from motorlab.kinds import KINDS
-from motorlab.runs import STUDY, claim_folder, finished_with, is_complete, toml_holds, write_toml
+from motorlab.runs import STUDY, atomic_write_text, claim_folder, finished_with, is_complete, toml_holds, write_toml
 from motorlab.settings import Settings
 from motorlab.user_modules import ENV_VAR, imported_names
 
@@ -37,12 +37,14 @@ TRIAL_FILE = "sweep_trial.toml"
 STARTED_FILE = "sweep_trial_started.toml"  # the job a trial's folder was started with
 
 def trial(name: str, setting: str, seed: int, job: jobs.Job, run_dir: Path, log: Path,
-          env: dict[str, str] | None = None, fingerprint: str = "") -> dict[str, Any]:
+          env: dict[str, str] | None = None, fingerprint: str = "", files: dict[Path, str] | None = None) -> dict[str, Any]:
     """`fingerprint`: a hash of inputs the job only names (a recipe file's text); `env`: the process's
-    variables (e.g. one math thread per process)."""
+    variables (e.g. one math thread per process); `files`: what the job reads that is written only when it
+    starts (a recipe variant, in the sweep's folder: planning writes nothing, so a refused sweep has
+    touched no folder)."""
     return {"name": name, "setting": setting, "seed": seed, "job": job.as_dict(),
             "run_dir": str(Path(run_dir).resolve()), "log": str(Path(log).resolve()), "env": env or {},
-            "fingerprint": fingerprint}
+            "fingerprint": fingerprint, "files": {str(Path(p).resolve()): text for p, text in (files or {}).items()}}
 
 
 def _marker(t: dict[str, Any]) -> dict[str, Any]:
@@ -63,6 +65,8 @@ def mark_started(t: dict[str, Any]) -> None:
     and a folder that is not that kind's run is refused here), and what started it."""
     command = jobs.from_dict(t["job"]).command
     claim_folder(Path(t["run_dir"]), KINDS[command].name if command in KINDS else STUDY)
+    for path, text in t.get("files", {}).items():
+        atomic_write_text(Path(path), text)
     write_toml(Path(t["run_dir"]) / STARTED_FILE, _marker(t))
 
 

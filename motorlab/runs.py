@@ -348,7 +348,8 @@ def finished_run_message(run_dir: Path, resumable: bool = False) -> str:
             "to replace it.")
 
 
-def refuse_finished(run_dir: Path, resumable: bool = False, kind: str | None = None) -> None:
+def refuse_finished(run_dir: Path, resumable: bool = False, kind: str | None = None,
+                    inputs: frozenset[str] = frozenset()) -> None:
     """Raise unless `run_dir` may be written by a run of `kind` (None: any kind's run folder) in the
     current folder mode (see `run_folders`). Call it before any work, so a refusal costs nothing.
 
@@ -356,7 +357,8 @@ def refuse_finished(run_dir: Path, resumable: bool = False, kind: str | None = N
     says it holds a run of this kind: then a finished run is refused unless the command resumes or
     overwrites it, and --overwrite refuses a folder that has gained entries its run did not leave
     there. Any other folder is refused, whatever the mode: motorlab never writes into, replaces or
-    resumes what it did not make.
+    resumes what it did not make. `inputs`: names the command itself reads there, which a folder not
+    yet marked may hold (a search's study database the user made for it).
 
     Raises:
         MotorlabError: one line naming the folder, why, and the fix.
@@ -370,10 +372,12 @@ def refuse_finished(run_dir: Path, resumable: bool = False, kind: str | None = N
     claim = claims.read_claim(run_dir)
     held = claims.entries(run_dir)
     if claim is None:
-        if held:
+        if held - inputs:
+            older = " (a run folder an older motorlab wrote has none either: move it away first)" \
+                if {SUMMARY, ENVIRONMENT} <= held else ""
             raise MotorlabError(
-                f"{run_dir} is not empty and is not a motorlab run folder (it has no {claims.MARKER}); motorlab writes "
-                "only into new or empty folders and its own runs, and replaces nothing else: choose another --out.")
+                f"{run_dir} is not empty and is not a motorlab run folder (it has no {claims.MARKER}){older}; motorlab "
+                "writes only into new or empty folders and its own runs, and replaces nothing else: choose another --out.")
         return
     if kind is not None and claim.kind != kind:
         raise MotorlabError(f"{run_dir} holds a motorlab {claim.kind} run, not a {kind} run; a {kind} command neither "
@@ -417,15 +421,15 @@ def prepare_run_dir(out: Path | None, step: str, resumable: bool = False, kind: 
     return run_dir
 
 
-def claim_folder(run_dir: Path, kind: str) -> Path:
+def claim_folder(run_dir: Path, kind: str, inputs: frozenset[str] = frozenset()) -> Path:
     """Make `run_dir` a marked run folder of `kind` without locking it, for a run another process
     will write (a study's training step): the same refusals as `prepare_run_dir`, which that
-    process then calls.
+    process then calls (`inputs`: see `refuse_finished`).
 
     Raises:
         MotorlabError: as `refuse_finished`, or another process is writing it.
     """
-    refuse_finished(run_dir, True, kind)
+    refuse_finished(run_dir, True, kind, inputs)
     make_folder(run_dir)
     if not claims.free(run_dir):
         raise MotorlabError(claims.busy_message(run_dir))

@@ -53,6 +53,11 @@ SECONDS = {
     "tests/envs/test_spaces.py": 110, "tests/envs/test_spaces_model_based.py": 30, "tests/adversarial/test_run_folders.py": 60,
     "tests/adversarial/test_spaces_and_training.py": 40, "tests/adversarial/test_model_based.py": 12,
     "tests/adversarial/test_settings_and_urls.py": 15,
+    # issue 52's generated and signal tests
+    "tests/adversarial/test_signals.py": 80, "tests/adversarial/test_settings_generated.py": 30,
+    "tests/adversarial/test_user_code_failures.py": 25, "tests/adversarial/test_spaces_generated.py": 15,
+    "tests/api/test_errors.py": 15, "tests/adversarial/test_os_errors.py": 6, "tests/test_claims.py": 4,
+    "tests/adversarial/test_run_folder_lifecycle.py": 3, "tests/adversarial/test_credentials.py": 3,
     "tests/control/test_oracle.py": 12, "tests/control/test_planning.py": 20,
     "tests/envs/test_cartpole_swingup.py": 3, "tests/studies/test_mbrl_cartpole_recipe.py": 40,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[sar_synergies]": 85,

@@ -13,17 +13,22 @@ infos and resets automatically; a one-env proxy keeps every motorlab wrapper
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import gymnasium as gym
 
+from motorlab import processes
 from motorlab.errors import MotorlabError
 
 
-def _serve(conn, factory: Callable[[], gym.Env]) -> None:
-    """Child process: build the env, then answer (method, args, kwargs) requests."""
+def _serve(conn, factory: Callable[[], gym.Env], parent: int | None = None) -> None:
+    """Child process: build the env, then answer (method, args, kwargs) requests; it stops with the
+    process it serves (motorlab.processes.serve_parent: a fork server's child is no child of that process)."""
+    if parent is not None:
+        processes.serve_parent(parent)
     try:
         env = factory()
         conn.send(("ok", (env.observation_space, env.action_space, env.spec, env.metadata, env.render_mode,
@@ -71,7 +76,7 @@ class ProcessEnv(gym.Env):
         ctx = mp.get_context("forkserver")
         ctx.set_forkserver_preload(list(preload))
         self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_serve, args=(child, factory), daemon=True)
+        self._proc = ctx.Process(target=_serve, args=(child, factory, os.getpid()), daemon=True)
         self._proc.start()
         child.close()
         self._closed = False

@@ -23,6 +23,7 @@ import gymnasium as gym
 import numpy as np
 from rich.progress import Progress
 
+from motorlab import processes
 from motorlab.envs import EnvConfig, make_env, max_return
 from motorlab.envs.catalog import facts
 from motorlab.envs.spaces import require_actions
@@ -139,8 +140,11 @@ def read_signal(env, signal: str, action: np.ndarray, bounds: tuple[np.ndarray, 
 _worker: dict[str, Any] = {}
 
 
-def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool, signal: str = "act") -> None:
+def _init_worker(run_dir: str, env_cfg: dict, deterministic: bool, signal: str = "act", parent: int | None = None) -> None:
     import torch  # heavy: the worker processes load it, not every command that reads these settings
+
+    if parent is not None:  # a pool worker: stopped by its parent, and with it (motorlab.processes)
+        processes.serve_parent(parent)
 
     torch.set_num_threads(1)
     cfg = EnvConfig.model_validate(env_cfg)
@@ -185,7 +189,7 @@ def _episodes(seeds: list[int], workers: int, init_args: tuple):
             yield _run_episode(s)
         return
     # spawn: a fresh interpreter per worker is safe with torch and MuJoCo state
-    with mp.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=init_args) as pool:
+    with mp.get_context("spawn").Pool(workers, initializer=_init_worker, initargs=(*init_args, os.getpid())) as pool:
         yield from pool.imap(_run_episode, seeds)
 
 

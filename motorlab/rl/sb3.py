@@ -8,12 +8,16 @@ MultiInputPolicy, and --her relabels goals with SB3's HerReplayBuffer. Everythin
 
 from __future__ import annotations
 
+import contextlib
 import inspect
 import io
+import os
 import sys
+import tempfile
 import typing
 from pathlib import Path
 
+import gymnasium as gym
 from pydantic import TypeAdapter, ValidationError
 from pydantic.errors import PydanticSchemaGenerationError
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -23,7 +27,7 @@ from stable_baselines3.common.logger import TensorBoardOutputFormat
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 from stable_baselines3.her.her_replay_buffer import HerReplayBuffer
 
-from motorlab import trackers
+from motorlab import processes, trackers
 from motorlab.envs import make_env
 from motorlab.envs.spaces import is_dict
 from motorlab.errors import MotorlabError, did_you_mean
@@ -115,8 +119,16 @@ def build_model(cfg: TrainConfig, run_dir: Path) -> BaseAlgorithm:
     """
     env_cfg = cfg.env
     vec_cls = SubprocVecEnv if cfg.n_envs > 1 else DummyVecEnv
-    venv = make_vec_env(lambda: make_env(env_cfg, dict_obs=True), n_envs=cfg.n_envs, seed=cfg.seed,
-                        vec_env_cls=vec_cls)
+    parent = os.getpid()
+    _worker_report(parent).unlink(missing_ok=True)
+
+    def env_fn() -> gym.Env:
+        if os.getpid() == parent:
+            return make_env(env_cfg, dict_obs=True)
+        processes.serve_parent(parent)  # a SubprocVecEnv worker: stopped by this process, and with it
+        return _ReportsFailure(make_env(env_cfg, dict_obs=True), _worker_report(parent))
+
+    venv = make_vec_env(env_fn, n_envs=cfg.n_envs, seed=cfg.seed, vec_env_cls=vec_cls)
     if cfg.normalize:  # a Dict observation: running statistics per key
         venv = VecNormalize(venv, norm_obs=True, norm_reward=False, clip_obs=10.0)
     algo = ALGORITHMS[cfg.algo]
@@ -215,8 +227,11 @@ def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, monitor: Tr
     callback = MonitorCallback(monitor, eval_every, on_policy, cfg.until_solved, run_dir, every, start)
     if start < cfg.timesteps and not (cfg.until_solved and monitor.steps_to_success is not None):
         # resumed: SB3 counts on from num_timesteps; the schedules see the same total budget
-        model.learn(total_timesteps=cfg.timesteps - start, callback=callback, progress_bar=cfg.progress,
-                    tb_log_name=algo.title, reset_num_timesteps=start == 0)
+        try:
+            model.learn(total_timesteps=cfg.timesteps - start, callback=callback, progress_bar=cfg.progress,
+                        tb_log_name=algo.title, reset_num_timesteps=start == 0)
+        except (EOFError, BrokenPipeError, ConnectionResetError):  # a SubprocVecEnv worker is gone
+            raise MotorlabError(_worker_failure()) from None
     steps = int(model.num_timesteps)
     # stopped once solved: the saved policy is the one the solving evaluation judged
     stopped = cfg.until_solved and monitor.steps_to_success is not None
@@ -233,6 +248,50 @@ def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, monitor: Tr
     save_sb3_policy(run_dir, model, cfg.algo, venv if isinstance(venv, VecNormalize) else None)
     model.get_env().close()
     return steps
+
+
+def _worker_report(parent: int) -> Path:
+    """Where a SubprocVecEnv worker of process `parent` leaves the line saying why it stopped."""
+    return Path(tempfile.gettempdir()) / f"motorlab-env-worker-{parent}.txt"
+
+
+class _ReportsFailure(gym.Wrapper):
+    """A SubprocVecEnv worker's env: when it fails as the user's code can (a MotorlabError, e.g. its step
+    raising: envs.wrappers.user_code_error's one line), the line is left for the trainer and the worker
+    leaves quietly. Without it SB3's worker prints a traceback and the trainer sees only a closed pipe."""
+
+    def __init__(self, env: gym.Env, report: Path):
+        super().__init__(env)
+        self._report = report
+
+    def step(self, action):
+        try:
+            return self.env.step(action)
+        except MotorlabError as e:
+            self._leave(e)
+
+    def reset(self, **kwargs):
+        try:
+            return self.env.reset(**kwargs)
+        except MotorlabError as e:
+            self._leave(e)
+
+    def _leave(self, e: MotorlabError) -> None:
+        with contextlib.suppress(OSError):
+            self._report.write_text(f"an env worker of --n-envs: {e}")
+        os._exit(2)
+
+
+def _worker_failure() -> str:
+    """The line a SubprocVecEnv worker left before it stopped (removed once read), or what is known."""
+    report = _worker_report(os.getpid())
+    try:
+        line = report.read_text().strip()
+        report.unlink()
+        return line
+    except OSError:
+        return ("an env worker of --n-envs stopped unexpectedly (killed, or out of memory); run with --n-envs 1 to "
+                "see the env's own error.")
 
 
 def _save_model(model: BaseAlgorithm, run_dir: Path) -> None:

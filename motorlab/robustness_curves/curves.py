@@ -210,12 +210,15 @@ def measure(targets: list[Subject], axes: list[Axis], episodes: int, seed: int, 
 
 
 def write_points_csv(path: Path, curves: Curves) -> None:
-    """curves.csv: one row per episode (policy, seed run, disturbance, value, return, length, success)."""
+    """curves.csv: one row per episode (policy, seed run, disturbance, value, return, length, success); the
+    success cell is empty where the env defines no success (no flag, no maximum return): not a 0."""
+    defined = curves.measure == "success"
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["policy", "run", "disturbance", "value", "episode", "return", "length", "success"])
     for p in curves.points:
         for i, (ret, length, ok) in enumerate(zip(p.returns, p.lengths, p.success, strict=True)):
-            w.writerow([p.group, p.label, p.key, f"{p.value:g}", i, f"{ret:.6g}", int(length), int(ok)])
+            w.writerow([p.group, p.label, p.key, f"{p.value:g}", i, f"{ret:.6g}", int(length),
+                        int(ok) if defined else ""])
     atomic_write_text(path, buf.getvalue())
 

@@ -29,7 +29,6 @@ from motorlab.errors import MotorlabError, did_you_mean, mask_secrets
 from motorlab.kinds import KINDS, for_command
 from motorlab.launcher import trial
 from motorlab.recipes import SEEDS, bundled, find_recipe, parse_recipe, set_fields, step_fields
-from motorlab.runs import atomic_write_text
 from motorlab.settings import Settings
 from motorlab.stepkind import StepKind
 from motorlab.sweeps.grid import labels
@@ -259,10 +258,9 @@ def recipe_trials(path: Path, settings: list[dict[str, str]], seeds: list[int], 
             planned.append((name, s, text))
     out = []
     for name, s, text in planned:
-        recipe_file = sweep_dir / "recipes" / f"{name}-seed{s}.toml"
-        atomic_write_text(recipe_file, text)
+        recipe_file = sweep_dir / "recipes" / f"{name}-seed{s}.toml"  # written when the trial starts
         run_dir = sweep_dir / name / f"seed{s}"
         job = jobs.job("run", {"recipe": str(recipe_file.resolve())}, {"out": run_dir.resolve()})
         out.append(trial(f"{name}/seed{s}", name, s, job, run_dir, sweep_dir / "logs" / f"{name}-seed{s}.log",
-                         threads, hashlib.sha256(text.encode()).hexdigest()[:16]))
+                         threads, hashlib.sha256(text.encode()).hexdigest()[:16], files={recipe_file: text}))
     return out

@@ -100,11 +100,14 @@ def run_tune(spec: TuneSpec, console: Console | None = None) -> dict[str, Any]:
 
 def _search(spec: TuneSpec, planner: Planner, console: Console) -> dict[str, Any]:
     """The search, checked and planned, run into its folder; then its outputs."""
-    refuse_finished(spec.out, resumable=True, kind="tune")  # a finished search goes on with --resume, or is replaced
+    # the default storage, a SQLite file in --out, may be there before the search is (a study made for it)
+    database = frozenset({"study.db", "study.db-journal", "study.db-wal", "study.db-shm"}) \
+        if spec.storage == f"sqlite:///{spec.out / 'study.db'}" else frozenset()
+    refuse_finished(spec.out, resumable=True, kind="tune", inputs=database)  # a finished search: --resume or replaced
     if folder_mode() == "overwrite":
         prepare_run_dir(spec.out, "tune", resumable=True)  # the old folder (and its study.db) aside until this search ends
     else:  # marked as a search's folder, not locked: processes sharing the study's database share it too
-        claim_folder(spec.out, "tune")
+        claim_folder(spec.out, "tune", inputs=database)
     config = mask_secrets({"tune": spec.target, "space": {k: d.describe() for k, d in spec.space.items()},
                            "objective": spec.objective.key, "direction": spec.objective.direction,
                            "trials": spec.trials, "seeds": spec.seeds, "storage": spec.storage,  # no password in files

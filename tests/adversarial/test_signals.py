@@ -108,13 +108,19 @@ def test_sigterm_stops_a_sweep_that_resume_then_finishes(tmp_path):
         assert summary["timesteps"] == BUDGET and summary["resumed_from"] >= 128, summary
 
 
-def test_sighup_stops_a_study_that_resume_then_finishes(tmp_path):
+def _study_training(tmp_path: Path) -> tuple[Path, Path, list[Path], subprocess.Popen, list[psutil.Process]]:
+    """`motorlab run` of RECIPE, once both seeds' processes are training: (recipe, study, seed folders,
+    the command, its descendants)."""
     recipe = tmp_path / "signalled.toml"
     recipe.write_text(RECIPE)
     out = tmp_path / "study"
     seeds = [out / "ppo" / f"seed{k}" for k in range(2)]
     proc = _start("run", str(recipe), "--out", str(out))
-    descendants = _training(proc, seeds)
+    return recipe, out, seeds, proc, _training(proc, seeds)
+
+
+def test_sighup_stops_a_study_that_resume_then_finishes(tmp_path):
+    recipe, out, seeds, proc, descendants = _study_training(tmp_path)
     proc.send_signal(signal.SIGHUP)
     _assert_stopped(proc, signal.SIGHUP, descendants, seeds)
     assert not (out / "summary.json").exists()
@@ -129,12 +135,7 @@ def test_sighup_stops_a_study_that_resume_then_finishes(tmp_path):
 
 def test_children_of_a_killed_command_die_with_it(tmp_path):
     """SIGKILL leaves the command no chance to stop its trainings: the kernel stops them (pdeathsig)."""
-    recipe = tmp_path / "signalled.toml"
-    recipe.write_text(RECIPE)
-    out = tmp_path / "study"
-    seeds = [out / "ppo" / f"seed{k}" for k in range(2)]
-    proc = _start("run", str(recipe), "--out", str(out))
-    descendants = _training(proc, seeds)
+    _, _, seeds, proc, descendants = _study_training(tmp_path)
     proc.send_signal(signal.SIGKILL)
     proc.communicate(timeout=30)
     # at once, or at worst when a cleanup that hung hits the worker's deadline (15 s)

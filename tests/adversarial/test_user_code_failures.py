@@ -102,6 +102,16 @@ def test_an_env_that_raises_mid_training_is_one_line_naming_it(tmp_path):
     assert "fix it there" in message
 
 
+def test_an_env_that_raises_in_a_training_env_worker_is_one_line_naming_it(tmp_path):
+    """--n-envs 2: the env steps in SB3's SubprocVecEnv workers; its error still reaches the user as one
+    line (not the worker's traceback and a closed pipe)."""
+    out = tmp_path / "train"
+    proc = run_here("train", env("Boom-v0"), "--algo", "ppo", "--timesteps", "256", "--n-envs", "2", "--set",
+                    "n_steps=64", "--set", "batch_size=64", "--no-progress", "--out", out)
+    assert_one_line_error(proc, "env worker", env("Boom-v0"), "RuntimeError: simulator diverged", f"{MODULE}.py:")
+    assert "Traceback" not in proc.stderr + proc.stdout
+
+
 @pytest.mark.parametrize("workers", ["1", "2"])
 def test_an_env_that_raises_mid_evaluation_is_one_line_in_this_process_or_a_worker(tmp_path, workers):
     first = tmp_path / "first"

@@ -106,7 +106,7 @@ def test_video_is_h264(hand_play_run, tmp_path):
     index = json.loads((out / "videos.json").read_text())
     assert frames > 1 and index["frames"] == [frames]
     assert seconds > 0 and index["fps"] > 0
-    assert not list(out.glob(".*"))  # no temp files left behind
+    assert [p.name for p in out.glob(".*")] == [".motorlab-run"]  # its marker, and no temp file left behind
 
 
 def test_video_unknown_camera_lists_the_cameras(hand_play_run, tmp_path):
