@@ -135,9 +135,13 @@ def mark(run_dir: Path, kind: str, replaces: str | None = None) -> None:
     write_claim(run_dir, Claim(kind, os.getpid(), old.files if old else None, replaces))
 
 
+_MARKER_TEMP = f".{MARKER}."  # the marker's temp file while it is written (`atomic_path`'s prefix)
+
+
 def entries(run_dir: Path) -> set[str]:
-    """The names in `run_dir`, the marker aside."""
-    return {e.name for e in os.scandir(run_dir)} - {MARKER}
+    """The names in `run_dir`, the marker aside (and the marker's temp file: another process marking a
+    folder it just made shows it for a moment, and the folder is no less empty for it)."""
+    return {e.name for e in os.scandir(run_dir) if e.name != MARKER and not e.name.startswith(_MARKER_TEMP)}
 
 
 # ---- one writer at a time -------------------------------------------------------------------

@@ -16,7 +16,20 @@ from urllib.parse import unquote, urlsplit
 
 
 class MotorlabError(Exception):
-    """A user-caused problem: the message names the thing and the fix."""
+    """A user-caused problem: the message names the thing and the fix, on one line whatever it quotes
+    (a path or a library's message holding a newline is shown with the newline escaped, as `\\n`)."""
+
+    def __str__(self) -> str:
+        return one_line(super().__str__())
+
+
+# control characters as Python writes them in a string literal: a message quoting them stays one line
+_CONTROL = {c: repr(chr(c))[1:-1] for c in (*range(32), 127)}
+
+
+def one_line(text: str) -> str:
+    """`text` with its control characters (newlines, tabs, escapes) written out: one printable line."""
+    return text.translate(_CONTROL)
 
 
 def did_you_mean(word: str, choices: Iterable[str], n: int = 3) -> str:
@@ -183,7 +196,7 @@ class StorageError(MotorlabError, OSError):
         self.line = line
 
     def __str__(self) -> str:
-        return self.line
+        return one_line(self.line)
 
     def __reduce__(self):  # pickled across processes with its line (OSError's own drops extra arguments)
         return type(self), (self.errno, self.line, self.filename)

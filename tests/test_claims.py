@@ -152,3 +152,12 @@ def test_a_long_name_is_moved_aside_under_a_hash(tmp_path):
         assert len(list(tmp_path.iterdir())) == 2
         write_summary(run, {"x": 2})
     assert [p.name for p in tmp_path.iterdir()] == [run.name]
+
+
+def test_a_folder_another_process_is_marking_counts_as_empty(tmp_path):
+    """Two searches started at once into one new --out (they share it): one sees the other's marker
+    being written, its temp file, for a moment; the folder is no less empty for it."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / f".{claims.MARKER}.k3j2x1.tmp").write_text("{}")
+    assert prepare_run_dir(run, "tune") == run and claims.read_claim(run).kind == "tune"

@@ -44,8 +44,8 @@ pytestmark = pytest.mark.fast
 KINDS = ("train", "evaluate")
 MODES = ("new", "resume", "overwrite")
 # names a user may give --out: globs and brackets (a pattern would match other runs' asides), spaces,
-# unicode, leading dots and dashes, long ones
-NAME_CHARS = st.sampled_from(list("ab[]*?-. _é✓") + ["x"])
+# unicode, leading dots and dashes, a newline (a refusal quoting it is still one line), long ones
+NAME_CHARS = st.sampled_from(list("ab[]*?-. _é✓\n") + ["x"])
 NAMES = st.one_of(
     st.text(NAME_CHARS, min_size=1, max_size=12),
     st.integers(150, 230).map(lambda n: "long" + "é" * ((n - 4) // 2)),
