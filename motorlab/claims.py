@@ -88,7 +88,7 @@ class Claim:
 
     kind: str  # the kind of run it holds: a step kind's name, "study", "sweep", "tune", "export"
     pid: int | None  # the process that last took it
-    files: tuple[str, ...] | None  # its entries when that process was done (None: not known yet)
+    files: tuple[str, ...] | None  # what it held when that process was done, as `contents` (None: not known yet)
     replaces: str | None = None  # the name of the run an --overwrite moved aside for it, in the same parent
 
 
@@ -142,6 +142,25 @@ def entries(run_dir: Path) -> set[str]:
     """The names in `run_dir`, the marker aside (and the marker's temp file: another process marking a
     folder it just made shows it for a moment, and the folder is no less empty for it)."""
     return {e.name for e in os.scandir(run_dir) if e.name != MARKER and not e.name.startswith(_MARKER_TEMP)}
+
+
+def contents(run_dir: Path) -> set[str]:
+    """Everything under `run_dir` as paths relative to it (`plots/curve.png`, `plots`), the marker aside: what
+    a finished run's marker lists, and what an --overwrite compares with it. A run folder inside it (a
+    study's step, a sweep's trial: its own marker) is one entry, not looked into: it lists its own."""
+    found: set[str] = set()
+
+    def walk(folder: str, prefix: str) -> None:
+        with os.scandir(folder) as listing:
+            for entry in listing:
+                if not prefix and (entry.name == MARKER or entry.name.startswith(_MARKER_TEMP)):
+                    continue
+                found.add(prefix + entry.name)
+                if entry.is_dir(follow_symlinks=False) and not os.path.lexists(os.path.join(entry.path, MARKER)):
+                    walk(entry.path, f"{prefix}{entry.name}/")
+
+    walk(os.fspath(run_dir), "")
+    return found
 
 
 # ---- one writer at a time -------------------------------------------------------------------
@@ -276,7 +295,7 @@ def record_entries(run_dir: Path) -> None:
     with no marker gets none: it is not a run folder)."""
     claim = read_claim(run_dir)
     if claim is not None and is_complete(run_dir):
-        write_claim(run_dir, Claim(claim.kind, claim.pid, tuple(sorted(entries(run_dir))), None))
+        write_claim(run_dir, Claim(claim.kind, claim.pid, tuple(sorted(contents(run_dir))), None))
 
 
 # ---- writes never leave the folder ------------------------------------------------------------

@@ -29,7 +29,16 @@ from motorlab import jobs, processes
 from motorlab.errors import MotorlabError, mask_url, redact
 from motorlab.extras import missing
 from motorlab.kinds import KINDS
-from motorlab.runs import STUDY, atomic_write_text, claim_folder, finished_with, is_complete, toml_holds, write_toml
+from motorlab.runs import (
+    STUDY,
+    atomic_write_text,
+    claim_folder,
+    finished_with,
+    is_complete,
+    toml_holds,
+    write_toml,
+    wrote_into,
+)
 from motorlab.settings import Settings
 from motorlab.user_modules import ENV_VAR, imported_names
 
@@ -58,6 +67,7 @@ def is_finished(t: dict[str, Any]) -> bool:
 
 def mark_finished(t: dict[str, Any]) -> None:
     write_toml(Path(t["run_dir"]) / TRIAL_FILE, _marker(t))
+    wrote_into(Path(t["run_dir"]))  # after its run: the trial folder's marker lists it too
 
 
 def mark_started(t: dict[str, Any]) -> None:

@@ -385,8 +385,9 @@ def refuse_finished(run_dir: Path, resumable: bool = False, kind: str | None = N
     mode = folder_mode()
     if mode == "new" and is_complete(run_dir):
         raise MotorlabError(finished_run_message(run_dir, resumable))
-    foreign = sorted(held - set(claim.files)) if claim.files is not None else []
-    if mode == "overwrite" and foreign:
+    foreign = sorted(claims.contents(run_dir) - set(claim.files)) if mode == "overwrite" and claim.files is not None \
+        else []
+    if foreign:
         shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
         raise MotorlabError(f"{run_dir} holds {shown}, which its run did not write; --overwrite would delete "
                             "them: move them out first, or choose another --out.")
@@ -419,6 +420,17 @@ def prepare_run_dir(out: Path | None, step: str, resumable: bool = False, kind: 
     claims.mark(run_dir, kind, replaces)
     (run_dir / SUMMARY).unlink(missing_ok=True)
     return run_dir
+
+
+def wrote_into(path: Path) -> None:
+    """motorlab wrote `path` into a finished run's folder after the run (`motorlab plot`'s figures, `motorlab
+    report`'s page, a study's figures of its steps, a sweep's record of a trial): the run folder it lies in
+    lists it in its marker, so a later --overwrite does not take it for a file of the user's."""
+    for folder in (Path(path), *Path(path).parents):
+        if os.path.lexists(folder / claims.MARKER):
+            with contextlib.suppress(OSError, MotorlabError):  # the list is best effort: the files are written
+                claims.record_entries(folder)
+            return
 
 
 def claim_folder(run_dir: Path, kind: str, inputs: frozenset[str] = frozenset()) -> Path:

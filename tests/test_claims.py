@@ -54,13 +54,27 @@ def test_another_kinds_run_is_neither_resumed_nor_replaced(tmp_path, mode):
     assert snapshot(tmp_path) == before
 
 
-def test_overwrite_refuses_entries_its_run_did_not_leave(tmp_path):
+@pytest.mark.parametrize("note", ["my-notes.txt", "plots/my-notes.txt"])
+def test_overwrite_refuses_entries_its_run_did_not_leave(tmp_path, note):
     run = prepare_run_dir(tmp_path / "run", "train")
+    (run / "plots").mkdir()
+    (run / "plots" / "curve.png").write_bytes(b"png")
     write_summary(run, {"x": 1})
-    (run / "my-notes.txt").write_text("mine")
-    with pytest.raises(MotorlabError, match="my-notes.txt, which its run did not write"), run_folders("overwrite"):
+    (run / note).write_text("mine")
+    with pytest.raises(MotorlabError, match=f"{note}, which its run did not write"), run_folders("overwrite"):
         prepare_run_dir(run, "train")
-    assert (run / "my-notes.txt").read_text() == "mine"
+    assert (run / note).read_text() == "mine"
+
+
+def test_a_run_folder_inside_another_is_listed_as_one_entry(tmp_path):
+    """A study's step is a run of its own: the study's marker names the step's folder, not its files."""
+    study = prepare_run_dir(tmp_path / "study", "pendulum", kind="study")
+    step = prepare_run_dir(study / "ppo", "train")
+    (step / "policy.json").write_text("{}")
+    write_summary(step, {"x": 1})
+    write_summary(study, {"x": 1})
+    assert claims.read_claim(study).files == ("ppo", "summary.json")
+    assert claims.read_claim(step).files == ("policy.json", "summary.json")
 
 
 def _holder(run, ready_w):

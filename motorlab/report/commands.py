@@ -9,6 +9,7 @@ from pydantic import Field
 from rich.console import Console
 
 from motorlab.command import Command, NoFolder
+from motorlab.runs import wrote_into
 from motorlab.settings import Settings
 
 
@@ -38,7 +39,9 @@ class ReportCommand(Command[ReportSettings]):
     def execute(self, settings: ReportSettings, how: NoFolder, console: Console | None, progress: bool) -> Path:
         from motorlab.report.html import build_report
 
-        return build_report(settings.paths, settings.out)
+        page = build_report(settings.paths, settings.out)
+        wrote_into(page)  # into a run's folder, by default: its marker lists it
+        return page
 
     def report(self, result: Path, settings: ReportSettings, console: Console) -> None:
         console.print(f"written: {result}")
@@ -65,7 +68,9 @@ class PlotCommand(Command[PlotSettings]):
     def execute(self, settings: PlotSettings, how: NoFolder, console: Console | None, progress: bool) -> list[Path]:
         from motorlab.evaluation.figures import plot_run
 
-        return plot_run(settings.run_dir)
+        figures = plot_run(settings.run_dir)
+        wrote_into(settings.run_dir)  # the run's marker lists them: an --overwrite may replace them with it
+        return figures
 
     def report(self, result: list[Path], settings: PlotSettings, console: Console) -> None:
         for path in result:

@@ -67,6 +67,7 @@ from motorlab.runs import (
     write_config,
     write_summary,
     write_toml,
+    wrote_into,
 )
 from motorlab.settings import Settings, Summary
 from motorlab.stats import steps_to_success
@@ -216,11 +217,13 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
     if not detached:  # matplotlib is not thread-safe: a background step's figures are drawn by the study's thread
         for d, _ in runs:
             k.figures(d)
+            wrote_into(d)
     outputs.dirs[step.name] = [d for d, _ in runs]
     summaries = [k.summary.model_validate(read_json(d / "summary.json")) for d, _ in runs]
     for (d, settings), summary in zip(runs, summaries):
         if d in kept:  # runs made now wrote theirs; kept ones get their numbers as this version shows them
             write_run_results(d, k.results(settings, summary))
+            wrote_into(d)
     labels = [d.name if len(runs) > 1 else step.name for d, _ in runs]
     return _Outcome(k.aggregate(summaries), list(zip(labels, summaries)))
 

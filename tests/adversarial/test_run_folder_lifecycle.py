@@ -78,6 +78,7 @@ def _run(out: Path, kind: str, mode: str, payload: bytes, die_at: int | None = N
         write_config(run_dir, {"payload": payload.hex()})
         moment(1)
         atomic_write_bytes(run_dir / "artifact.bin", payload)
+        atomic_write_bytes(run_dir / "plots" / "curve.png", payload[::-1])
         moment(2)
         write_summary(run_dir, {"payload": payload.hex(), "kind": kind})
         moment(3)
@@ -90,6 +91,7 @@ def _expected_files(payload: bytes, kind: str) -> dict[str, str]:
     import tomli_w
 
     return {"config.toml": h(tomli_w.dumps({"payload": payload.hex()}).encode()), "artifact.bin": h(payload),
+            "plots/curve.png": h(payload[::-1]),
             SUMMARY: h((json.dumps({"payload": payload.hex(), "kind": kind}, indent=2) + "\n").encode())}
 
 
@@ -260,15 +262,15 @@ class RunFolders(RuleBasedStateMachine):
         finally:
             link.unlink()
 
-    @rule(name=outs)
-    def user_file(self, name):
-        """The user keeps a note in a finished run's folder: no command may delete it."""
+    @rule(name=outs, where=st.sampled_from(["my-notes.txt", "plots/my-notes.txt"]))
+    def user_file(self, name, where):
+        """The user keeps a note in a finished run's folder, or in a folder inside it: no command may delete it."""
         folder = self.work / name
-        if self.finished.get(name) is None or self.held == name:
+        if self.finished.get(name) is None or self.held == name or not (folder / where).parent.is_dir():
             return
-        (folder / "my-notes.txt").write_text("mine\n")
-        files = {"my-notes.txt": hashlib.sha256(b"mine\n").hexdigest()}
-        self.user_files[name] = files
+        (folder / where).write_text("mine\n")
+        files = {where: hashlib.sha256(b"mine\n").hexdigest()}
+        self.user_files[name] = {**self.user_files.get(name, {}), **files}
         kind, run_files = self.finished[name]
         self.finished[name] = (kind, {**run_files, **files})
 

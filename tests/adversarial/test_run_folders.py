@@ -105,12 +105,13 @@ def test_a_finished_out_is_refused_before_the_work(finished, collected, tmp_path
 def test_overwrite_replaces_a_finished_run_whole(finished, tmp_path):
     out = tmp_path / "run"
     assert_ok(run_here("train", ENV_ID, *LQR, "--out", out))
-    stale = out / "tensorboard" / "events.out.tfevents.stale"
-    stale.write_bytes(b"curves of the old run")
+    stale = {p: p.read_bytes() for p in (out / "tensorboard").rglob("events.out.tfevents.*")}  # the old curves
+    assert stale
     assert_ok(run_here("train", ENV_ID, "--algo", "lqr", "--timesteps", "400", "--no-progress", "--out", out,
                        "--overwrite"))
     assert read_summary(out)["timesteps"] == 400
-    assert not stale.exists()  # TensorBoard events of two runs never mix
+    # TensorBoard events of two runs never mix (a new file may take an old name: same second, same process)
+    assert not any(p.exists() and p.read_bytes() == data for p, data in stale.items())
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # nothing left aside
 
 
@@ -351,3 +352,19 @@ def test_a_worker_started_with_ctrl_c_ignored_still_stops_on_it(tmp_path):
     _, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 130, stderr
     assert not (out / "summary.json").exists()  # stopped, not finished
+
+
+def test_what_motorlab_adds_to_a_finished_run_is_replaced_with_it_and_a_users_file_is_not(tmp_path):
+    """`motorlab plot` and `motorlab report` write into a finished run's folder: its marker lists their files,
+    so --overwrite replaces them with the run; a file of the user's in it is refused, as ever."""
+    out = tmp_path / "run"
+    assert_ok(run_here("train", ENV_ID, *LQR, "--out", out))
+    assert_ok(run_here("plot", out))
+    assert_ok(run_here("report", out))
+    assert (out / "report.html").is_file() and (out / "plots" / "observation_trace.png").is_file()
+    assert_ok(run_here("train", ENV_ID, *LQR, "--out", out, "--overwrite"))
+    (out / "plots" / "mine.png").write_bytes(b"the user's own figure")
+    before = snapshot(out)
+    proc = run_here("train", ENV_ID, *LQR, "--out", out, "--overwrite")
+    assert_one_line_error(proc, "plots/mine.png, which its run did not write")
+    assert snapshot(out) == before
