@@ -9,7 +9,7 @@ from motorlab.envs import EnvConfig, make_env
 from motorlab.evaluation import evaluate, trained_env_settings
 from motorlab.policies import load_policy
 from motorlab.report.plots import env_tag, obs_labels, observation_trace, plot_learning_curve
-from motorlab.runs import read_config, require_run_dir
+from motorlab.runs import read_config, require_run_dir, wrote_into
 
 TRACE_SEED = 123  # a fixed episode, so re-plotting gives the same figure
 
@@ -40,4 +40,5 @@ def plot_run(run_dir: Path) -> list[Path]:
     written += [p for p in [observation_trace(
         obs, result.actions[0], result.dt, obs_labels(env_cfg.id, base_dim), plots / "observation_trace.png",
         title=f"{env_cfg.id}{env_tag(env_cfg.model_dump())}: return {result.returns[0]:.0f}")] if p is not None]
+    wrote_into(run_dir)  # the finished run's marker lists them: an --overwrite replaces them with it
     return written

@@ -9,7 +9,6 @@ from pydantic import Field
 from rich.console import Console
 
 from motorlab.command import Command, NoFolder
-from motorlab.runs import wrote_into
 from motorlab.settings import Settings
 
 
@@ -39,9 +38,7 @@ class ReportCommand(Command[ReportSettings]):
     def execute(self, settings: ReportSettings, how: NoFolder, console: Console | None, progress: bool) -> Path:
         from motorlab.report.html import build_report
 
-        page = build_report(settings.paths, settings.out)
-        wrote_into(page)  # into a run's folder, by default: its marker lists it
-        return page
+        return build_report(settings.paths, settings.out)
 
     def report(self, result: Path, settings: ReportSettings, console: Console) -> None:
         console.print(f"written: {result}")
@@ -68,9 +65,7 @@ class PlotCommand(Command[PlotSettings]):
     def execute(self, settings: PlotSettings, how: NoFolder, console: Console | None, progress: bool) -> list[Path]:
         from motorlab.evaluation.figures import plot_run
 
-        figures = plot_run(settings.run_dir)
-        wrote_into(settings.run_dir)  # the run's marker lists them: an --overwrite may replace them with it
-        return figures
+        return plot_run(settings.run_dir)
 
     def report(self, result: list[Path], settings: PlotSettings, console: Console) -> None:
         for path in result:

@@ -33,7 +33,7 @@ from motorlab.errors import MotorlabError, mask_secrets
 from motorlab.intervals import across_seeds
 from motorlab.report.plots import figure_caption
 from motorlab.report.results import DEMO_LABEL, Finding, Number, StepResults, read_run_results, read_study_results
-from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, is_complete, read_json
+from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, is_complete, read_json, wrote_into
 from motorlab.stats import steps_of_scores
 
 REPORT = "report.html"
@@ -421,4 +421,5 @@ def build_report(paths: list[Path], out: Path | None = None) -> Path:
         comparison=comparison, environments=_environments(all_runs),
         motorlab_version=describe()["packages"]["motorlab"], fmt=fmt, demo_label=DEMO_LABEL)
     atomic_write_text(out, html)
+    wrote_into(out)  # into a finished run's folder (by default): its marker lists it
     return out
