@@ -89,7 +89,6 @@ class Claim:
     kind: str  # the kind of run it holds: a step kind's name, "study", "sweep", "tune", "export"
     pid: int | None  # the process that last took it
     files: tuple[str, ...] | None  # what it held when that process was done, as `contents` (None: not known yet)
-    replaces: str | None = None  # the name of the run an --overwrite moved aside for it, in the same parent
 
 
 def read_claim(run_dir: Path) -> Claim | None:
@@ -112,8 +111,7 @@ def read_claim(run_dir: Path) -> Claim | None:
         raw = json.loads(data)
         files = raw.get("files")
         return Claim(kind=str(raw["kind"]), pid=raw.get("pid"),
-                     files=tuple(str(f) for f in files) if isinstance(files, list) else None,
-                     replaces=raw.get("replaces") if isinstance(raw.get("replaces"), str) else None)
+                     files=tuple(str(f) for f in files) if isinstance(files, list) else None)
     except (ValueError, KeyError, TypeError, AttributeError):
         raise MotorlabError(f"{path} is damaged (not the marker motorlab writes); motorlab will not write into "
                             f"{run_dir}: choose another --out.") from None
@@ -122,17 +120,16 @@ def read_claim(run_dir: Path) -> Claim | None:
 def write_claim(run_dir: Path, claim: Claim) -> None:
     """The marker, written whole (temp file, then rename: a kill leaves the old one or the new one)."""
     data = {"motorlab": 1, "kind": claim.kind, "pid": claim.pid,
-            "files": list(claim.files) if claim.files is not None else None, "replaces": claim.replaces}
+            "files": list(claim.files) if claim.files is not None else None}
     atomic_write_text(Path(run_dir) / MARKER, json.dumps(data) + "\n")
 
 
-def mark(run_dir: Path, kind: str, replaces: str | None = None) -> None:
+def mark(run_dir: Path, kind: str) -> None:
     """Make `run_dir` a run folder of `kind`. A marker that says so already is left as it is (a resumed
     run's folder changes only where the run writes)."""
     old = read_claim(run_dir)
-    if old is not None and old.kind == kind and replaces is None:
-        return
-    write_claim(run_dir, Claim(kind, os.getpid(), old.files if old else None, replaces))
+    if old is None or old.kind != kind:
+        write_claim(run_dir, Claim(kind, os.getpid(), None))
 
 
 _MARKER_TEMP = f".{MARKER}."  # the marker's temp file while it is written (`atomic_path`'s prefix)
@@ -295,7 +292,7 @@ def record_entries(run_dir: Path) -> None:
     with no marker gets none: it is not a run folder)."""
     claim = read_claim(run_dir)
     if claim is not None and is_complete(run_dir):
-        write_claim(run_dir, Claim(claim.kind, claim.pid, tuple(sorted(contents(run_dir))), None))
+        write_claim(run_dir, Claim(claim.kind, claim.pid, tuple(sorted(contents(run_dir)))))
 
 
 # ---- writes never leave the folder ------------------------------------------------------------

@@ -407,17 +407,16 @@ def prepare_run_dir(out: Path | None, step: str, resumable: bool = False, kind: 
     kind = kind or step
     run_dir = run_path(out, step)
     refuse_finished(run_dir, resumable, kind)
-    replaces = None
     if run_dir.is_dir():
         claims.lock(run_dir)  # before anything is written; then the checks again, as the holder
         refuse_finished(run_dir, resumable, kind)
         replaced = _REPLACED.get()
         if folder_mode() == "overwrite" and claims.entries(run_dir) and replaced is not None:
-            replaces = move_aside(run_dir, replaced).name
+            move_aside(run_dir, replaced)
     make_folder(run_dir)
     claims.lock(run_dir)  # a new folder (or the same one: this process holds it already)
     claims.refuse_links(run_dir)
-    claims.mark(run_dir, kind, replaces)
+    claims.mark(run_dir, kind)
     (run_dir / SUMMARY).unlink(missing_ok=True)
     return run_dir
 
