@@ -11,6 +11,8 @@ from rich.console import Console
 from motorlab.command import Command, Resumable
 from motorlab.errors import mask_url
 from motorlab.launcher import ExecutionSettings
+from motorlab.settings import MAX_SEED
+from motorlab.sweeps.sweep import MAX_SEEDS
 
 
 class TuneSettings(ExecutionSettings):
@@ -34,7 +36,7 @@ class TuneSettings(ExecutionSettings):
     study_name: str | None = Field(None, description="Study name in the database (default: derived from the target, "
                                    "space, objective and seeds)")
     sampler: Literal["tpe", "random", "cmaes"] = Field("tpe", description="Optuna's sampler: tpe, random or cmaes")
-    sampler_seed: int | None = Field(None, description=(
+    sampler_seed: int | None = Field(None, ge=0, le=MAX_SEED, description=(
         "Seed of the sampler: the same command samples the same settings (a resumed search goes on from where it "
         "was). Several processes sharing one search: leave it out or give each its own"))
     pruner: Literal["median", "hyperband", "none"] = Field("median", description=(
@@ -42,7 +44,7 @@ class TuneSettings(ExecutionSettings):
     prune_startup: int = Field(5, ge=0, description="Finished trials before the median pruner prunes")
     report_every: int = Field(1000, ge=1, description="Env steps between the intermediate numbers reported to the "
                               "pruner")
-    fresh_seeds: int | None = Field(None, ge=0, description="Seeds the best settings are re-run on after the search "
+    fresh_seeds: int | None = Field(None, ge=0, le=MAX_SEEDS, description="Seeds the best settings are re-run on after the search "
                                     "(default: --seeds; 0: none)")
 
 
