@@ -135,10 +135,15 @@ def mark(run_dir: Path, kind: str) -> None:
 _MARKER_TEMP = f".{MARKER}."  # the marker's temp file while it is written (`atomic_path`'s prefix)
 
 
+def _is_marker(name: str) -> bool:
+    """The marker, or its temp file: another process marking a folder it just made shows it for a moment,
+    and the folder is no less empty for it."""
+    return name == MARKER or name.startswith(_MARKER_TEMP)
+
+
 def entries(run_dir: Path) -> set[str]:
-    """The names in `run_dir`, the marker aside (and the marker's temp file: another process marking a
-    folder it just made shows it for a moment, and the folder is no less empty for it)."""
-    return {e.name for e in os.scandir(run_dir) if e.name != MARKER and not e.name.startswith(_MARKER_TEMP)}
+    """The names in `run_dir`, the marker aside."""
+    return {e.name for e in os.scandir(run_dir) if not _is_marker(e.name)}
 
 
 def contents(run_dir: Path) -> set[str]:
@@ -150,7 +155,7 @@ def contents(run_dir: Path) -> set[str]:
     def walk(folder: str, prefix: str) -> None:
         with os.scandir(folder) as listing:
             for entry in listing:
-                if not prefix and (entry.name == MARKER or entry.name.startswith(_MARKER_TEMP)):
+                if not prefix and _is_marker(entry.name):
                     continue
                 found.add(prefix + entry.name)
                 if entry.is_dir(follow_symlinks=False) and not os.path.lexists(os.path.join(entry.path, MARKER)):

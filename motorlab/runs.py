@@ -298,9 +298,9 @@ def _disposable(run_dir: Path) -> bool:
 
 def _asides(run_dir: Path) -> list[Path]:
     """Runs an --overwrite of `run_dir` moved aside and left there: its process was killed (one
-    still running owns its aside, named with its process id). Found by their exact names: the
-    one the new run's marker records, and those whose names are `run_dir`'s own prefix followed by
-    a time and a pid (never a pattern: a name with `[`, `*` or `?` matches only itself)."""
+    still running owns its aside, named with its process id). Found by their exact names: `run_dir`'s
+    own prefix followed by a time and a pid, matched whole (never a pattern: a name with `[`, `*` or
+    `?` matches only itself)."""
     parent = run_dir.parent
     if not parent.is_dir():
         return []
