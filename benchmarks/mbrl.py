@@ -119,20 +119,23 @@ import argparse
 import csv
 import importlib
 import json
-import os
 import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from datetime import datetime, timezone
 from multiprocessing import get_context
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
-# in each kept loop folder: what this script gave the loop (the stopping rule included); --resume reads it
-LOOP_GIVEN = "benchmark_settings.json"
-from provenance import cpu_model, git_state, load, versions, write_result  # noqa: E402  (benchmarks/ is the script's folder)
+# beside each kept loop folder (never in it: a run folder holds only the run's own files): what this
+# script gave the loop (the stopping rule included); --resume reads it
+LOOP_GIVEN = ".benchmark_settings.json"
+
+
+def given_path(out_dir: Path) -> Path:
+    return out_dir.with_name(out_dir.name + LOOP_GIVEN)
+from provenance import SCIENCE_SEEDS, Harness, write_result  # noqa: E402  (benchmarks/ is the script's folder)
 
 # name -> env id, the reward the loop plans with, the threshold, the loop's budget, the target
 # threshold "on": mean (the evaluation's mean return) or min (its worst episode); "value": a number,
@@ -153,12 +156,16 @@ ENVS = {
             "threshold": "mean return >= oracle - 0.1 * |oracle|, oracle = the oracle MPC's mean return on the "
                          "seed's evaluation reset seeds (true simulator)"},
 }
-LOOP_SEEDS, SAC_SEEDS = 5, 3
-SAC_CAP, EVAL_EVERY, EVAL_EPISODES = 30_000, 1000, 10
+HEADLINE_SEEDS = list(range(100, 105))  # SCIENCE_SEEDS.headline: no setting was chosen on them
+LOOP_SEEDS = len(HEADLINE_SEEDS)  # the target's n
+SAC_CAP, EVAL_EPISODES = 30_000, 10
+FIXED_BUDGETS = (1000, 3000, 6000)  # env steps at which both learners' returns are reported (up to the loop's budget)
+SAC_VARIANTS = ("default", "tuned")  # SB3's defaults; the equal-effort Optuna search's best (benchmarks/sac_tune.py)
+TUNED = HERE / "sac_tuned.json"
 ORACLE_EPISODES, ORACLE_MARGIN = 3, 0.1
 PLAN_MS_TARGET = 50.0
 WALL_TARGET_S = 40 * 60
-QUICK = {"loop_seeds": 1, "sac_seeds": 1, "sac_steps": 2000, "eval_every": 500, "oracle_episodes": 2}
+QUICK = {"seeds": [0], "sac_steps": 2000, "oracle_episodes": 2}
 QUICK_LOOP = {"budget": 300, "rounds": 8}  # rounds: a cap on the smoke run's time (early pendulum episodes are short)
 # the loop's evaluation reset seeds (motorlab.control.mbrl.SEED_STRIDE, EVAL_OFFSET; checked in main)
 SEED_STRIDE, EVAL_OFFSET = 1_000_000, 900_000
@@ -206,10 +213,12 @@ def evaluate(model, env, seeds: list[int]) -> list[float]:
     return returns
 
 
-def run_sac(env_id: str, seed: int, cap: int, eval_every: int, seeds: list[int], stop: dict | None) -> dict:
-    """SB3 SAC with defaults for up to `cap` env steps, evaluated every `eval_every` steps on one episode
-    per reset seed; with `stop` ({"on", "value"}) it stops at its first evaluation meeting it.
-    Runs in its own (spawned) process, on one torch thread."""
+def run_sac(env_id: str, seed: int, cap: int, eval_every: int, seeds: list[int], stop: dict | None,
+            variant: str = "default", params: dict | None = None) -> dict:
+    """SB3 SAC (its defaults, or `params`: the tuned variant's hyperparameters) for up to `cap` env
+    steps, evaluated every `eval_every` steps on one episode per reset seed; with `stop` ({"on",
+    "value"}) it stops at its first evaluation meeting it. Runs in its own (spawned) process, on one
+    torch thread."""
     import gymnasium as gym
     import numpy as np
     import torch
@@ -221,7 +230,7 @@ def run_sac(env_id: str, seed: int, cap: int, eval_every: int, seeds: list[int],
 
     torch.set_num_threads(1)
     env, eval_env = gym.make(env_id), gym.make(env_id)
-    model = SAC("MlpPolicy", env, seed=seed)
+    model = SAC("MlpPolicy", env, seed=seed, **(params or {}))
     model.set_logger(Logger(folder=None, output_formats=[]))  # SB3 would make an empty /tmp/SB3-<date> folder
     curve: list[dict] = []
     eval_seconds, eval_cpu = [0.0], [0.0]
@@ -234,7 +243,7 @@ def run_sac(env_id: str, seed: int, cap: int, eval_every: int, seeds: list[int],
         point = {"env_steps": model.num_timesteps, "return_mean": float(np.mean(returns)),
                  "return_std": float(np.std(returns)), "return_min": float(np.min(returns)), "returns": returns}
         curve.append(point)
-        say(f"sac {env_id} seed {seed}: {model.num_timesteps} steps, return {point['return_mean']:.2f} "
+        say(f"sac ({variant}) {env_id} seed {seed}: {model.num_timesteps} steps, return {point['return_mean']:.2f} "
             f"(min {point['return_min']:.2f})")
         return stop is not None and meets(point, stop["on"], stop["value"])
 
@@ -251,7 +260,7 @@ def run_sac(env_id: str, seed: int, cap: int, eval_every: int, seeds: list[int],
     eval_env.close()
     per_1k = 1000 / model.num_timesteps
     # wall time depends on what else runs on the machine; CPU time (this process's) much less
-    return {"seed": seed, "cap": cap, "env_steps": model.num_timesteps,
+    return {"seed": seed, "variant": variant, "params": params or {}, "cap": cap, "env_steps": model.num_timesteps,
             "stopped_early": model.num_timesteps < cap, "stop": stop, "curve": curve,
             "wall_seconds": round(wall, 1), "eval_seconds": round(eval_seconds[0], 1),
             "train_seconds_per_1k_steps": round(per_1k * (wall - eval_seconds[0]), 2),
@@ -349,7 +358,7 @@ def run_loop(settings: dict, out_dir: Path) -> dict:
 
     torch.set_num_threads(1)
 
-    given = out_dir / LOOP_GIVEN
+    given = given_path(out_dir)
     resumed = given.is_file()  # --resume: a kept folder of an earlier invocation
     if resumed and json.loads(given.read_text()) != json.loads(json.dumps(settings)):
         raise SystemExit(f"{out_dir} was run with other benchmark settings ({given}): choose another --keep")
@@ -363,7 +372,6 @@ def run_loop(settings: dict, out_dir: Path) -> dict:
         check_resumable(out_dir, resolved.loop_plan(), resume=True)  # the loop's own settings, unchanged
         summary = SimpleNamespace(**json.loads((out_dir / "summary.json").read_text()))
     else:
-        out_dir.mkdir(parents=True, exist_ok=True)
         given.write_text(json.dumps(settings))
         summary = MBRL.run(resolved, out=out_dir, progress=False)
     wall = time.perf_counter() - started
@@ -416,17 +424,42 @@ def median(values: list[float]) -> float | None:
     return statistics.median(values) if values else None
 
 
-def summarize(name: str, thresholds: list[float], loop: list[dict], sac: list[dict], budget: int) -> dict:
-    """The statistics of both learners (motorlab.stats), the targets, every per-seed number."""
+def sac_block(runs: list[dict], thresholds: dict[int, float], on: str):
+    """One SAC variant's steps to the threshold (censored at its cap) and its per-seed numbers."""
+    from motorlab.stats import steps_to_threshold
+
+    steps = [first_hit(r["curve"], on, thresholds[r["seed"]]) for r in runs]
+    stats = steps_to_threshold(steps, [r["cap"] for r in runs])
+    return stats, {
+        "seeds": [r["seed"] for r in runs], "params": runs[0].get("params", {}),
+        "budget_env_steps": [r["cap"] for r in runs], "steps_to_threshold": stats.to_json(),
+        "env_steps_trained": [r["env_steps"] for r in runs], "stopped_early": [r["stopped_early"] for r in runs],
+        "final_return_mean": [r["curve"][-1]["return_mean"] for r in runs],
+        "train_seconds_per_1k_steps": [r["train_seconds_per_1k_steps"] for r in runs],
+        "train_cpu_seconds_per_1k_steps": [r["train_cpu_seconds_per_1k_steps"] for r in runs],
+        "wall_seconds": [r["wall_seconds"] for r in runs]}
+
+
+RATIO_MEANING = ("SAC's median steps to the threshold / the loop's (Kaplan-Meier medians); bound: exact, lower (SAC's "
+                 "median censored: > its budget / the loop's median), upper (the loop's censored), unknown (both)")
+
+
+def summarize(name: str, thresholds: dict[int, float], loop: list[dict], sac: list[dict], budget: int) -> dict:
+    """The statistics of both learners (motorlab.stats), the targets, every per-seed number. "sac" is
+    SB3's defaults; "sac_tuned" the tuned variant, where it ran."""
     from motorlab.stats import steps_ratio, steps_to_threshold
 
     on = ENVS[name]["on"]
-    by_seed = dict(enumerate(thresholds))
-    loop_steps = [first_hit(r["curve"], on, by_seed[r["seed"]]) for r in loop]
-    sac_steps = [first_hit(r["curve"], on, by_seed[r["seed"]]) for r in sac]
+    loop_steps = [first_hit(r["curve"], on, thresholds[r["seed"]]) for r in loop]
     loop_stats = steps_to_threshold(loop_steps, budget)
-    sac_stats = steps_to_threshold(sac_steps, [r["cap"] for r in sac])
-    ratio = steps_ratio(loop_stats, sac_stats)
+    learners = {}
+    for variant in SAC_VARIANTS:
+        runs = [r for r in sac if r.get("variant", "default") == variant]
+        if runs:
+            stats, block = sac_block(runs, thresholds, on)
+            key = "sac" if variant == "default" else f"sac_{variant}"
+            learners[key] = block
+            learners[f"ratio_{key}_over_loop"] = {**steps_ratio(loop_stats, stats).to_json(), "meaning": RATIO_MEANING}
     plan = [r["plan_ms_per_env_median"] for r in loop]
     plan_known = [p for p in plan if p is not None]
     plan_median = median(plan_known)
@@ -456,19 +489,7 @@ def summarize(name: str, thresholds: list[float], loop: list[dict], sac: list[di
             "wall_seconds": [r["wall_seconds"] for r in loop],
             "reward_source": loop[0]["reward_source"], "termination_source": loop[0]["termination_source"],
         },
-        "sac": {
-            "seeds": [r["seed"] for r in sac], "budget_env_steps": [r["cap"] for r in sac],
-            "steps_to_threshold": sac_stats.to_json(),
-            "env_steps_trained": [r["env_steps"] for r in sac], "stopped_early": [r["stopped_early"] for r in sac],
-            "final_return_mean": [r["curve"][-1]["return_mean"] for r in sac],
-            "train_seconds_per_1k_steps": [r["train_seconds_per_1k_steps"] for r in sac],
-            "train_cpu_seconds_per_1k_steps": [r["train_cpu_seconds_per_1k_steps"] for r in sac],
-            "wall_seconds": [r["wall_seconds"] for r in sac],
-        },
-        "ratio_sac_over_loop": {**ratio.to_json(),
-                                "meaning": "SAC's median steps to the threshold / the loop's (Kaplan-Meier medians); "
-                                           "bound: exact, lower (SAC's median censored: > its budget / the loop's "
-                                           "median), upper (the loop's censored), unknown (both)"},
+        **learners,
         "targets": {
             "loop_seeds": {"target": f">= {k_target} of {LOOP_SEEDS}", "k": loop_stats.solved,
                            "of": loop_stats.seeds,  # not judged on another number of seeds (--quick: 1)
@@ -485,13 +506,34 @@ def summarize(name: str, thresholds: list[float], loop: list[dict], sac: list[di
 # ---------------------------------------------------------------------------------------- main
 
 
+def seed_list(text: str) -> list[int]:
+    """"100-104" or "100,102,7": the seeds, in order, without repeats."""
+    out: list[int] = []
+    for part in text.split(","):
+        lo, _, hi = part.strip().partition("-")
+        for s in range(int(lo), int(hi or lo) + 1):
+            if s not in out:
+                out.append(s)
+    return out
+
+
 def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("env", choices=list(ENVS), help="the env to benchmark (one per invocation)")
-    parser.add_argument("--loop-seeds", type=int, default=LOOP_SEEDS)
-    parser.add_argument("--sac-seeds", type=int, default=SAC_SEEDS)
+    parser.add_argument("--seeds", type=seed_list, default=HEADLINE_SEEDS,
+                        help=f"both learners' seeds, e.g. 100-104 (the headline's, the default) or 0-4 (development: "
+                             f"written to benchmarks/devlog/, never to results/); development "
+                             f"{SCIENCE_SEEDS.development.start}-{SCIENCE_SEEDS.development.stop - 1}, headline "
+                             f"{SCIENCE_SEEDS.headline.start}-{SCIENCE_SEEDS.headline.stop - 1}")
+    parser.add_argument("--sac-only", action="store_true",
+                        help="run SAC (and the arm's oracle) alone into --keep DIR/runs.json, for a later --sac-from")
+    parser.add_argument("--sac", default=",".join(SAC_VARIANTS), type=lambda t: [v for v in t.split(",") if v],
+                        help=f"the SAC variants to run: default (SB3's), tuned (the best of benchmarks/sac_tune.py's "
+                             f"search on development seeds, from {TUNED.name}); default: both")
     parser.add_argument("--sac-steps", type=int, default=SAC_CAP, help="SAC's cap of env steps")
-    parser.add_argument("--eval-every", type=int, default=EVAL_EVERY, help="SAC's evaluation interval, env steps")
+    parser.add_argument("--eval-every", type=int, default=None,
+                        help="SAC's evaluation interval in env steps (default: the loop's round, so both learners "
+                             "are evaluated equally often)")
     parser.add_argument("--sac-full", action="store_true",
                         help="train SAC to its cap even after it has met the threshold")
     parser.add_argument("--oracle-episodes", type=int, default=ORACLE_EPISODES,
@@ -513,7 +555,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--resume", action="store_true",
                         help="with --keep: a loop seed whose folder is already there continues it (a finished one is "
                              "read back, not run again), so the loop's seeds can be split over invocations that each "
-                             "fit a session (e.g. --loop-seeds 2, then 5 with --sac-from); its settings must match")
+                             "fit a session (e.g. --seeds 100-101, then 100-104 with --sac-from); its settings "
+                             "must match")
     parser.add_argument("--sac-from", type=Path, default=None,
                         help="reuse SAC's runs (and the arm's oracle) from an earlier run's runs.json")
     parser.add_argument("--quick", action="store_true", help="a smoke run: " + json.dumps({**QUICK, **QUICK_LOOP}))
@@ -524,12 +567,26 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error("--ceiling-from reuses a ceiling: give --ceiling too")
     if args.resume and not args.keep:
         parser.error("--resume continues the loop folders of --keep DIR: give --keep")
-    if args.loop_seeds == 0 and not args.keep:
-        parser.error("--loop-seeds 0 runs SAC alone, for a later --sac-from DIR/runs.json: give --keep DIR")
+    if args.sac_only and not args.keep:
+        parser.error("--sac-only runs SAC alone, for a later --sac-from DIR/runs.json: give --keep DIR")
+    unknown = [v for v in args.sac if v not in SAC_VARIANTS]
+    if unknown or not args.sac:
+        parser.error(f"--sac takes {', '.join(SAC_VARIANTS)} (comma-separated), got {args.sac}")
     if args.quick:
         for k, v in QUICK.items():
             setattr(args, k, v)
+    SCIENCE_SEEDS.mode(args.seeds)  # refuses a mix of development and headline seeds before any work
     return args
+
+
+def tuned_params(env_id: str) -> dict:
+    """The tuned SAC's hyperparameters for env_id (benchmarks/sac_tuned.json, written by sac_tune.py from
+    its search on development seeds)."""
+    table = json.loads(TUNED.read_text()) if TUNED.is_file() else {}
+    if env_id not in table:
+        raise SystemExit(f"no tuned SAC for {env_id} in {TUNED}: run benchmarks/sac_tune.py first (it searches on "
+                         "development seeds), or pass --sac default")
+    return table[env_id]["params"]
 
 
 def reused_ceiling(path: Path, name: str, jobs: list[tuple]) -> tuple[list[dict], dict]:
@@ -557,16 +614,17 @@ def reused(args, name: str) -> tuple[list[dict], list[dict] | None]:
         raise SystemExit(f"{args.sac_from} holds the runs of {saved.get('env')!r}, not {name!r}")
     for k in ("sac_steps", "eval_every"):
         setattr(args, k, saved["settings"][k])
-    runs = {r["seed"]: r for r in saved["sac"]}
-    missing = [s for s in range(args.sac_seeds) if s not in runs]
+    runs = {(r.get("variant", "default"), r["seed"]): r for r in saved["sac"]}
+    wanted = [(v, s) for v in args.sac for s in args.seeds]
+    missing = [f"{v} seed {s}" for v, s in wanted if (v, s) not in runs]
     if missing:
-        raise SystemExit(f"{args.sac_from} has no SAC run for seed(s) {missing}")
+        raise SystemExit(f"{args.sac_from} has no SAC run for {', '.join(missing)}")
     oracle = saved.get("oracle")
     if ENVS[name]["value"] == "oracle":
-        if not oracle or any(s not in {o["seed"] for o in oracle} for s in range(args.loop_seeds)):
+        if not oracle or any(s not in {o["seed"] for o in oracle} for s in args.seeds):
             raise SystemExit(f"{args.sac_from} lacks the oracle's returns for the loop's seeds")
         args.oracle_episodes = len(oracle[0]["returns"])
-    return [runs[s] for s in range(args.sac_seeds)], oracle
+    return [runs[w] for w in wanted], oracle
 
 
 def write_runs(args, name: str, sac: list[dict], oracle: list[dict] | None, loop: list[dict]) -> Path:
@@ -577,6 +635,55 @@ def write_runs(args, name: str, sac: list[dict], oracle: list[dict] | None, loop
     path = args.keep / "runs.json"
     write_result(saved, path)
     return path
+
+
+def eval_interval(name: str, budget: int, overrides: dict) -> int:
+    """The loop's env steps per round (it evaluates after each): SAC is evaluated as often. A round of
+    episodes that end early (the pendulum) is shorter: capped at the loop's STEPS_PER_ROUND."""
+    import gymnasium as gym
+
+    from motorlab.control.steps import STEPS_PER_ROUND, MbrlSettings
+    from motorlab.user_modules import split_env_id
+
+    resolved = MbrlSettings(**loop_settings(name, 0, budget, None, None, overrides))
+    module, env_id = split_env_id(ENVS[name]["id"])
+    if module:  # a user's env (the arm) registers itself when its module is imported
+        importlib.import_module(module)
+    limit = gym.spec(env_id).max_episode_steps
+    return min(resolved.round_episodes() * limit, STEPS_PER_ROUND)
+
+
+def returns_at(curve: list[dict], budgets: list[int]) -> dict[str, dict]:
+    """Per budget: the mean return of the run's last evaluation at or before it (None: none yet), and
+    whether the run had stopped before it (it met the threshold earlier: its last evaluation, carried)."""
+    out = {}
+    for b in budgets:
+        before = [p for p in curve if p["env_steps"] <= b]
+        out[str(b)] = {"return_mean": before[-1]["return_mean"] if before else None,
+                       "carried_from_stop": bool(curve) and curve[-1]["env_steps"] < b}
+    return out
+
+
+def fixed_budget_table(loop: list[dict], sac: list[dict], budgets: list[int]) -> dict:
+    """Both learners' returns at each fixed budget, per seed, and over seeds (motorlab.intervals)."""
+    from motorlab.intervals import across_seeds
+
+    def column(runs: list[dict]) -> dict:
+        per_seed = {r["seed"]: returns_at(r["curve"], budgets) for r in runs}
+        out = {}
+        for b in map(str, budgets):
+            values = [v[b]["return_mean"] for v in per_seed.values()]
+            known = [v for v in values if v is not None]
+            out[b] = {"per_seed": values, "carried_from_stop": [v[b]["carried_from_stop"] for v in per_seed.values()],
+                      "over_seeds": across_seeds(known).to_json() if known else None}
+        return out
+
+    table = {"loop": column(loop)}
+    for variant in sorted({r.get("variant", "default") for r in sac}):
+        table[f"sac_{variant}"] = column([r for r in sac if r.get("variant", "default") == variant])
+    return {"budgets": budgets, "learners": table,
+            "note": "the mean return of each seed's last evaluation at or before the budget; a run that stopped at "
+                    "the threshold before a budget carries its last evaluation (carried_from_stop)"}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -592,18 +699,32 @@ def main(argv: list[str] | None = None) -> None:
     if lacking:
         raise SystemExit(f"the loop lacks MbrlSettings.{', '.join(lacking)} (a budget of env steps; a threshold "
                          "on every evaluation episode), which this benchmark needs")
-    loop_seeds, sac_seeds = list(range(args.loop_seeds)), list(range(args.sac_seeds))
-    if env["value"] == "oracle" and not set(sac_seeds) <= set(loop_seeds):
-        raise SystemExit("SAC seed s uses loop seed s's oracle threshold: --sac-seeds <= --loop-seeds")
-    seeds = max(len(loop_seeds), len(sac_seeds))  # thresholds per seed index, the loop's and SAC's
+    seeds = list(args.seeds)
+    loop_seeds = [] if args.sac_only else seeds
     budget = QUICK_LOOP["budget"] if args.quick else env["budget"]
     overrides = dict(item.split("=", 1) for item in args.loop_set)  # pydantic reads "true", "5" into their types
     oracle_settings = {k: float(v) if "." in v else int(v) for k, v in (i.split("=", 1) for i in args.oracle_set)}
-    started, load_start = time.perf_counter(), load()
-    git_start = git_state()  # what ran: the code the run's processes load as they start
+    if args.eval_every is None:
+        args.eval_every = eval_interval(name, budget, overrides)
+    sac_params = {v: (tuned_params(env["id"]) if v == "tuned" else {}) for v in args.sac}
+    budgets = [b for b in FIXED_BUDGETS if b <= budget] or [budget]
+    # every setting the numbers depend on, resolved (the catalogue's entries included): its hash is the
+    # configuration the development log counts, and a headline's record
+    rounds = QUICK_LOOP["rounds"] if args.quick else None
+    resolved = MbrlSettings(**loop_settings(name, 0, budget, rounds, None, overrides)).model_dump(mode="json")
+    resolved.pop("seed")
+    settings = {"env": name, "env_id": env["id"], "threshold": env["threshold"], "loop_budget": budget,
+                "loop": resolved, "sac": {"cap": args.sac_steps, "eval_every": args.eval_every,
+                                          "variants": sac_params, "full": args.sac_full},
+                "eval_episodes": EVAL_EPISODES, "oracle": {"episodes": args.oracle_episodes, **oracle_settings},
+                "fixed_budgets": budgets}
+    harness = Harness("mbrl")
+    run = harness.start(seeds, settings, log=f"mbrl-{name}{'-quick' if args.quick else ''}")
+    started = time.perf_counter()
     walls: dict[str, float | None] = {}
-    say(f"{name} ({env['id']}): threshold {env['threshold']}; loop budget {budget:,} env steps, seeds {loop_seeds}; "
-        f"SAC cap {args.sac_steps:,}, seeds {sac_seeds}")
+    say(f"{name} ({env['id']}): {run.mode} run on seeds {seeds}; threshold {env['threshold']}; loop budget "
+        f"{budget:,} env steps; SAC ({', '.join(args.sac)}) cap {args.sac_steps:,}, evaluated every "
+        f"{args.eval_every} env steps; settings {run.settings_hash}")
 
     reward_check = check_user_reward(name) if env["reward"] not in ("builtin", "auto") else None
     if reward_check:
@@ -614,7 +735,7 @@ def main(argv: list[str] | None = None) -> None:
     # 1. the arm's oracle (before SAC: SAC's early stop needs the thresholds)
     if env["value"] == "oracle" and oracle is None:
         t = time.perf_counter()
-        jobs = [(env["id"], s, eval_seeds(s, args.oracle_episodes), oracle_settings) for s in loop_seeds]
+        jobs = [(env["id"], s, eval_seeds(s, args.oracle_episodes), oracle_settings) for s in seeds]
         oracle = in_processes(run_oracle, jobs, args.jobs,
                               lambda r: f"oracle seed {r['seed']}: mean return {r['return_mean']:.2f}, "
                                         f"{r['plan_ms_median']:.0f} ms/step, {r['wall_seconds']} s")
@@ -632,36 +753,38 @@ def main(argv: list[str] | None = None) -> None:
                                    lambda r: f"ceiling seed {r['seed']}: mean return {r['return_mean']:.2f} "
                                              f"(min {min(r['returns']):.2f}), {r['plan_ms_median']:.0f} ms/step")
         walls["ceiling"] = round(time.perf_counter() - t, 1)
-    thresholds: list[float] | None = None
+    thresholds: dict[int, float] | None = None  # by seed: SAC seed s uses loop seed s's
     if isinstance(env["value"], float):
-        thresholds = [env["value"]] * seeds
+        thresholds = dict.fromkeys(seeds, env["value"])
     elif env["value"] == "oracle":
         by_seed = {o["seed"]: o for o in oracle}
-        thresholds = [oracle_threshold(by_seed[s]["return_mean"]) for s in loop_seeds]
+        thresholds = {s: oracle_threshold(by_seed[s]["return_mean"]) for s in seeds}
     # 2. SAC, two processes at a time (pusher: the whole cap, its final return is the threshold)
     early = thresholds is not None and not args.sac_full
     if sac is None:
         t = time.perf_counter()
         jobs = [(env["id"], s, args.sac_steps, args.eval_every, eval_seeds(s, EVAL_EPISODES),
-                 {"on": env["on"], "value": thresholds[s]} if early else None) for s in sac_seeds]
+                 {"on": env["on"], "value": thresholds[s]} if early else None, v, sac_params[v])
+                for v in args.sac for s in seeds]
         sac = in_processes(run_sac, jobs, args.jobs,
-                           lambda r: f"sac seed {r['seed']}: {r['env_steps']} steps in {r['wall_seconds']} s, "
-                                     f"final return {r['curve'][-1]['return_mean']:.2f}")
+                           lambda r: f"sac ({r['variant']}) seed {r['seed']}: {r['env_steps']} steps in "
+                                     f"{r['wall_seconds']} s, final return {r['curve'][-1]['return_mean']:.2f}")
         walls["sac"] = round(time.perf_counter() - t, 1)
     else:
         say(f"SAC's runs taken from {args.sac_from} (cap {args.sac_steps:,} env steps)")
-    if thresholds is None:  # pusher: SAC's IQM over seeds of its final mean return
+    if thresholds is None:  # pusher: SAC's (defaults') IQM over seeds of its final mean return
         from motorlab.intervals import across_seeds
 
-        if any(r["stopped_early"] for r in sac):
-            raise SystemExit("the threshold is SAC's final return, but a SAC run stopped early")
-        thresholds = [across_seeds([r["curve"][-1]["return_mean"] for r in sac]).value] * seeds  # 3 seeds: the mean
+        defaults = [r for r in sac if r.get("variant", "default") == "default"]
+        if not defaults or any(r["stopped_early"] for r in defaults):
+            raise SystemExit("the threshold is SB3-default SAC's final return: run --sac default (to its cap)")
+        thresholds = dict.fromkeys(seeds, across_seeds([r["curve"][-1]["return_mean"] for r in defaults]).value)
     for r in sac:  # a reused run that stopped early at another threshold cannot say when it would meet this one
         if r["stopped_early"] and first_hit(r["curve"], env["on"], thresholds[r["seed"]]) is None:
             raise SystemExit(f"SAC seed {r['seed']} stopped early (at {r['stop']}) before meeting this threshold "
                              f"({thresholds[r['seed']]:.4g}): run SAC again (or with --sac-full)")
-    say("thresholds per seed: " + ", ".join(f"{x:.4g}" for x in thresholds))
-    if not loop_seeds:  # SAC alone (pusher's 3 seeds to 30k take ~20 min): its runs for a later --sac-from
+    say("thresholds per seed: " + ", ".join(f"{s}: {x:.4g}" for s, x in thresholds.items()))
+    if not loop_seeds:  # SAC alone (pusher's seeds to 30k take ~20 min): its runs for a later --sac-from
         write_runs(args, name, sac, oracle, [])
         say(f"SAC's runs in {args.keep / 'runs.json'}: run the loop with --sac-from {args.keep / 'runs.json'}")
         return
@@ -671,11 +794,10 @@ def main(argv: list[str] | None = None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
         root.mkdir(parents=True, exist_ok=True)
-        kept = [s for s in loop_seeds if (root / f"loop-seed{s}" / LOOP_GIVEN).is_file()]
+        kept = [s for s in loop_seeds if given_path(root / f"loop-seed{s}").is_file()]
         if kept and not args.resume:
             raise SystemExit(f"{root} already holds loop seed(s) {kept}: pass --resume to continue (or read back) "
                              "them, or choose another --keep")
-        rounds = QUICK_LOOP["rounds"] if args.quick else None
         jobs = [(loop_settings(name, s, budget, rounds, thresholds[s], overrides), root / f"loop-seed{s}")
                 for s in loop_seeds]
         loop = in_processes(run_loop, jobs, args.loop_jobs,
@@ -689,29 +811,27 @@ def main(argv: list[str] | None = None) -> None:
     stats = summarize(name, thresholds, loop, sac, budget)
     out = {
         "benchmark": "mbrl", "env": name, "env_id": env["id"], "quick": args.quick,
-        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "threshold": {"rule": env["threshold"], "on": f"eval_return_{env['on']}",
-                      "per_seed": thresholds},  # index: the seed (SAC seed s uses loop seed s's)
+                      "per_seed": {str(s): x for s, x in thresholds.items()}},  # SAC seed s uses loop seed s's
         "budgets": {"loop_env_steps": budget, "sac_env_steps": args.sac_steps},
         **stats,
+        "returns_at_fixed_budgets": fixed_budget_table(loop, sac, budgets),
         "loop_runs": loop,
         "sac_runs": sac,
         "settings": {
             "loop": {"given": loop[0]["settings"] if loop else None, "loop_set": overrides,
                      "processes_at_once": args.loop_jobs,
                      "note": "the rest are the loop's defaults (MbrlSettings, the env catalogue's planner settings)"},
-            "sac": {"algo": "stable_baselines3.SAC('MlpPolicy', env, seed=s), defaults; 1 torch thread, "
-                            f"{args.jobs} processes at once", "cap": args.sac_steps, "eval_every": args.eval_every,
-                    "eval_episodes": EVAL_EPISODES, "deterministic": True,
+            "sac": {"algo": "stable_baselines3.SAC('MlpPolicy', env, seed=s, **params): params {} for default (SB3's "
+                            "defaults), the search's best for tuned; 1 torch thread, "
+                            f"{args.jobs} processes at once", "variants": sac_params, "cap": args.sac_steps,
+                    "eval_every": args.eval_every, "eval_episodes": EVAL_EPISODES, "deterministic": True,
                     "early_stop": early, "sac_full": args.sac_full},
             "eval_reset_seeds": f"seed s, episode j: s * {SEED_STRIDE} + {EVAL_OFFSET} + j (j < {EVAL_EPISODES}); the "
                                 "loop's and SAC's, the same at every evaluation",
         },
         "reward_check": reward_check,
         "wall_seconds": {"total": round(wall, 1), **walls}, "wall_target_seconds": WALL_TARGET_S,
-        "git": git_state(at_start=git_start), "versions": versions(),
-        "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "load_average_start": load_start,
-                    "load_average_end": load()},
     }
     if oracle is not None:
         out["oracle"] = {"runs": oracle, "episodes_per_seed": args.oracle_episodes,
@@ -739,9 +859,17 @@ def main(argv: list[str] | None = None) -> None:
         out["loop_resumed_seeds"] = [r["seed"] for r in loop if r["resumed"]]
     if args.keep:
         out["runs"] = str(write_runs(args, name, sac, oracle, loop))
-    out["result_file"] = str(result_path(name, args.quick).relative_to(HERE.parent))
-    write_result(out, result_path(name, args.quick))
-    print(json.dumps(out, indent=2))
+    seed_free = {f"loop seed {r['seed']}": {k: v for k, v in r["settings_resolved"].items() if k not in ("seed",
+                 "until_return", "resume")} for r in loop}
+    expected = {k: v for k, v in resolved.items() if k not in ("until_return", "resume")}
+    for where, used in seed_free.items():  # each seed's process resolved the settings itself: the same?
+        differ = sorted(k for k in {*used, *expected} if used.get(k) != expected.get(k))
+        if differ:
+            raise SystemExit(f"{where} ran with other loop settings ({', '.join(differ)}) than the run started with "
+                             "(the code or the catalogue changed during the run): nothing recorded")
+    kept = ("loop", "targets", "returns_at_fixed_budgets", "threshold", *(k for k in out if k.startswith(("sac", "ratio"))))
+    result = out if run.mode == "headline" else {k: out[k] for k in kept if k != "sac_runs"}
+    run.finish(result, file=result_path(name, args.quick).stem)
 
 
 if __name__ == "__main__":

@@ -3,13 +3,16 @@ result file written whole (temp file, then rename). Shared by the benchmarks tha
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import platform
 import subprocess
 import tempfile
+from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 HERE = Path(__file__).resolve().parent
 
@@ -98,3 +101,156 @@ class Recorder:
         write_result(out, self.results / f"{file or self.name}.json")
         print(json.dumps(out, indent=2))
         return out
+
+
+# ---------------------------------------------------------------------------------------- development vs headline
+#
+# A science benchmark (one whose numbers are claims about learning: mbrl, mbrl_bodies) declares two
+# disjoint sets of seeds. Settings are chosen on development seeds; a run on them writes one line to
+# benchmarks/devlog/<name>.jsonl (the settings tried, their hash, the result) and never a result file.
+# A headline runs on seeds no development run used, at a commit with no uncommitted code, and records
+# the hash of every setting it used and how many configurations the development log had tried before
+# it; it refuses to record when its settings or its code changed while it ran.
+
+DEVLOG = HERE / "devlog"
+# paths whose uncommitted changes make a headline's code unknown (results and the devlog are its outputs)
+CODE_PATHS = ("motorlab/", "benchmarks/", "pyproject.toml")
+OUTPUT_PATHS = ("benchmarks/results/", "benchmarks/devlog/")
+
+
+@dataclass(frozen=True)
+class SeedPlan:
+    """A benchmark's development seeds (settings are chosen on them) and its headline seeds (reported,
+    never used to choose). A seed also picks its evaluation episodes' reset seeds, so headline seeds
+    meet fresh episodes too."""
+
+    development: range
+    headline: range
+
+    def __post_init__(self) -> None:
+        if set(self.development) & set(self.headline):
+            raise ValueError(f"development seeds {_span(self.development)} and headline seeds "
+                             f"{_span(self.headline)} overlap")
+
+    def mode(self, seeds: list[int]) -> str:
+        """"development" or "headline": the set every seed belongs to; a mix, or a seed in neither, is refused."""
+        if not seeds:
+            raise SystemExit("no seeds to run")
+        dev = [s for s in seeds if s in self.development]
+        head = [s for s in seeds if s in self.headline]
+        if len(dev) == len(seeds):
+            return "development"
+        if len(head) == len(seeds):
+            return "headline"
+        stray = sorted(set(seeds) - set(dev) - set(head))
+        raise SystemExit(f"seeds {sorted(seeds)} mix development seeds ({_span(self.development)}) and headline seeds "
+                         f"({_span(self.headline)})" + (f", and {stray} are in neither" if stray else "")
+                         + ": run one set at a time")
+
+
+def _span(r: range) -> str:
+    return f"{r.start}-{r.stop - 1}"
+
+
+SCIENCE_SEEDS = SeedPlan(development=range(0, 100), headline=range(100, 1000))
+
+
+def settings_hash(settings: Any) -> str:
+    """sha256 of the settings as canonical JSON (sorted keys), first 16 hex digits."""
+    text = json.dumps(settings, sort_keys=True, default=str, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def devlog_entries(name: str, devlog: Path = DEVLOG) -> list[dict]:
+    path = devlog / f"{name}.jsonl"
+    if not path.is_file():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def configurations_tried(entries: list[dict]) -> int:
+    """The distinct settings (by hash) a development log tried."""
+    return len({e["settings_hash"] for e in entries})
+
+
+def code_changes(state: dict) -> list[str]:
+    """The uncommitted files of a git state that are code (not a benchmark's own outputs)."""
+    return sorted(f for f in state.get("changed_files", [])
+                  if f.startswith(CODE_PATHS) and not f.startswith(OUTPUT_PATHS))
+
+
+class Harness:
+    """A science benchmark's runs: `start` one on a set of seeds with its settings, `finish` it with its
+    result. Development runs append to the devlog; headline runs write results/<file>.json through
+    `Recorder`, with the settings' hash and the development log's count of configurations."""
+
+    def __init__(self, name: str, seeds: SeedPlan = SCIENCE_SEEDS, results: Path = HERE / "results",
+                 devlog: Path = DEVLOG):
+        self.name, self.seeds, self.results, self.devlog = name, seeds, results, devlog
+
+    def start(self, seeds: list[int], settings: Any, *, log: str | None = None) -> HarnessRun:
+        """Begin a run on `seeds` with `settings` (every setting it uses, resolved: the catalogue's
+        included); `log`: the devlog's name (default the harness's, e.g. mbrl-reacher per env)."""
+        mode = self.seeds.mode(list(seeds))
+        recorder = Recorder(self.name, results=self.results)
+        if mode == "headline":
+            dirty = code_changes(recorder.git)
+            if recorder.git.get("commit") is None or dirty:
+                raise SystemExit(f"a headline run needs committed code (its settings frozen at one commit); "
+                                 f"uncommitted: {', '.join(dirty) or recorder.git.get('error')}. Commit, or run "
+                                 f"from a worktree of the commit (git worktree add)")
+        return HarnessRun(self, list(seeds), mode, json.loads(json.dumps(settings, default=str)), recorder,
+                          log or self.name)
+
+
+@dataclass
+class HarnessRun:
+    harness: Harness
+    seeds: list[int]
+    mode: str
+    settings: Any
+    recorder: Recorder
+    log: str
+
+    @property
+    def settings_hash(self) -> str:
+        return settings_hash(self.settings)
+
+    def check_settings(self, used: Any, where: str) -> None:
+        """Refuse when settings a part of the run actually used (e.g. a seed's process, resolved there)
+        differ from the settings the run started with."""
+        if settings_hash(json.loads(json.dumps(used, default=str))) != self.settings_hash:
+            raise SystemExit(f"{where} ran with other settings than the run started with (the code or the catalogue "
+                             f"changed during the run): nothing recorded")
+
+    def finish(self, result: dict, file: str | None = None, *, used: dict[str, Any] | None = None) -> dict:
+        """Record the run. `used`: {where: settings} as each part of the run resolved them, each checked equal
+        to the start's. Development: one devlog line, no result file. Headline: results/<file>.json, refused
+        when the settings or the code changed while it ran."""
+        for where, settings in (used or {}).items():
+            self.check_settings(settings, where)
+        import datetime
+
+        date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+        entries = devlog_entries(self.log, self.harness.devlog)
+        if self.mode == "development":
+            line = {"date": date, "argv": self.recorder.argv, "git": git_state(at_start=self.recorder.git),
+                    "seeds": self.seeds, "settings_hash": self.settings_hash, "settings": self.settings,
+                    "result": result}
+            self.harness.devlog.mkdir(parents=True, exist_ok=True)
+            with open(self.harness.devlog / f"{self.log}.jsonl", "a") as f:  # one write per line: appends stay whole
+                f.write(json.dumps(line, default=str) + "\n")
+            print(json.dumps(line, indent=2, default=str))
+            return line
+        end = git_state(at_start=self.recorder.git)
+        if end.get("changed_during_run"):
+            raise SystemExit("the code changed during the headline run (a commit or an edit): nothing recorded; run "
+                             "it again from a worktree of one commit")
+        same = [e for e in entries if e["settings_hash"] == self.settings_hash]
+        development = {"log": f"benchmarks/devlog/{self.log}.jsonl", "configurations_tried": configurations_tried(entries),
+                       "runs": len(entries), "runs_with_these_settings": len(same),
+                       "in_sample": [{"seeds": e["seeds"], "date": e["date"], "result": e["result"]} for e in same]}
+        return self.recorder.record({**result, "provenance": {
+            "mode": "headline", "seeds": self.seeds, "seed_plan": {"development": _span(self.harness.seeds.development),
+                                                                   "headline": _span(self.harness.seeds.headline)},
+            "settings_hash": self.settings_hash, "settings": self.settings, "development": development}}, file)

@@ -45,3 +45,94 @@ def test_a_scripts_own_machine_facts_are_kept_beside_the_recorded_ones(tmp_path,
     speed = recorder.record({"machine": {"legs_env_steps_per_second": 1022}})["machine"]
     assert speed["legs_env_steps_per_second"] == 1022 and speed["cores"] >= 1  # both, neither replaced
     assert recorder.record({"machine": "x86_64"})["machine"]["reported"] == "x86_64"
+
+
+# ---- development vs headline: the harness ------------------------------------------------------
+
+import json  # noqa: E402
+
+import pytest  # noqa: E402
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+import provenance  # noqa: E402
+from provenance import Harness, SeedPlan, settings_hash  # noqa: E402
+
+PLAN = SeedPlan(development=range(0, 100), headline=range(100, 1000))
+
+
+@given(st.lists(st.integers(0, 1200), min_size=1, max_size=8))
+@settings(max_examples=200, deadline=None)
+def test_a_run_is_development_or_headline_never_both(seeds):
+    dev = all(s < 100 for s in seeds)
+    head = all(100 <= s < 1000 for s in seeds)
+    if dev or head:
+        assert PLAN.mode(seeds) == ("development" if dev else "headline")
+    else:
+        with pytest.raises(SystemExit, match="mix development seeds|in neither"):
+            PLAN.mode(seeds)
+
+
+def test_overlapping_seed_sets_are_refused():
+    with pytest.raises(ValueError, match="overlap"):
+        SeedPlan(development=range(0, 10), headline=range(5, 20))
+
+
+def _clean(monkeypatch, commit="a" * 40, changed=()):
+    state = {"commit": commit, "dirty": bool(changed), "changed_files": list(changed)}
+    monkeypatch.setattr(provenance, "git_state",
+                        lambda at_start=None: state if at_start is None else {**at_start, "changed_during_run": False})
+    return state
+
+
+def test_development_runs_write_only_the_devlog(tmp_path, monkeypatch, capsys):
+    _clean(monkeypatch)
+    harness = Harness("demo", PLAN, results=tmp_path / "results", devlog=tmp_path / "devlog")
+    for lr in (1e-3, 3e-4, 1e-3):  # two distinct configurations, one tried twice
+        run = harness.start([0, 1], {"lr": lr, "env": "Reacher-v5"})
+        assert run.mode == "development"
+        run.finish({"return": -5.0})
+    assert not (tmp_path / "results").exists()  # never a result file from development seeds
+    lines = provenance.devlog_entries("demo", tmp_path / "devlog")
+    assert [e["settings"]["lr"] for e in lines] == [1e-3, 3e-4, 1e-3]
+    assert lines[0]["settings_hash"] == settings_hash({"env": "Reacher-v5", "lr": 1e-3}) == lines[2]["settings_hash"]
+    assert provenance.configurations_tried(lines) == 2 and lines[0]["seeds"] == [0, 1]
+
+
+def test_a_headline_records_the_settings_hash_and_the_configurations_tried_before_it(tmp_path, monkeypatch, capsys):
+    _clean(monkeypatch)
+    harness = Harness("demo", PLAN, results=tmp_path / "results", devlog=tmp_path / "devlog")
+    for lr in (1e-3, 3e-4, 1e-4):
+        harness.start([0], {"lr": lr}).finish({"return": lr})
+    run = harness.start([100, 101, 102], {"lr": 3e-4})
+    assert run.mode == "headline"
+    out = run.finish({"return": -4.0}, used={"seed 100": {"lr": 3e-4}})
+    written = json.loads((tmp_path / "results" / "demo.json").read_text())
+    assert written == out and written["return"] == -4.0
+    prov = written["provenance"]
+    assert prov["settings_hash"] == settings_hash({"lr": 3e-4}) and prov["seeds"] == [100, 101, 102]
+    assert prov["development"]["configurations_tried"] == 3 and prov["development"]["runs"] == 3
+    assert [e["result"] for e in prov["development"]["in_sample"]] == [{"return": 3e-4}]  # the in-sample number
+
+
+def test_a_headline_refuses_settings_that_changed_during_the_run(tmp_path, monkeypatch, capsys):
+    _clean(monkeypatch)
+    harness = Harness("demo", PLAN, results=tmp_path / "results", devlog=tmp_path / "devlog")
+    run = harness.start([100], {"horizon": 15})
+    with pytest.raises(SystemExit, match="other settings"):
+        run.finish({"return": 1.0}, used={"seed 100": {"horizon": 20}})  # a seed's process resolved another value
+    assert not (tmp_path / "results").exists()
+
+
+def test_a_headline_needs_committed_code_and_refuses_code_that_changed(tmp_path, monkeypatch, capsys):
+    _clean(monkeypatch, changed=["motorlab/envs/catalog.py"])
+    harness = Harness("demo", PLAN, results=tmp_path / "results", devlog=tmp_path / "devlog")
+    with pytest.raises(SystemExit, match="catalog.py"):
+        harness.start([100], {"x": 1})
+    harness.start([0], {"x": 1})  # development runs may try uncommitted settings
+    _clean(monkeypatch, changed=["benchmarks/results/mbrl-reacher.json", "benchmarks/devlog/x.jsonl"])
+    run = harness.start([100], {"x": 1})  # its own outputs are no code
+    monkeypatch.setattr(provenance, "git_state", lambda at_start=None: {**at_start, "changed_during_run": True})
+    with pytest.raises(SystemExit, match="changed during the headline"):
+        run.finish({"r": 1})
+    assert not (tmp_path / "results").exists()
