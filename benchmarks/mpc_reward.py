@@ -34,8 +34,9 @@ Measured
   met (per group and over all). Also: the median time of one reward call on a planner-sized batch
   (population x particles rows, horizon 15) for the bundled and the user's reward (their per-call
   overhead, free of the planner's noise), the mean env reward per step of each variant (a sanity
-  check that every variant plans, not a comparison), the git commit (and whether the tree was dirty),
-  the date, package versions, the CPU model, its cores and the load average at start and end.
+  check that every variant plans, not a comparison), and, by provenance.Recorder, the date, the
+  command line, the git commit (and whether the tree was dirty), package versions, the CPU model, its
+  cores and the load average at start and end.
 
 Prints one JSON object; also writes it to benchmarks/results/mpc_reward.json (or --out), through a
 temporary file renamed over it.
@@ -44,9 +45,6 @@ temporary file renamed over it.
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
-import os
 import statistics
 import sys
 import time
@@ -58,7 +56,7 @@ import torch
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # benchmarks/user_reacher_reward.py, as a user's module on the path
 
-from provenance import cpu_model, git_state, load, versions, write_result  # noqa: E402  (benchmarks/ is the script's folder)
+from provenance import Recorder  # noqa: E402  (benchmarks/ is the script's folder)
 
 from motorlab.control.mpc_episodes import build_policy  # noqa: E402
 from motorlab.dynamics.collection import collect_transitions  # noqa: E402
@@ -142,8 +140,6 @@ def reward_call_us(task_reward, rows: int, state_size: int, action_size: int, re
     return statistics.median(times)
 
 
-# ---------------------------------------------------------------------------------------- provenance
-
 # ---------------------------------------------------------------------------------------- main
 
 def main() -> None:
@@ -160,8 +156,9 @@ def main() -> None:
     if unknown:
         parser.error(f"unknown groups {sorted(unknown)}; choose from {', '.join(GROUPS)}")
 
-    load_start = load()
-    git_start = git_state()  # what ran: the code the run's processes load as they start
+    # the git state and load now (what ran: the code the run's processes load as they start); --out's
+    # folder and name, so a result written elsewhere is recorded the same way
+    recorder = Recorder("mpc_reward", results=args.out.parent)
     started = time.perf_counter()
     torch.set_num_threads(1)
     data = collect_transitions(ENV_ID, args.episodes, seed=args.seed, state="observation", workers=1,
@@ -201,21 +198,15 @@ def main() -> None:
             "env_reward_per_step_mean": {v: round(env_rewards[(group, v)], 4) for v in VARIANTS},
         }
 
-    out = {
-        "benchmark": "mpc_reward", "env_id": ENV_ID, "state_layout": "observation", "user_reward": USER_REWARD,
+    recorder.record({
+        "env_id": ENV_ID, "state_layout": "observation", "user_reward": USER_REWARD,
         "transitions": len(data), "fit": {"epochs": args.epochs, "hidden": [64, 64], "models": fits},
         "planner": {"optimizer": "cem", **PLANNER, "envs": 1, "device": "cpu"},
         "torch_threads": torch.get_num_threads(), "timed_steps_per_variant": args.steps, "chunk": CHUNK,
         "groups": results, "targets": TARGETS,
         "meets_targets": all(all(r["meets"].values()) for r in results.values()),
         "wall_seconds": round(time.perf_counter() - started, 1),
-        "git": git_state(at_start=git_start), "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "versions": versions(),
-        "cpu": {"model": cpu_model(), "cores": os.cpu_count(),
-                "load_average": {"start": load_start, "end": load()}},
-    }
-    print(json.dumps(out, indent=2))
-    write_result(out, args.out)
+    }, file=args.out.name.removesuffix(".json"))
 
 
 if __name__ == "__main__":

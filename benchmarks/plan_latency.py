@@ -15,22 +15,20 @@ The peer here is the target itself, not another planner: benchmarks/mbrl.py comp
 with SAC, and records each loop seed's collection time per step (an upper bound of this figure).
 
 Output: one JSON object on stdout, also written to benchmarks/results/plan_latency.json, with the
-resolved settings per env, the git commit, versions, the CPU and the load average.
+resolved settings per env and, by provenance.Recorder, the date, the command line, the git commit,
+versions, the CPU and the load average.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
 import sys
 import time
-from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-from mbrl import ENVS  # noqa: E402  (benchmarks/ is the script's folder)
-from provenance import cpu_model, git_state, load, versions, write_result  # noqa: E402
+from mbrl import ENVS  # benchmarks/ is the script's folder
+from provenance import Recorder
 
 TARGET_MS = 50.0
 WARM_UP = 3
@@ -95,20 +93,16 @@ def main(argv: list[str] | None = None) -> None:
     if unknown:
         parser.error(f"unknown env {unknown[0]!r}: give any of {', '.join(ENVS)}")
     overrides = {k: json.loads(v) if v[:1] in "[{" else v for k, v in (s.split("=", 1) for s in args.set)}
-    load_start = load()
-    git_start = git_state()  # what ran: the code the run's processes load as they start
+    recorder = Recorder("plan_latency")  # the git state and load now: what ran is the code loaded as it starts
+    if argv is not None:
+        recorder.argv = list(argv)  # called from Python: these were its arguments
     per_env = {}
     for name in args.envs or list(ENVS):
         per_env[name] = latency(name, args.steps, overrides)
         print(f"[plan-latency] {name}: {per_env[name]['ms_median']:.1f} ms median", file=sys.stderr, flush=True)
-    out = {"benchmark": "plan_latency", "target_ms": TARGET_MS,
-           "basis": "one env, one torch thread, MPCPolicy.act per control step at the loop's defaults",
-           "set": overrides, "envs": per_env, "all_met": all(r["met"] for r in per_env.values()),
-           "git": git_state(at_start=git_start), "versions": versions(),
-           "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "load_average_start": load_start,
-                       "load_average_end": load()}}
-    write_result(out, HERE / "results" / "plan_latency.json")
-    print(json.dumps(out, indent=2))
+    recorder.record({"target_ms": TARGET_MS,
+                     "basis": "one env, one torch thread, MPCPolicy.act per control step at the loop's defaults",
+                     "set": overrides, "envs": per_env, "all_met": all(r["met"] for r in per_env.values())})
 
 
 if __name__ == "__main__":

@@ -7,8 +7,8 @@ rl-zoo3 has no SAC settings for these envs (its sac.yml tunes the MuJoCo locomot
 PyBullet ones; Reacher-v5, Pusher-v5, InvertedPendulum-v5, the bundled cart-pole and the arm are
 not there), so the issue's fallback applies: a search of equal effort, on development seeds.
 
-Equal effort: --trials 8 by default, more than the loop's configurations recorded for any env
-(Pusher's, the most tuned: six configurations). Each trial trains SAC on every --seeds seed (2 at a
+Equal effort, or more: --trials defaults to twice the configurations the loop's development log
+holds for the env (benchmarks/devlog/mbrl-ENV.jsonl; Pusher's six, Reacher's two), and at least 6. Each trial trains SAC on every --seeds seed (2 at a
 time, one torch thread each) for --steps env steps, evaluated as the benchmark does (every loop round
 of env steps, 10 episodes on the seed's own evaluation reset seeds, deterministic policy), and scores
 the mean over seeds of the mean return over its evaluations: the area under the learning curve,
@@ -24,8 +24,8 @@ development log, benchmarks/devlog/sac_tune-ENV.jsonl (provenance.Harness). The 
 to benchmarks/sac_tuned.json under the env id, which mbrl.py's tuned variant reads.
 
 Seeds: development only (0-99); a headline seed is refused. Time on this 2-core machine: a trial is
-~2-3 min on Reacher at 10k steps and 2 seeds (SAC ~10-13 s of wall per 1k env steps), so 8 trials
-~20 min.
+~1-2 min on Reacher at 5k steps and 2 seeds on an idle machine (SAC ~10-13 s of wall per 1k env
+steps), several times that on a loaded one.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import mbrl  # noqa: E402
-from provenance import DEVLOG, SCIENCE_SEEDS, Harness, git_state, write_result  # noqa: E402
+from provenance import DEVLOG, SCIENCE_SEEDS, Harness, configurations_tried, devlog_entries, git_state, write_result  # noqa: E402
 
 TUNED = mbrl.TUNED
 
@@ -66,14 +66,18 @@ def score(runs: list[dict]) -> float:
 def parse(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("env", choices=list(mbrl.ENVS))
-    parser.add_argument("--trials", type=int, default=8, help="trials in all (a resumed search counts its earlier ones)")
+    parser.add_argument("--trials", type=int, default=None,
+                        help="trials in all, a resumed search counting its earlier ones (default: twice the loop's "
+                             "configurations in its development log, at least 6)")
     parser.add_argument("--seeds", type=mbrl.seed_list, default=[0, 1], help="development seeds, e.g. 0,1")
-    parser.add_argument("--steps", type=int, default=10_000, help="env steps per trial and seed")
+    parser.add_argument("--steps", type=int, default=5_000, help="env steps per trial and seed")
     parser.add_argument("--jobs", type=int, default=2, help="SAC processes at once")
     parser.add_argument("--sampler-seed", type=int, default=0)
     args = parser.parse_args(argv)
     if SCIENCE_SEEDS.mode(args.seeds) != "development":
         parser.error("the search runs on development seeds only")
+    if args.trials is None:
+        args.trials = max(6, 2 * configurations_tried(devlog_entries(f"mbrl-{args.env}")))
     return args
 
 

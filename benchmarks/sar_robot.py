@@ -19,10 +19,9 @@ Measured at full scale with 5 seeds a side (2026-11-28, results/sar_robot.json):
 <= 1,800 s: met). 5 synergies (VAF 80.5%). SAR-RL IQM -54.5 [-149.4, -12.2], RL-E2E -5.6 [-12.8,
 3.2]; P(SAR-RL > RL-E2E) 0.08 [0.00, 0.32]; Mann-Whitney p = 0.99: the science target is not met,
 RL-E2E is ahead. Zero-shot -34.9 vs -24.0, P 0.32 [0.00, 0.68].
-Earlier, with 3 seeds a side (2026-11-25): 913 s. 5 synergies (VAF 80.5%) of
-the 8 motor commands. Running backward, both arms still fail at these budgets: SAR-RL IQM -45
-[-111, -11], RL-E2E -8 [-16, -1]; zero-shot -54 vs -58. At 1/8 scale an earlier run went the
-other way (691 vs 469): early in learning the result turns on falls, not on gait.
+Earlier, with 3 seeds a side (2026-11-25): 913 s, both arms failing at these budgets (SAR-RL's 3
+seeds' range [-111, -11], RL-E2E's [-16, -1]; a 3-seed bracket is their range, not a 95% CI).
+At 1/8 scale an earlier run went the other way: early in learning the result turns on falls, not on gait.
 
 Usage:  .venv/bin/python benchmarks/sar_robot.py [--scale K]
         (or SAR_ROBOT_SCALE=K): every budget divided by K (play, SAR-RL, RL-E2E env steps, SAC
@@ -69,12 +68,15 @@ def seed_values(study: Path, step: str, key: str) -> list[float]:
 
 def arm(values: list[float]) -> dict:
     """Per-seed values over seeds (motorlab.intervals): the IQM from 4 seeds (else the mean), a 95%
-    stratified-bootstrap CI from 3 seeds (else none, and why)."""
+    stratified-bootstrap CI from 5 seeds (else none), the seeds' range, and what the shown interval
+    is ("text": the CI from 5 seeds, else the range, named so)."""
     from motorlab.intervals import across_seeds
 
     summary = across_seeds(values)
     return {"per_seed": [round(v, 2) for v in values], "statistic": summary.statistic, "value": round(summary.value, 2),
-            "ci95": [round(x, 2) for x in summary.ci] if summary.ci else None, "ci_method": summary.method}
+            "ci95": [round(x, 2) for x in summary.ci] if summary.ci else None,
+            "range": [round(x, 2) for x in summary.range] if summary.range else None, "ci_method": summary.method,
+            "text": summary.text(lambda v: f"{v:.2f}")}
 
 
 def ratio(a: dict, b: dict) -> float | None:
@@ -85,7 +87,8 @@ def ratio(a: dict, b: dict) -> float | None:
 
 def compared(a: dict, b: dict) -> dict:
     """How SAR-RL (a) stands against RL-E2E (b): ratio, difference, which is higher, and P(SAR-RL >
-    RL-E2E) over their seeds (rliable's probability of improvement; its interval from 3 seeds a side)."""
+    RL-E2E) over their seeds (rliable's probability of improvement; its interval from 5 seeds a side;
+    "all tied" where every seed of both arms has the same value)."""
     from motorlab.intervals import p_better
 
     better = p_better(a["per_seed"], b["per_seed"])

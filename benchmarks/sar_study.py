@@ -167,8 +167,8 @@ class FinalEvaluations:
 
 
 def arm_result(runs: list[Path]) -> dict:
-    """One arm over its seeds: success and return per seed, across seeds (the mean, an interval
-    from 3 seeds where it has a width), the episodes pooled (Wilson), the curve's mean."""
+    """One arm over its seeds: success and return per seed, across seeds (the mean, the seeds'
+    range, a 95% CI from 5 seeds where it has a width), the episodes pooled (Wilson), the curve's mean."""
     from motorlab.intervals import across_seeds
 
     final = FinalEvaluations.of([json.loads((r / "summary.json").read_text()) for r in runs])

@@ -1,21 +1,33 @@
 """Statistics across seeds: each metric per setting (motorlab.intervals: the IQM only from 4
-seeds, a 95% stratified-bootstrap interval only from 3), the probability of improvement between
-settings, and performance profiles (rliable, Agarwal et al., 2021). Bootstraps use a fixed random
-state, so the same runs give the same numbers.
+seeds, a 95% stratified-bootstrap interval only from 5, the seeds' range below), the probability
+of improvement between settings, and performance profiles (rliable, Agarwal et al., 2021).
+Bootstraps use a fixed random state, so the same runs give the same numbers.
 
 Steps to a threshold across seeds (`steps_to_threshold`, `steps_ratio`): a seed that never
 reached the threshold within its budget is right-censored at that budget, and the seeds'
-median is the Kaplan-Meier median (scipy.stats.ecdf on scipy.stats.CensoredData)."""
+median is the Kaplan-Meier median (scipy.stats.ecdf on scipy.stats.CensoredData). k of n solved
+has its 95% Wilson interval; the median and the ratio of two medians, from 5 seeds (a side), a 95%
+percentile-bootstrap interval over the seeds, each resampled seed keeping its censoring."""
 
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, Literal
 
 import numpy as np
 
-from motorlab.intervals import MIN_SEEDS_FOR_INTERVAL, across_seeds, fixed_rng, p_better
+from motorlab.intervals import (
+    CONFIDENCE,
+    MIN_SEEDS_FOR_INTERVAL,
+    across_seeds,
+    fixed_rng,
+    p_better,
+    too_few_seeds,
+    wilson,
+)
 
 REPS = 2000  # bootstrap resamples; rliable's CIs settle well before this for a handful of seeds
 # metric -> higher is better; a study's metrics are "<step>.<metric>"
@@ -65,27 +77,29 @@ def steps_of_scores(runs: list[Score]) -> StepsToThreshold:
 
 
 def _steps_entry(runs: list[Score]) -> dict[str, Any]:
-    """Steps to success over seeds: k of n solved and the Kaplan-Meier median, each unsolved seed
-    censored at its budget (its recorded value), never counted as if it had solved there."""
-    result = steps_of_scores(runs)
-    return {"values": [v for v, _ in runs], "censored": [c for _, c in runs], "solved": result.solved,
-            "unsolved": result.seeds - result.solved, "median": result.median, "median_above": result.median_above,
-            "text": result.text}
+    """Steps to success over seeds: k of n solved (with its Wilson interval) and the Kaplan-Meier
+    median (with its bootstrap interval from 5 seeds), each unsolved seed censored at its budget
+    (its recorded value), never counted as if it had solved there."""
+    result = steps_of_scores(runs).to_json()
+    keep = ("solved", "solved_ci", "median", "median_above", "median_ci", "median_ci_method", "text")
+    return {"values": [v for v, _ in runs], "censored": [c for _, c in runs],
+            "unsolved": result["seeds"] - result["solved"], **{k: result[k] for k in keep}}
 
 
 def aggregate(scores: dict[str, list[dict[str, Score]]]) -> tuple[dict[str, Any], dict[str, Any]]:
     """Each metric per setting over its seeds (motorlab.intervals): the mean, the IQM from 4 seeds,
-    a 95% interval from 3 seeds where it has a width; steps to success as k of n solved with the
-    Kaplan-Meier median (unsolved seeds censored at their budgets); the probability that one
-    setting beats another, with its interval from 3 seeds a side; performance profiles of returns
-    and success rates.
+    a 95% interval from 5 seeds where it has a width (the seeds' range below, in the details); steps
+    to success as k of n solved (Wilson) with the Kaplan-Meier median (unsolved seeds censored at
+    their budgets; its bootstrap interval from 5 seeds); the probability that one setting beats
+    another, with its interval from 5 seeds a side; performance profiles of returns and success
+    rates.
 
     Args:
         scores: setting label -> one dict of trial_scores per finished seed.
 
     Returns:
-        (flat summary keys "<setting>.<metric>_mean", "_iqm" (4+ seeds), "_mean_ci_low"/"_iqm_ci_low"
-        and "_high" (whichever statistic the interval is of), "steps_to_success_solved", "_median";
+        (flat summary keys "<setting>.<metric>_mean", "_iqm" (4+ seeds), "_iqm_ci_low" and "_high"
+        (5+ seeds, where the interval has a width), "steps_to_success_solved", "_median";
         details for plots and aggregate.json, each entry with the words that say what it is)
     """
     flat: dict[str, Any] = {}
@@ -130,7 +144,7 @@ def aggregate(scores: dict[str, list[dict[str, Score]]]) -> tuple[dict[str, Any]
 
 def _profile(values: dict[str, np.ndarray]) -> dict[str, Any]:
     """Fraction of runs scoring above tau, for taus across the observed range (rliable's score
-    distribution), with its bootstrap band where every setting has 3 seeds or more."""
+    distribution), with its bootstrap band where every setting has MIN_SEEDS_FOR_INTERVAL seeds."""
     from rliable import library as rly
 
     every = np.concatenate([v[:, 0] for v in values.values()])
@@ -148,6 +162,7 @@ def _profile(values: dict[str, np.ndarray]) -> dict[str, Any]:
 # ---- steps to a threshold: censored at each seed's budget, Kaplan-Meier median ----------------
 
 _HALF = 0.5 - 1e-9  # the KM estimate is a product of fractions: 1 - (3/4)(2/3) may land a hair under 0.5
+_TAIL = (1 - CONFIDENCE) / 2
 
 
 @dataclass(frozen=True)
@@ -165,6 +180,33 @@ class SeedSteps:
 
 
 @dataclass(frozen=True)
+class MedianInterval:
+    """The 95% percentile-bootstrap interval of a Kaplan-Meier median over seeds. A resample whose
+    median is censored (fewer than half its seeds reached the threshold) counts as +inf: an end that
+    falls on such resamples is only known to be above `above`, and is None here ("> above")."""
+
+    low: float | None  # None: above `above` too (the median is censored in nearly every resample)
+    high: float | None  # None: above `above` (the median is censored in more than 2.5% of resamples)
+    above: int | None  # what a censored end is above: the least of the censored resamples' largest times
+    # (the budget, where the seeds share one); None where no resample is censored
+    seeds: int
+
+    @property
+    def method(self) -> str:
+        return f"95% bootstrap CI over {self.seeds} seeds"
+
+    def text(self) -> str:
+        """E.g. "[1,000, > 3,000]"."""
+        def end(v: float | None) -> str:
+            return f"> {self.above:,}" if v is None else f"{v:,.0f}"
+        return f"[{end(self.low)}, {end(self.high)}]"
+
+    def to_json(self) -> dict[str, Any]:
+        return {"low": self.low, "high": self.high, "low_above_budget": self.low is None,
+                "high_above_budget": self.high is None, "above": self.above, "method": self.method}
+
+
+@dataclass(frozen=True)
 class StepsToThreshold:
     """Env steps to reach a threshold over seeds, each seed right-censored at its own budget.
 
@@ -174,7 +216,11 @@ class StepsToThreshold:
     time: the median is then above `median_above`, the largest observed time (the budget, when
     all seeds share one). With ties the smallest such time is taken: seeds at [1000, 1000, 2000,
     2000] have median 1000 (the estimate is 0.5 at 1000), where numpy's median says 1500. With
-    every seed solved it is the ordinary lower median of the steps."""
+    every seed solved it is the ordinary lower median of the steps.
+
+    Intervals: `solved_ci`, the 95% Wilson interval of the share solved (k of n); `median_ci`, from
+    MIN_SEEDS_FOR_INTERVAL seeds, the median's bootstrap interval (`MedianInterval`, see
+    `_median_draws`), None below."""
 
     per_seed: tuple[SeedSteps, ...]
     median: float | None
@@ -190,6 +236,11 @@ class StepsToThreshold:
         return sum(not s.censored for s in self.per_seed)
 
     @property
+    def solved_ci(self) -> tuple[float, float]:
+        """The 95% Wilson interval of the share of seeds that solve (k of n)."""
+        return wilson(self.solved, self.seeds)
+
+    @property
     def budgets(self) -> tuple[int, ...]:
         return tuple(s.budget for s in self.per_seed)
 
@@ -203,14 +254,37 @@ class StepsToThreshold:
         """When `median` is None: the median is above this (the largest observed time); else None."""
         return None if self.median is not None else max(s.time for s in self.per_seed)
 
+    @cached_property
+    def median_ci(self) -> MedianInterval | None:
+        """The median's 95% bootstrap interval over the seeds, from MIN_SEEDS_FOR_INTERVAL seeds;
+        computed once, on first use, with a fixed seed (the same runs give the same interval)."""
+        if self.seeds < MIN_SEEDS_FOR_INTERVAL:
+            return None
+        medians, largest = _median_draws(self.per_seed)
+        low, high = np.quantile(medians, [_TAIL, 1 - _TAIL], method="inverted_cdf")  # a draw each: inf stays inf
+        censored = np.isinf(medians)
+        above = int(largest[censored].min()) if censored.any() else None
+        return MedianInterval(*(None if math.isinf(v) else float(v) for v in (low, high)), above, self.seeds)
+
+    @property
+    def median_ci_method(self) -> str:
+        """What the median's interval is, or why there is none."""
+        return self.median_ci.method if self.median_ci else f"no interval ({too_few_seeds(self.seeds)})"
+
     @property
     def text(self) -> str:
-        """E.g. "3 of 5 seeds; median 1,400 steps (Kaplan–Meier)", "1 of 5 seeds; median > 3,000 (budget)"."""
-        head = f"{self.solved} of {self.seeds} seeds"
+        """E.g. "3 of 5 seeds, 95% Wilson interval [23%, 88%]; median 1,400 steps (Kaplan–Meier), 95%
+        bootstrap CI over 5 seeds [1,000, > 3,000]", "1 of 3 seeds, 95% Wilson interval [6%, 79%];
+        median > 3,000 (budget), no interval (n = 3: too few seeds ...)"."""
+        low, high = self.solved_ci
+        head = f"{self.solved} of {self.seeds} seeds, 95% Wilson interval [{low:.0%}, {high:.0%}]"
         if self.median is not None:
-            return f"{head}; median {self.median:,.0f} steps (Kaplan–Meier)"
-        shared = len(set(self.budgets)) == 1
-        return f"{head}; median > {self.median_above:,} ({'budget' if shared else 'the largest budget'})"
+            median = f"median {self.median:,.0f} steps (Kaplan–Meier)"
+        else:
+            shared = len(set(self.budgets)) == 1
+            median = f"median > {self.median_above:,} ({'budget' if shared else 'the largest budget'})"
+        ci = f"{self.median_ci.method} {self.median_ci.text()}" if self.median_ci else self.median_ci_method
+        return f"{head}; {median}, {ci}"
 
     def at_most(self, steps: float) -> bool | None:
         """Is the median at most `steps`? None where the censoring leaves it open (fewer than half
@@ -221,8 +295,11 @@ class StepsToThreshold:
 
     def to_json(self) -> dict[str, Any]:
         """Every number, for a results file."""
-        return {"solved": self.solved, "seeds": self.seeds, "budgets": list(self.budgets),
-                "median": self.median, "median_above": self.median_above, "text": self.text,
+        return {"solved": self.solved, "seeds": self.seeds, "solved_ci": list(self.solved_ci),
+                "solved_ci_method": "95% Wilson interval", "budgets": list(self.budgets),
+                "median": self.median, "median_above": self.median_above,
+                "median_ci": self.median_ci.to_json() if self.median_ci else None,
+                "median_ci_method": self.median_ci_method, "text": self.text,
                 "per_seed": [{"steps": s.steps, "budget": s.budget, "censored": s.censored} for s in self.per_seed]}
 
 
@@ -267,6 +344,48 @@ def _km_median(per_seed: tuple[SeedSteps, ...]) -> float | None:
     return float(cdf.quantiles[reached[0]]) if len(reached) else None
 
 
+def _median_draws(per_seed: tuple[SeedSteps, ...], seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """REPS bootstrap resamples of the seeds, each seed drawn with its censoring: per resample its
+    Kaplan-Meier median (`_km_median`; +inf where censored, i.e. above the resample's largest time)
+    and its largest observed time. A fixed seed: the same runs give the same draws."""
+    rng = np.random.default_rng(seed)
+    picks = rng.integers(len(per_seed), size=(REPS, len(per_seed)))
+    times = np.array([s.time for s in per_seed], dtype=np.int64)
+    # the median depends only on the resample's multiset of (time, censored): 5 seeds have at most 126
+    keys = np.sort((2 * times + [s.censored for s in per_seed])[picks], axis=1)
+    memo: dict[bytes, float] = {}
+    medians = np.empty(REPS)
+    for r, (row, key) in enumerate(zip(picks, keys)):
+        k = key.tobytes()
+        if k not in memo:
+            median = _km_median(tuple(per_seed[i] for i in row))
+            memo[k] = math.inf if median is None else median
+        medians[r] = memo[k]
+    return medians, times[picks].max(axis=1).astype(np.float64)
+
+
+@dataclass(frozen=True)
+class RatioInterval:
+    """The 95% bootstrap interval of a ratio of Kaplan-Meier medians (see `steps_ratio`). `low` 0: open
+    below (a's median censored in more than 2.5% of resamples); `high` inf: open above (b's)."""
+
+    low: float
+    high: float
+    seeds: tuple[int, int]
+
+    @property
+    def method(self) -> str:
+        return f"95% bootstrap CI over {self.seeds[0]} and {self.seeds[1]} seeds"
+
+    def text(self) -> str:
+        """E.g. "[6.1, 12.5]", "[6.1, ∞]", "[0, 2.4]"."""
+        return f"[{self.low:.3g}, {'∞' if math.isinf(self.high) else f'{self.high:.3g}'}]"
+
+    def to_json(self) -> dict[str, Any]:
+        return {"low": self.low, "high": None if math.isinf(self.high) else self.high,
+                "low_open": self.low == 0, "high_open": math.isinf(self.high), "method": self.method}
+
+
 @dataclass(frozen=True)
 class StepsRatio:
     """b's median steps over a's (e.g. a = the loop, b = SAC: how many times more steps SAC needs).
@@ -278,17 +397,31 @@ class StepsRatio:
       upper:   a's median is censored (above a.median_above): the ratio is below
                ratio = b.median / a.median_above.
       unknown: both censored: ratio is None.
+
+    ci: from MIN_SEEDS_FOR_INTERVAL seeds a side, the 95% bootstrap interval (`steps_ratio`); None below.
     """
 
     ratio: float | None
     bound: Literal["exact", "lower", "upper", "unknown"]
     numerator: float | None  # b's median, or b's budget where censored (lower); None when unknown
     denominator: float | None  # a's median, or a's budget where censored (upper); None when unknown
+    ci: RatioInterval | None = None
+    seeds: tuple[int, int] = (0, 0)  # a's and b's
+
+    @property
+    def ci_method(self) -> str:
+        """What the interval is, or why there is none."""
+        if self.ci is not None:
+            return self.ci.method
+        a, b = self.seeds
+        return f"no interval: n = {a} and {b} seeds, too few for one, which needs {MIN_SEEDS_FOR_INTERVAL} a side"
 
     @property
     def text(self) -> str:
+        """E.g. "= 6, 95% bootstrap CI over 5 and 5 seeds [4, ∞]", "> 30, no interval: ..."."""
         sign = {"exact": "=", "lower": ">", "upper": "<"}.get(self.bound)
-        return "unknown (both medians censored)" if sign is None else f"{sign} {self.ratio:.3g}"
+        point = "unknown (both medians censored)" if sign is None else f"{sign} {self.ratio:.3g}"
+        return f"{point}, {self.ci.method} {self.ci.text()}" if self.ci else f"{point}, {self.ci_method}"
 
     def at_most(self, value: float) -> bool | None:
         """Is the ratio at most `value`? None where its bound leaves that open."""
@@ -302,15 +435,41 @@ class StepsRatio:
 
     def to_json(self) -> dict[str, Any]:
         return {"ratio": self.ratio, "bound": self.bound, "numerator": self.numerator,
-                "denominator": self.denominator, "text": self.text}
+                "denominator": self.denominator, "ci": self.ci.to_json() if self.ci else None,
+                "ci_method": self.ci_method, "text": self.text}
 
 
 def steps_ratio(a: StepsToThreshold, b: StepsToThreshold) -> StepsRatio:
-    """The ratio of medians b / a, and what kind of number it is (see `StepsRatio`)."""
+    """The ratio of medians b / a, what kind of number it is (see `StepsRatio`), and from
+    MIN_SEEDS_FOR_INTERVAL seeds a side its 95% bootstrap interval (`_ratio_interval`)."""
+    ci = _ratio_interval(a, b) if min(a.seeds, b.seeds) >= MIN_SEEDS_FOR_INTERVAL else None
+    seeds = (a.seeds, b.seeds)
     if a.median is not None and b.median is not None:
-        return StepsRatio(b.median / a.median, "exact", b.median, a.median)
+        return StepsRatio(b.median / a.median, "exact", b.median, a.median, ci, seeds)
     if a.median is not None:  # b censored: its median > its budget, so the ratio > budget / a's median
-        return StepsRatio(b.median_above / a.median, "lower", float(b.median_above), a.median)
+        return StepsRatio(b.median_above / a.median, "lower", float(b.median_above), a.median, ci, seeds)
     if b.median is not None:  # a censored: the ratio < b's median / a's budget
-        return StepsRatio(b.median / a.median_above, "upper", b.median, float(a.median_above))
-    return StepsRatio(None, "unknown", None, None)
+        return StepsRatio(b.median / a.median_above, "upper", b.median, float(a.median_above), ci, seeds)
+    return StepsRatio(None, "unknown", None, None, ci, seeds)
+
+
+def _ratio_interval(a: StepsToThreshold, b: StepsToThreshold) -> RatioInterval:
+    """The 95% percentile-bootstrap interval of b.median / a.median: each side's seeds resampled on
+    their own (`_median_draws`, different fixed seeds), one ratio per pair of resamples.
+
+    Censoring propagates as bounds. In a resample where b's median is censored (above b's largest
+    time there) the ratio is only known to be above largest_b / median_a; where a's is censored, only
+    below median_b / largest_a (above 0); both censored: anywhere in (0, inf). So every resample
+    gives a range [lo, hi] (a point where both medians are known), and the interval takes its low
+    end from the lo's and its high end from the hi's: it holds whatever the censored medians are.
+    A censored b in more than 2.5% of resamples leaves the high end open (inf); a censored a, the
+    low end (0)."""
+    med_a, largest_a = _median_draws(a.per_seed, seed=0)
+    med_b, largest_b = _median_draws(b.per_seed, seed=1)
+    known_a, known_b = np.isfinite(med_a), np.isfinite(med_b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lo = np.where(known_a, np.where(known_b, med_b, largest_b) / med_a, 0.0)
+        hi = np.where(known_b, med_b / np.where(known_a, med_a, largest_a), math.inf)
+    low = float(np.quantile(lo, _TAIL, method="inverted_cdf"))
+    high = float(np.quantile(hi, 1 - _TAIL, method="inverted_cdf"))
+    return RatioInterval(low, high, (a.seeds, b.seeds))

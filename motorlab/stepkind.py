@@ -322,7 +322,7 @@ def _strings(value: Any) -> list[str]:
 def seeds_headline(all_scores: list[Scores]) -> dict[str, Any]:
     """The headline of a train or evaluate step run for several seeds: the mean over seeds (std
     across seeds), and from 4 seeds rliable's IQM of the return (below, it trims nothing: it is the
-    mean), with a 95% bootstrap CI from 3 seeds where it has a width (`iqm_keys`)."""
+    mean), with a 95% bootstrap CI from 5 seeds where it has a width (`iqm_keys`)."""
     means = [s.return_mean for s in all_scores]
     out = {
         "seeds": len(all_scores),
@@ -341,10 +341,10 @@ def _mean_of_known(values: list[float | None]) -> float | None:
 
 
 def iqm_keys(name: str, values: list[float]) -> dict[str, float]:
-    """Over seeds (motorlab.intervals): from MIN_SEEDS_FOR_IQM seeds "<name>_iqm" with
-    "<name>_iqm_ci_low" and "_high"; with 3 seeds (the IQM would be the mean) "<name>_mean_ci_low"
-    and "_high", the interval of the headline's "<name>_mean"; an interval only where it has a
-    width; nothing below 3 seeds."""
+    """Over seeds (motorlab.intervals): from MIN_SEEDS_FOR_IQM seeds "<name>_iqm", and from
+    MIN_SEEDS_FOR_INTERVAL seeds its 95% CI "<name>_iqm_ci_low" and "_high" where it has a width.
+    Below 5 seeds no "_ci_" keys (the seeds' range is no CI), so a headline number shown with
+    "[low, high]" after it is always that 95% CI."""
     summary = across_seeds(values)
     statistic = "iqm" if summary.statistic == "IQM" else "mean"
     out = {f"{name}_iqm": summary.value} if statistic == "iqm" else {}
@@ -357,7 +357,7 @@ def iqm_keys(name: str, values: list[float]) -> dict[str, float]:
 RETURN = Metric("return_mean", "return", "return", spread="return_std")
 SCORED_METRICS = (
     RETURN,
-    Metric("return_iqm", "return IQM", "return"),
+    Metric("return_iqm", "return IQM (95% CI from 5 seeds)", "return"),  # its brackets: the CI (`iqm_keys`)
     Metric("return_min", "min return", "return"),
     Metric("success_rate", "success", "percent"),
     Metric("episode_length_mean", "mean length", "steps"),

@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from provenance import git_state  # noqa: E402
+import provenance  # noqa: E402
+from provenance import Harness, SeedPlan, git_state, settings_hash  # noqa: E402
 
 
 def test_git_state_keeps_the_start_and_flags_a_tree_that_changed_during_the_run():
@@ -48,15 +54,6 @@ def test_a_scripts_own_machine_facts_are_kept_beside_the_recorded_ones(tmp_path,
 
 
 # ---- development vs headline: the harness ------------------------------------------------------
-
-import json  # noqa: E402
-
-import pytest  # noqa: E402
-from hypothesis import given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
-
-import provenance  # noqa: E402
-from provenance import Harness, SeedPlan, settings_hash  # noqa: E402
 
 PLAN = SeedPlan(development=range(0, 100), headline=range(100, 1000))
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -72,3 +73,84 @@ def test_a_benchmark_the_table_does_not_know_shows_whether_its_targets_are_met()
 def test_the_page_and_the_docs_build_use_the_hook():
     assert table.PLACEHOLDER in (ROOT / "docs" / "benchmarks.md").read_text()
     assert "docs/hooks/benchmark_table.py" in (ROOT / "mkdocs.yml").read_text()
+
+
+def _row(rendered: str, name: str) -> str:
+    return next(line for line in rendered.splitlines() if f"`{name}`" in line)
+
+
+def test_a_result_without_its_command_line_or_date_says_so(tmp_path):
+    data = json.loads((RESULTS / "sar_robot.json").read_text())
+    assert isinstance(data["argv"], list) and data["date"]
+    (tmp_path / "sar_robot.json").write_text(json.dumps(data))
+    row = _row(table.render(tmp_path), "sar_robot.json")
+    assert f"`benchmarks/sar_robot.py {' '.join(data['argv'])}`" in row and data["date"][:10] in row
+    assert table.NO_COMMAND not in row and table.UNDATED not in row
+    del data["argv"], data["date"]
+    (tmp_path / "sar_robot.json").write_text(json.dumps(data))
+    row = _row(table.render(tmp_path), "sar_robot.json")
+    assert table.NO_COMMAND in row and table.UNDATED in row
+    # the recorded files that lack them (written before every script used provenance.Recorder)
+    rendered = table.render(RESULTS)
+    for path in RESULTS.glob("*.json"):
+        recorded = json.loads(path.read_text())
+        row = _row(rendered, path.name)
+        assert (table.NO_COMMAND in row) == ("argv" not in recorded), path.name
+        assert (table.UNDATED in row) == ("date" not in recorded), path.name
+
+
+def test_statistics_over_seeds_are_computed_now_not_copied_from_the_stored_text(tmp_path):
+    """A file whose stored labels are stale (a "95% CI" from 3 seeds, P = 0.5 "do not overlap" for tied
+    seeds): the row shows what motorlab.intervals says of its per-seed values today."""
+    from motorlab.intervals import across_seeds, p_better
+
+    data = json.loads((RESULTS / "sar_robot.json").read_text())
+    data["sar_rl"] = {"per_seed": [0.0, 0.0, 0.0], "value": 0.0, "ci95": [0.0, 0.0],
+                      "ci_method": "95% stratified-bootstrap CI over 3 seeds"}
+    data["rl_e2e"] = {"per_seed": [-1.0, 2.0, 5.0], "value": 2.0, "ci95": [-1.0, 5.0],
+                      "ci_method": "95% stratified-bootstrap CI over 3 seeds"}
+    data["p_sar_better"] = {"p": 0.5, "ci": None, "seeds": [3, 3],
+                            "method": "no interval: every bootstrap resample gives the same P (the two sides' "
+                                      "seeds do not overlap)"}
+    (tmp_path / "sar_robot.json").write_text(json.dumps(data))
+    row = _row(table.render(tmp_path), "sar_robot.json")
+    assert "95% stratified-bootstrap CI over 3 seeds" not in row and "do not overlap" not in row
+    assert across_seeds([-1.0, 2.0, 5.0]).text(table.results.FORMS["number"]) in row
+    assert p_better([0.0, 0.0, 0.0], [-1.0, 2.0, 5.0]).text().replace("P(A > B)", "P(SAR-RL > RL-E2E)") in row
+
+
+def test_steps_and_their_ratio_are_recomputed_from_the_per_seed_records(tmp_path):
+    from motorlab.stats import steps_ratio, steps_to_threshold
+
+    data = json.loads((RESULTS / "mbrl-pendulum.json").read_text())
+    loop, sac = ([s["steps"] if not s["censored"] else None for s in data[k]["steps_to_threshold"]["per_seed"]]
+                 for k in ("loop", "sac"))
+    data["loop"]["steps_to_threshold"]["text"] = "stale"
+    data["ratio_sac_over_loop"]["text"] = "stale too"
+    (tmp_path / "mbrl-pendulum.json").write_text(json.dumps(data))
+    row = _row(table.render(tmp_path), "mbrl-pendulum.json")
+    a = steps_to_threshold(loop, data["loop"]["steps_to_threshold"]["budgets"])
+    b = steps_to_threshold(sac, data["sac"]["steps_to_threshold"]["budgets"])
+    assert "stale" not in row and a.text in row and b.text in row and steps_ratio(a, b).text in row
+
+
+def test_every_benchmark_script_records_its_command_line_and_date():
+    """Each script writes its result through benchmarks/provenance.py's Recorder (directly, or through
+    the Harness of a science benchmark), which adds the date and the command line: none writes a
+    result file of its own making."""
+    scripts = table.scripts()
+    assert len(scripts) >= 15
+    for script in scripts:
+        source = (table.BENCHMARKS / f"{script}.py").read_text()
+        assert re.search(r"\b(Recorder|Harness)\(", source), f"benchmarks/{script}.py records no provenance"
+
+
+def test_a_science_result_without_a_headline_record_is_marked_in_sample():
+    provenance_note = table.provenance_note
+    old = {"benchmark": "mbrl", "loop": {}}  # recorded before the harness: on the seeds the settings were chosen on
+    assert provenance_note("mbrl", old).startswith("**in-sample**")
+    headline = {"provenance": {"mode": "headline", "seeds": [100, 101, 102, 103, 104],
+                               "development": {"configurations_tried": 6, "log": "benchmarks/devlog/mbrl-pusher.jsonl"}}}
+    note = provenance_note("mbrl", headline)
+    assert "100–104" in note and "6 configuration(s)" in note and "in-sample" not in note
+    assert provenance_note("tune", old) == ""  # a speed or tuning benchmark has no development seeds to mark

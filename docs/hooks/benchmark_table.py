@@ -3,16 +3,22 @@ docs build, so no number on it is typed by hand.
 
 MkDocs runs this file as a hook (mkdocs.yml: `hooks:`): in docs/benchmarks.md the line
 `<!-- benchmark-results -->` becomes one row per result file (a benchmark of several envs writes one
-file per env, e.g. mbrl-pendulum.json), naming the file, its date and commit, and its headline
-facts, each read from the file; a benchmark script with no file reads "not yet run".
+file per env, e.g. mbrl-pendulum.json), naming the file, its date, commit and command line, and its
+headline facts, each read from the file; a benchmark script with no file reads "not yet run", a file
+without a date "undated", one without its command line "no command line recorded". A statistic over
+seeds (across seeds, P(A > B), steps to a threshold and their ratio) is computed at the build from the
+file's per-seed values, by docs/hooks/results.py (motorlab.intervals, motorlab.stats), never copied
+from the text an older run stored beside them.
 
 tests/test_benchmark_table.py checks every fact in the table against its JSON.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,7 +28,22 @@ PAGE = "benchmarks.md"
 ROOT = Path(__file__).resolve().parents[2]
 BENCHMARKS = ROOT / "benchmarks"
 # modules in benchmarks/ that the benchmarks import: not benchmarks of their own
-HELPERS = frozenset({"provenance", "mbrl_body", "user_reacher_reward"})
+HELPERS = frozenset({"provenance", "mbrl_body", "user_reacher_reward", "bodies"})
+
+
+def _results_hook():
+    """docs/hooks/results.py (MkDocs loads hooks from their files, not as a package)."""
+    if "results" in sys.modules and getattr(sys.modules["results"], "__file__", None) == str(Path(__file__).parent
+                                                                                               / "results.py"):
+        return sys.modules["results"]
+    spec = importlib.util.spec_from_file_location("results", Path(__file__).parent / "results.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+results = _results_hook()
 
 
 @dataclass(frozen=True)
@@ -32,22 +53,45 @@ class Fact:
 
     label: str
     path: tuple[str, ...]
-    form: str  # "count", "ms", "ratio", "percent", "number", "text", "met"
+    # "count", "ms", "ratio", "percent", "number", "text", "met" (or a form of docs/hooks/results.py); over
+    # seeds, computed at the build: "seeds" or "seeds:<form>" (per-seed values), "steps" (steps to a
+    # threshold), "p_better" and "steps_ratio" (path against other)
+    form: str
+    other: tuple[str, ...] = ()  # the second side of "p_better" (B) and "steps_ratio" (the numerator)
+    sides: tuple[str, str] = ("A", "B")  # what "p_better" calls path's side and other's
 
-    def value(self, data: dict[str, Any]) -> Any:
-        for key in self.path:
+    @staticmethod
+    def _at(data: dict[str, Any], path: tuple[str, ...]) -> Any:
+        for key in path:
             data = data[key]
         return data
 
+    def value(self, data: dict[str, Any]) -> Any:
+        return self._at(data, self.path)
+
     def text(self, data: dict[str, Any]) -> str:
-        return f"{self.label} {show(self.value(data), self.form)}"
+        return f"{self.label} {self.shown(data)}".strip()
+
+    def shown(self, data: dict[str, Any]) -> str:
+        value = self.value(data)
+        if self.form.startswith("seeds"):
+            return results.across_text(value, self.form.partition(":")[2] or "number")
+        if self.form == "steps":
+            return results.steps_of(value).text
+        if self.form == "p_better":
+            return results.p_better_text(value, self._at(data, self.other), *self.sides)
+        if self.form == "steps_ratio":
+            return results.ratio_text(value, self._at(data, self.other))
+        return show(value, self.form)
 
     def present(self, data: dict[str, Any]) -> bool:
         """The file has this number (an older run's file may not)."""
-        for key in self.path:
-            if not isinstance(data, dict) or key not in data:
-                return False
-            data = data[key]
+        for path in (self.path, self.other):
+            at = data
+            for key in path:
+                if not isinstance(at, dict) or key not in at:
+                    return False
+                at = at[key]
         return True
 
 
@@ -66,18 +110,15 @@ def show(value: Any, form: str) -> str:
         return f"{100 * value:.0f}%"
     if form == "number":
         return f"{value:,.3g}" if abs(value) < 1000 else f"{value:,.0f}"
+    if form in results.FORMS:
+        return results.FORMS[form](value)
     return str(value)
 
 
 def facts(benchmark: str, data: dict[str, Any]) -> list[Fact]:
     """The headline facts of a result file, by the benchmark that wrote it."""
     if benchmark == "mbrl":
-        return [Fact("loop:", ("loop", "steps_to_threshold", "text"), "text"),
-                Fact("target", ("targets", "loop_seeds", "target"), "text"),
-                Fact("target met:", ("targets", "loop_seeds", "met"), "met"),
-                Fact("SAC:", ("sac", "steps_to_threshold", "text"), "text"),
-                Fact("SAC / loop", ("ratio_sac_over_loop", "text"), "text"),
-                Fact("plan per control step:", ("targets", "plan_ms", "median"), "ms")]
+        return [f for f in _mbrl() if f.present(data)]
     if benchmark == "plan_latency":
         return [*(Fact(f"{env}:", ("envs", env, "ms_median"), "ms") for env in data["envs"]),
                 Fact("every env under 50 ms:", ("all_met",), "met")]
@@ -91,11 +132,21 @@ def facts(benchmark: str, data: dict[str, Any]) -> list[Fact]:
     return [f for f in (named(data) if named else []) if f.present(data)] + target_facts(data)
 
 
+def _mbrl() -> list[Fact]:
+    return [Fact("loop:", ("loop", "steps_to_threshold"), "steps"),
+            Fact("target", ("targets", "loop_seeds", "target"), "text"),
+            Fact("target met:", ("targets", "loop_seeds", "met"), "met"),
+            Fact("SAC:", ("sac", "steps_to_threshold"), "steps"),
+            Fact("SAC / loop", ("loop", "steps_to_threshold"), "steps_ratio", other=("sac", "steps_to_threshold")),
+            Fact("plan per control step:", ("targets", "plan_ms", "median"), "ms")]
+
+
 def _sar_study(data: dict[str, Any]) -> list[Fact]:
     learning = data.get("learning") or {}
     where = f"{learning.get('env')} at {learning.get('env_steps_per_seed', 0):,} env steps"
-    return [Fact(f"success on {where}, reference SAC:", ("learning", "reference_sac", "success", "value"), "percent"),
-            Fact("sar-sac-fast:", ("learning", "sar_sac_fast", "success", "value"), "percent"),
+    return [Fact(f"success on {where}, reference SAC:", ("learning", "reference_sac", "success_per_seed"),
+                 "seeds:percent"),
+            Fact("sar-sac-fast:", ("learning", "sar_sac_fast", "success_per_seed"), "seeds:percent"),
             Fact("sar-sac-fast's env steps/s over the reference's:", ("speedup_over_reference", "sar_sac_fast"),
                  "ratio")]
 
@@ -103,17 +154,20 @@ def _sar_study(data: dict[str, Any]) -> list[Fact]:
 # benchmark -> the numbers its row shows before its targets (each a path into its JSON)
 NAMED = {
     "sar_study": _sar_study,
-    "sar_robot": lambda d: [Fact("return, SAR-RL:", ("sar_rl", "value"), "number"),
-                            Fact("RL-E2E:", ("rl_e2e", "value"), "number"),
-                            Fact("P(SAR-RL > RL-E2E):", ("p_sar_better", "p"), "number"),
-                            Fact("wall:", ("wall_seconds",), "number")],
+    "sar_robot": lambda d: [Fact("return, SAR-RL:", ("sar_rl", "per_seed"), "seeds"),
+                            Fact("RL-E2E:", ("rl_e2e", "per_seed"), "seeds"),
+                            Fact("", ("sar_rl", "per_seed"), "p_better", other=("rl_e2e", "per_seed"),
+                                 sides=("SAR-RL", "RL-E2E")),
+                            Fact("wall:", ("wall_seconds",), "min_of_s")],
     "sar_legs": lambda d: [Fact("full study projected, hours on this machine:", ("study", "projected_full_hours"),
                                 "number"),
                            Fact("on a Ray cluster, a machine per seed:",
                                 ("study", "projected_full_hours_ray_cluster_one_machine_per_seed"), "number"),
                            Fact(f"at 1/{d.get('study', {}).get('scale')} of the budgets, return SAR-RL:",
-                                ("study", "arms", "sar-rl", "return", "value"), "number"),
-                           Fact("RL-E2E:", ("study", "arms", "rl-e2e", "return", "value"), "number")],
+                                ("study", "arms", "sar-rl", "return", "per_seed"), "seeds"),
+                           Fact("RL-E2E:", ("study", "arms", "rl-e2e", "return", "per_seed"), "seeds"),
+                           Fact("", ("study", "arms", "sar-rl", "return", "per_seed"), "p_better",
+                                other=("study", "arms", "rl-e2e", "return", "per_seed"), sides=("SAR-RL", "RL-E2E"))],
     "dynamics_fit": lambda d: [Fact("fit speedup over the reference:", ("speedup",), "ratio"),
                                Fact("validation MSE / the reference's:", ("mse_ratio",), "ratio")],
     "dynamics_collect": lambda d: [Fact("transitions/s over the reference's:", ("ratio",), "ratio")],
@@ -124,13 +178,16 @@ NAMED = {
                       Fact("return:", ("motorlab", "return_mean"), "number"),
                       Fact("plan speedup over EvoTorch CEM:", ("plan_speedup",), "ratio")],
     "pendulum_steps_to_success": lambda d: [
-        Fact("plain, motorlab / SB3 steps:", ("plain", "steps_ratio_motorlab_over_sb3", "text"), "text"),
-        Fact("delayed:", ("delayed_tau_0.2s_action_and_observation", "steps_ratio_motorlab_over_sb3", "text"), "text")],
+        Fact("plain, motorlab / SB3 steps:", ("plain", "sb3_ppo_defaults"), "steps_ratio",
+             other=("plain", "motorlab_fast")),
+        Fact("delayed:", ("delayed_tau_0.2s_action_and_observation", "sb3_ppo_defaults"), "steps_ratio",
+             other=("delayed_tau_0.2s_action_and_observation", "motorlab_fast"))],
     "sar_study_overlap": lambda d: [Fact("two chains at once over one after another:", ("speedup",), "ratio"),
                                     Fact("same numbers both ways:", ("same_numbers",), "met")],
-    "tune": lambda d: [Fact("tuned / defaults steps:", ("ratio_tuned_over_defaults", "text"), "text"),
-                       Fact("tuned median:", ("motorlab_tuned", "median_text"), "text"),
-                       Fact("defaults:", ("sb3_ppo_defaults_history10", "median_text"), "text"),
+    "tune": lambda d: [Fact("tuned / defaults steps:", ("sb3_ppo_defaults_history10", "censored"), "steps_ratio",
+                            other=("motorlab_tuned", "censored")),
+                       Fact("tuned:", ("motorlab_tuned", "censored"), "steps"),
+                       Fact("defaults:", ("sb3_ppo_defaults_history10", "censored"), "steps"),
                        Fact("wall minutes:", ("wall_minutes",), "number"),
                        Fact("ratio met:", ("targets", "ratio_met"), "met"),
                        Fact("minutes met:", ("targets", "minutes_met"), "met")],
@@ -160,8 +217,13 @@ def result_files(script: str, results: Path) -> list[Path]:
     return sorted(p for p in results.glob("*.json") if p.stem == script or p.stem.startswith(f"{script}-"))
 
 
+UNDATED = "**undated**"
+NO_COMMAND = "**no command line recorded**"
+
+
 def dated(path: Path, data: dict[str, Any]) -> str:
-    """The run's date: the file's own, else the day its last version was committed."""
+    """The run's date, from the file; a file without one is shown undated, with the day its last
+    version was committed (when the run happened is not known: only when it was kept)."""
     if isinstance(data.get("date"), str):
         return data["date"][:10]
     try:
@@ -169,16 +231,46 @@ def dated(path: Path, data: dict[str, Any]) -> str:
                              text=True, timeout=30).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         day = ""
-    return day or "undated"
+    return f"{UNDATED} (file committed {day})" if day else UNDATED
 
 
-def rows(results: Path = BENCHMARKS / "results") -> list[tuple[str, str, str, str]]:
-    """(script, file, date and commit, facts) per result file; a script without one: "not yet run"."""
+def command(script: str, data: dict[str, Any]) -> str:
+    """The command line the run recorded (provenance.Recorder's argv), or that it recorded none."""
+    argv = data.get("argv")
+    if not isinstance(argv, list):
+        return NO_COMMAND
+    line = " ".join([f"benchmarks/{script}.py", *map(str, argv)]).replace("`", "'").replace("|", "\\|")
+    return f"`{line}`"
+
+
+# benchmarks whose numbers are claims about learning: their settings are chosen on development seeds,
+# and a result is a headline only when provenance.Harness recorded it on held-out seeds
+SCIENCE = frozenset({"mbrl", "mbrl_bodies"})
+
+
+def provenance_note(script: str, data: dict[str, Any]) -> str:
+    """For a science benchmark: "**in-sample**" when its file is no headline (recorded on the seeds
+    its settings were chosen on), else the held-out seeds and the development log's count."""
+    if script not in SCIENCE:
+        return ""
+    prov = data.get("provenance") or {}
+    if prov.get("mode") != "headline":
+        return ("**in-sample** (recorded on development seeds, the ones its settings were chosen on; "
+                "not a headline): ")
+    dev = prov.get("development") or {}
+    seeds = prov.get("seeds") or []
+    return (f"headline on held-out seeds {seeds[0]}–{seeds[-1]}, after {dev.get('configurations_tried', 0)} "
+            f"configuration(s) in `{dev.get('log')}`: ")
+
+
+def rows(results: Path = BENCHMARKS / "results") -> list[tuple[str, str, str, str, str]]:
+    """(script, file, date and commit, command line, facts) per result file; a script without one:
+    "not yet run"."""
     out = []
     for script in scripts():
         files = result_files(script, results)
         if not files:
-            out.append((f"`{script}.py`", "–", "–", "not yet run"))
+            out.append((f"`{script}.py`", "–", "–", "–", "not yet run"))
         for path in files:
             data = json.loads(path.read_text())
             commit = (data.get("git") or {}).get("commit") or ""
@@ -188,12 +280,14 @@ def rows(results: Path = BENCHMARKS / "results") -> list[tuple[str, str, str, st
             shown = "; ".join(f.text(data) for f in facts(data.get("benchmark", script), data))
             if data.get("quick"):
                 shown = f"(a `--quick` smoke run) {shown}"
-            out.append((f"`{script}.py`", f"`{path.name}`", when, shown or "(no headline facts named for it yet)"))
+            shown = f"{provenance_note(script, data)}{shown}"
+            out.append((f"`{script}.py`", f"`{path.name}`", when, command(script, data),
+                        shown or "(no headline facts named for it yet)"))
     return out
 
 
 def render(results: Path = BENCHMARKS / "results") -> str:
-    lines = ["| benchmark | result file | run on | recorded |", "|---|---|---|---|"]
+    lines = ["| benchmark | result file | run on | command line | recorded |", "|---|---|---|---|---|"]
     lines += [f"| {' | '.join(row)} |" for row in rows(results)]
     return "\n".join(lines) + "\n"
 

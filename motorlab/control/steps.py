@@ -465,7 +465,7 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
 
     def aggregate(self, summaries: list[MbrlSummary]) -> dict[str, Any]:
         """Several seeds: each headline number's mean over the seeds (None where a seed has none), the
-        final return's std across seeds and from 4 seeds its IQM with rliable's 95% CI, the seeds' total
+        final return's std across seeds and from 4 seeds its IQM, with rliable's 95% CI from 5, the seeds' total
         wall time."""
         import statistics
 
@@ -481,7 +481,7 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
         finals = [h["final_return_mean"] for h in heads]
         if None not in finals:
             out["final_return_std"] = statistics.stdev(finals)
-            out.update(iqm_keys("final_return", finals))  # the IQM from 4 seeds; an interval from 3
+            out.update(iqm_keys("final_return", finals))  # the IQM from 4 seeds; a confidence interval from 5
         out["wall_seconds"] = sum(h["wall_seconds"] for h in heads)
         return out
 

@@ -209,7 +209,7 @@ def group_statistics(groups: dict[str, list[Path | str]]) -> dict[str, Any]:
     success rate, and the probability that one group beats another (e.g. SAR-RL vs RL-E2E).
 
     Returns:
-        Flat keys "<group>.final_return_mean", "_iqm" (4+ seeds), "_iqm_ci_low" or "_mean_ci_low" (3+ seeds),
+        Flat keys "<group>.final_return_mean", "_iqm" (4+ seeds), "_iqm_ci_low" and "_high" (5+ seeds),
         "<A>.final_return_p_better_than[<B>]", ...
     """
     scores = {g: [trial_scores(_scored(read_json(run_folder(d) / SUMMARY))) for d in ds] for g, ds in groups.items()}

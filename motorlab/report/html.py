@@ -282,8 +282,9 @@ def _video_captions(path: Path, summary: dict[str, Any]) -> dict[str, str]:
 def _finding(label: str, step: str, key: str, value: float, seeds: list[str], values: list[float],
              censored: list[bool] | None = None) -> Finding:
     """A tuning number over seeds (the search's value, or the fresh seeds'), each seed's value, and
-    what the seeds give together (motorlab.intervals: an interval only from 3 seeds on). Steps to
-    success: k of n solved and their Kaplan-Meier median, an unsolved seed shown as "> budget"."""
+    what the seeds give together (motorlab.intervals: a 95% CI from 5 seeds, the seeds' range below).
+    Steps to success: k of n solved and their Kaplan-Meier median, each with its interval named in the
+    text, an unsolved seed shown as "> budget"."""
     censored = censored or [False] * len(values)
     together = {}
     steps = key.rpartition(".")[2] == "steps_to_success"
@@ -292,9 +293,9 @@ def _finding(label: str, step: str, key: str, value: float, seeds: list[str], va
         together = {"aggregate": reached.text, "ci": None, "ci_method": "unsolved seeds censored at their budgets"}
     elif len(values) > 1:
         summary = across_seeds(values)
+        shown = summary.interval  # the 95% CI from 5 seeds, else the seeds' range, named by ci_method
         together = {"aggregate": f"{summary.statistic} {fmt(summary.value)}",
-                    "ci": f"[{fmt(summary.ci[0])}, {fmt(summary.ci[1])}]" if summary.ci else None,
-                    "ci_method": summary.method}
+                    "ci": f"[{fmt(shown[0])}, {fmt(shown[1])}]" if shown else None, "ci_method": summary.method}
     text = f"restricted mean {fmt(value)}" if steps else fmt(value)
     return Finding(label=label, step=step, key=key, text=text, value=value, seeds=seeds,
                    values=[f"> {fmt(v)}" if c else fmt(v) for v, c in zip(values, censored)], **together)

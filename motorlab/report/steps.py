@@ -170,9 +170,9 @@ class CompareKind(StepKind[CompareSettings, Summary]):
         labels = {"final_episode_return": ("final training return (running mean)", "return"),
                   "final_episode_success": ("final training success (last 100)", "percent"),
                   "final_eval_return_mean": ("final evaluation return (curve)", "return"),
-                  "final_return_iqm": ("evaluation return IQM", "return"),
+                  "final_return_iqm": ("evaluation return IQM (95% CI from 5 seeds)", "return"),
                   "final_return_mean": ("evaluation return, mean over seeds", "return"),
-                  "success_rate_iqm": ("evaluation success IQM", "percent"),
+                  "success_rate_iqm": ("evaluation success IQM (95% CI from 5 seeds)", "percent"),
                   "success_rate_mean": ("evaluation success, mean over seeds", "percent")}
         if rest in labels:
             return Metric(key, f"{group}: {labels[rest][0]}", labels[rest][1])
@@ -180,7 +180,7 @@ class CompareKind(StepKind[CompareSettings, Summary]):
 
     def numbers(self, settings: CompareSettings, h: dict[str, Any]) -> list[Number]:
         """Per group its final return and success (learning curves), rliable's IQMs with their 95%
-        CIs, and the probability that one group beats another."""
+        CIs (from 5 seeds, said in the label), and the probability that one group beats another."""
         numbers = []
         for key, value in h.items():
             if value is None or key.endswith(("_ci_low", "_ci_high", ".seeds")):

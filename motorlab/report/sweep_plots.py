@@ -30,7 +30,7 @@ def interval_estimates(metrics: dict[str, dict[str, Any]], path: Path, title: st
             for y, s in enumerate(settings):
                 e = metrics[metric][s]
                 color = f"C{y % 10}"
-                if e.get("ci"):  # an interval only from 3 seeds (motorlab.intervals)
+                if e.get("ci"):  # a confidence interval only from 5 seeds (motorlab.intervals)
                     ax.plot(e["ci"], [y, y], lw=8, alpha=0.35, color=color, solid_capstyle="butt")
                 ax.plot(e["values"], [y] * len(e["values"]), "|", ms=12, color=color, alpha=0.8)
                 centre = e.get("value", e.get("median"))  # steps to success: the Kaplan-Meier median
@@ -49,7 +49,7 @@ def interval_estimates(metrics: dict[str, dict[str, Any]], path: Path, title: st
         return save_figure(fig, path, "Each setting over its seeds (dot): the interquartile mean from 4 seeds, "
                                       "else the mean; steps to success: the Kaplan-Meier median, unsolved seeds "
                                       "censored at their budgets. Bar: the 95% bootstrap confidence interval, "
-                                      "drawn only from 3 seeds. Ticks are single seeds.")
+                                      "drawn only from 5 seeds. Ticks are single seeds.")
 
 
 def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) -> Path | None:
@@ -58,7 +58,7 @@ def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) 
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(7, 0.45 * len(rows) + 1.6))
         for y, (_, p) in enumerate(rows):
-            if p.get("ci"):  # from 3 seeds a side
+            if p.get("ci"):  # from 5 seeds a side
                 ax.plot(p["ci"], [y, y], lw=8, alpha=0.35, color="C0", solid_capstyle="butt")
             ax.plot(p["p"], y, "o", color="C0")
         ax.axvline(0.5, color="gray", ls="--", lw=1)
@@ -68,7 +68,7 @@ def improvement(pairs: dict[str, list[dict[str, Any]]], path: Path, title: str) 
         ax.set_xlabel("probability that A is better than B (fewer steps for steps to success)")
         ax.set_title(f"{title}: probability of improvement", fontsize=10)
         return save_figure(fig, path, "Probability that setting A beats setting B on a random pair of seeds, with "
-                                      "its 95% confidence interval where both have 3 seeds or more; 0.5 is a coin "
+                                      "its 95% confidence interval where both have 5 seeds or more; 0.5 is a coin "
                                       "flip.")
 
 

@@ -389,7 +389,8 @@ def _step_results(step: Step, headline: dict[str, Any], beside: list[str], run_d
 
 def _findings(recipe: Recipe, results: dict[str, _Outcome], console: Console) -> list[Finding]:
     """The numbers the recipe is about (its [[findings]], else each step's own), each with its
-    seeds and, where there are several, rliable's IQM and 95% bootstrap CI across them."""
+    seeds and, where there are several, what they give together (motorlab.intervals): rliable's IQM
+    from 4 seeds, its 95% bootstrap CI from 5, the seeds' range (named so) below."""
     by_name = {s.name: s for s in recipe.steps}
     specs = recipe.findings or [FindingSpec(step=s.name, key=key) for s in recipe.steps
                                 for key in s.kind.default_findings(s.settings, results[s.name].headline)]
@@ -413,9 +414,10 @@ def _findings(recipe: Recipe, results: dict[str, _Outcome], console: Console) ->
             if spec.key == "steps_to_success":
                 together = _censored_steps(step, outcome)
             elif all(isinstance(v, (int, float)) for v in values):
-                summary = across_seeds(values)  # the IQM from 4 seeds, an interval from 3
+                summary = across_seeds(values)  # the IQM from 4 seeds; a CI from 5, the seeds' range below
+                interval = summary.interval
                 together = {"aggregate": f"{summary.statistic} {metric.text(summary.value, {})}",
-                            "ci": metric.interval(*summary.ci) if summary.ci else None, "ci_method": summary.method}
+                            "ci": metric.interval(*interval) if interval else None, "ci_method": summary.method}
             finding = dataclasses.replace(finding, seeds=seeds, values=shown, **together)
         if pooled := _pooled_success(step, outcome, spec.key):
             finding = dataclasses.replace(finding, pooled=pooled.text(partial(metric.text, values={})))
@@ -424,7 +426,8 @@ def _findings(recipe: Recipe, results: dict[str, _Outcome], console: Console) ->
 
 
 def _censored_steps(step: Step, outcome: _Outcome) -> dict[str, Any]:
-    """Steps to success over seeds: "k of n seeds" and the Kaplan-Meier median, a seed that never
+    """Steps to success over seeds: "k of n seeds" with its Wilson interval and the Kaplan-Meier
+    median with its bootstrap interval from 5 seeds (each named in the text), a seed that never
     solved censored at the steps it was allowed (its run's timesteps), never counted as a value."""
     heads = [step.kind.headline(s) for _, s in outcome.runs]
     steps = [h.get("steps_to_success") for h in heads]

@@ -167,7 +167,7 @@ def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[st
                                                             "profiles": {}})
     target = mask_secrets(target)  # the sweep's files, plots and report record it
     summary = {"sweep": target, "description": f"{len(labels)} settings × {len(trials) // max(1, len(labels))} "
-               "seeds; IQM from 4 seeds (else the mean), 95% stratified-bootstrap CIs from 3 (rliable)",
+               "seeds; IQM from 4 seeds (else the mean), 95% stratified-bootstrap CIs from 5 (rliable), the seeds' range below",
                "steps": labels, "trials": len(trials),
                "finished": len(done), "failed": len(trials) - len(done), "wall_seconds": round(wall, 2), **flat}
     write_json(sweep_dir / "aggregate.json", {"runs": {s: [t["run_dir"] for t in done if t["setting"] == s]
@@ -189,7 +189,7 @@ def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[st
     return summary
 
 
-COLUMNS = ["setting", "metric", "seeds", "over seeds", "95% CI", "mean", "per seed"]
+COLUMNS = ["setting", "metric", "seeds", "over seeds", "interval", "mean", "per seed"]
 
 
 def _rows(metrics: dict[str, dict[str, Any]]) -> list[list[str]]:

@@ -45,21 +45,26 @@ class Fresh:
         return across_seeds(self.values).text(number)
 
     def to_summary(self) -> dict[str, Any]:
-        """summary.json's fresh_* keys. Steps to success: k of n solved and the censored median,
-        no interval; otherwise the IQM from 4 seeds (else the mean), its interval from 3
-        (fresh_ci None below; fresh_ci_method says why)."""
+        """summary.json's fresh_* keys. Steps to success: k of n solved with its Wilson interval and
+        the censored median with its bootstrap interval from 5 seeds (fresh_median_ci); otherwise
+        the IQM from 4 seeds (else the mean), its 95% CI from 5 (fresh_ci None below), and the
+        seeds' range (fresh_range); fresh_ci_method says what the shown interval is, or why none."""
         out = {"fresh_seeds": self.seeds, "fresh_values": self.values, "fresh_censored": [c for _, c in self.scores],
                "fresh_text": self.text}
         if self.objective.censors:
             reached = self.objective.reached(self.scores)
+            # no interval for the restricted mean; the median's is fresh_median_ci
             return {**out, "fresh_value": self.objective.combine(self.values),
                     "fresh_statistic": self.objective.statistic(len(self.scores)), "fresh_ci": None,
-                    "fresh_ci_method": "no interval: unsolved seeds censored at their budgets",
-                    "fresh_solved": reached.solved, "fresh_median": reached.median,
-                    "fresh_median_above": reached.median_above}
+                    "fresh_ci_method": "no interval for the restricted mean: unsolved seeds censored at their budgets",
+                    "fresh_solved": reached.solved, "fresh_solved_ci": list(reached.solved_ci),
+                    "fresh_median": reached.median, "fresh_median_above": reached.median_above,
+                    "fresh_median_ci": reached.median_ci.to_json() if reached.median_ci else None,
+                    "fresh_median_ci_method": reached.median_ci_method}
         s = across_seeds(self.values)
         return {**out, "fresh_value": s.value, "fresh_statistic": s.statistic,
-                "fresh_ci": list(s.ci) if s.ci else None, "fresh_ci_method": s.method}
+                "fresh_ci": list(s.ci) if s.ci else None, "fresh_range": list(s.range) if s.range else None,
+                "fresh_ci_method": s.method}
 
 
 def keep_seed_scores(trial: optuna.Trial | FrozenTrial, scores: list[Score]) -> None:

@@ -155,7 +155,7 @@ def test_study_report_opens_cleanly_and_shows_the_summary_numbers(study, browser
     # the pendulum has no success flag: a success is the maximum return, and the label says so
     assert labels["success (return ≥ 1000)"] == "100%" and labels["falls"] == "0/2"
     assert labels["return"] == "1,000.0 ± 0.0"
-    assert "return IQM" not in {label for label, *_ in numbers["ppo"]}  # 2 seeds: an IQM would trim nothing
+    assert not any(label.startswith("return IQM") for label, *_ in numbers["ppo"])  # 2 seeds: an IQM trims nothing
     assert {label for label, *_ in numbers["ppo"]} >= {"return", "success (return ≥ 1000)", "seeds",
                                                       "trained for (all seeds)"}
 
@@ -181,9 +181,13 @@ def test_study_report_opens_with_its_findings(study, browser):
     assert pid[2:5] == ["pid: success", "100%", "one run"]
     assert pid[5].startswith("episodes: 100% [") and "95% Wilson interval over" in pid[5], pid[5]
     assert "pooled from 1 seed(s)" in pid[5] and "100%, 100%]" not in pid[5]
-    # two seeds: their mean, named so, with no interval over seeds; the pooled episodes' interval
+    # two seeds: their mean, named so, with their range (named so: no CI from 2 seeds) unless they
+    # agree; the pooled episodes' interval
     assert ppo[4].startswith("seed0 ") and ", seed1 " in ppo[4]
-    assert ppo[5].startswith("mean ") and "(n = 2: too few seeds for an interval)" in ppo[5], ppo[5]
+    across = ppo[5].partition("episodes: ")[0]
+    assert across.startswith("mean ") and "95%" not in across, ppo[5]
+    assert ("] (range of 2 seeds, not a confidence interval: one needs 5 seeds)" in across
+            or "(the 2 seeds agree; no confidence interval below 5 seeds)" in across and "[" not in across), ppo[5]
     assert "episodes: " in ppo[5] and "pooled from 2 seed(s)" in ppo[5], ppo[5]
     first = page.evaluate("Array.from(document.querySelectorAll('h3, table.steps, figure')).map(e => e.tagName)")
     assert first[0] == "H3" and first.index("TABLE") > first.index("FIGURE")  # findings, figures, then the steps

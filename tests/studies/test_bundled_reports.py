@@ -45,21 +45,25 @@ def test_report_opens_with_the_recipes_findings_all_filled(bundled, browser):  #
         assert value.strip() and value != "–" and f"{step}.{key}" in summary, label
         seeds = 0 if per_seed == "one run" else len(per_seed.split(", "))
         several += seeds > 1
-        if seeds >= 3:  # an interval and what it is, or that the seeds agree
-            assert ("[" in over_seeds and "95% stratified-bootstrap CI over" in over_seeds
-                    or "seeds agree" in over_seeds), label
-        elif seeds == 2:  # no interval over seeds: the bootstrap of 2 seeds is only their range
-            across, _, pooled = over_seeds.partition("episodes: ")
-            assert "n = 2: too few seeds for an interval" in across and "[" not in across, label
-            assert across.startswith("mean "), label  # the IQM of 2 trims nothing: named the mean
-            if key == "success_rate":  # the episodes of both seeds, pooled: Wilson's interval
-                assert "95% Wilson interval over" in pooled and "pooled from 2 seed(s)" in pooled, label
+        across, _, pooled = over_seeds.partition("episodes: ")
+        if key == "steps_to_success":  # k of n and the median, each interval named in the text
+            assert seeds < 2 or "95% Wilson interval" in across, label
+        elif seeds >= 5:  # a 95% CI and what it is, or that the seeds agree
+            assert ("[" in across and f"95% stratified-bootstrap CI over {seeds} seeds" in across
+                    or "seeds agree" in across), label
+        elif seeds >= 2:  # no CI from 2-4 seeds (a bootstrap of them is about their range): the range, named so
+            assert "95%" not in across, label
+            assert (f"] (range of {seeds} seeds, not a confidence interval" in across
+                    or f"the {seeds} seeds agree" in across and "[" not in across), label
+            assert across.startswith("mean " if seeds < 4 else "IQM "), label  # the IQM of 2-3 trims nothing
+            if key == "success_rate":  # the episodes of every seed, pooled: Wilson's interval
+                assert "95% Wilson interval over" in pooled and f"pooled from {seeds} seed(s)" in pooled, label
         assert_no_zero_width_interval(over_seeds, label)
     assert several or name == "reacher-quick"  # sar-hand-quick's findings are over its 2 seeds
 
 
 def assert_no_zero_width_interval(text: str, label: str) -> None:
-    """No "[x, x]" shown as a 95% CI (the bootstrap of one seed, or of equal seeds)."""
+    """No "[x, x]" shown as an interval (the bootstrap of one seed, or the range of equal seeds)."""
     import re
 
     for low, high in re.findall(r"\[([^,\]]+), ([^\]]+)\]", text):

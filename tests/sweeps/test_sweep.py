@@ -71,19 +71,25 @@ def test_local_sweep_aggregates_with_rliable(local_sweep):
         per_seed = [read_summary(local_sweep / setting / f"seed{s}")["eval_return_mean"] for s in (0, 1)]
         entry = details["metrics"]["final_return"][setting]
         assert entry["values"] == pytest.approx(per_seed)
-        # two seeds: their mean, named so; no IQM (it would trim nothing) and no interval (a bootstrap of
-        # two seeds is only their range), and the details say why
+        # two seeds: their mean, named so; no IQM (it would trim nothing) and no CI (a bootstrap of two
+        # seeds is only their range): their range, named as such, in the details
         assert summary[f"{setting}.final_return_mean"] == pytest.approx(np.mean(per_seed))
         assert not any(k.startswith(f"{setting}.") and ("_iqm" in k or "_ci_" in k) for k in summary), summary
         assert entry["statistic"] == "mean" and entry["ci"] is None
-        assert entry["method"] == "n = 2: too few seeds for an interval"
+        assert entry["range"] == pytest.approx([min(per_seed), max(per_seed)])
+        assert entry["method"] == ("range of 2 seeds, not a confidence interval: one needs 5 seeds"
+                                   if per_seed[0] != per_seed[1] else "the 2 seeds agree; no confidence interval "
+                                   "below 5 seeds")
         assert summary[f"{setting}.seeds"] == 2
         assert 0 <= summary[f"{setting}.success_rate_mean"] <= 1
         # 256 steps never solve it: both censored at the budget, never a value, and no median
         assert summary[f"{setting}.steps_to_success_unsolved"] == 2
         assert summary[f"{setting}.steps_to_success_solved"] == 0
         assert summary[f"{setting}.steps_to_success_median"] is None
-        assert details["metrics"]["steps_to_success"][setting]["text"] == "0 of 2 seeds; median > 256 (budget)"
+        steps = details["metrics"]["steps_to_success"][setting]
+        assert steps["text"] == ("0 of 2 seeds, 95% Wilson interval [0%, 66%]; median > 256 (budget), no interval "
+                                 "(n = 2: too few seeds for a confidence interval, which needs 5)")
+        assert steps["solved_ci"][0] == 0.0 and steps["median_ci"] is None
     p = summary[f"{LR3}.final_return_p_better_than[{LR1}]"]
     a = details["metrics"]["final_return"][LR3]["values"]
     b = details["metrics"]["final_return"][LR1]["values"]
@@ -97,7 +103,7 @@ def test_local_sweep_aggregates_with_rliable(local_sweep):
         assert_png(local_sweep / "plots" / name)
     assert LR3 in (local_sweep / "table.txt").read_text()
     table = (local_sweep / "table.txt").read_text()
-    assert "mean " in table and "n = 2: too few seeds for an interval" in table
+    assert "mean " in table and ("range of 2 seeds, not a confidence interval" in table or "seeds agree" in table)
     html = (local_sweep / "report.html").read_text()
     assert f'data-key="{LR3}.final_return_mean"' in html
 
@@ -203,15 +209,25 @@ def test_stats_iqm_improvement_and_direction(monkeypatch):
     pair = details["probability_of_improvement"]["final_return"][0]
     # every a above every b: each resample gives P = 1, and a point is shown as no interval
     assert pair["p"] == 1.0 and pair["ci"] is None and "do not overlap" in pair["method"]
-    mixed = aggregate({"a": [{"final_return": (float(v), False)} for v in (1, 3, 5, 7)],
-                       "b": [{"final_return": (float(v), False)} for v in (2, 4, 6, 8)]})[1]
+    mixed = aggregate({"a": [{"final_return": (float(v), False)} for v in (1, 3, 5, 7, 9)],
+                       "b": [{"final_return": (float(v), False)} for v in (2, 4, 6, 8, 10)]})[1]
     pair = mixed["probability_of_improvement"]["final_return"][0]
-    assert pair["ci"][0] < pair["p"] < pair["ci"][1] and "over 4 and 4 seeds" in pair["method"]
+    assert pair["ci"][0] < pair["p"] < pair["ci"][1] and "over 5 and 5 seeds" in pair["method"]
+    few = aggregate({"a": [{"final_return": (float(v), False)} for v in (1, 3, 5, 7)],
+                     "b": [{"final_return": (float(v), False)} for v in (2, 4, 6, 8)]})[1]
+    assert few["probability_of_improvement"]["final_return"][0]["ci"] is None  # 4 a side: no CI
+    tied = aggregate({"a": [{"final_return": (0.0, False)}] * 5, "b": [{"final_return": (0.0, False)}] * 5})[1]
+    pair = tied["probability_of_improvement"]["final_return"][0]
+    assert pair["p"] == 0.5 and pair["method"].startswith("all tied") and "overlap" not in pair["method"]
     assert flat["a.steps_to_success_p_better_than[b]"] == 1.0  # fewer steps is better
     # steps: 4 of b's 8 seeds censored at 500; the median is Kaplan-Meier's, never a mean of budgets
     assert flat["b.steps_to_success_unsolved"] == 4 and flat["b.steps_to_success_solved"] == 4
     assert flat["b.steps_to_success_median"] == 500.0  # half solved at 500: the KM CDF reaches 0.5 there
     assert flat["a.steps_to_success_median"] == 100.0
+    # the median's bootstrap interval (8 seeds): b's median is censored in over a third of the resamples
+    b_ci = details["metrics"]["steps_to_success"]["b"]["median_ci"]
+    assert b_ci["high"] is None and b_ci["high_above_budget"] and b_ci["above"] == 500
+    assert details["metrics"]["steps_to_success"]["a"]["median_ci"]["low"] == 100.0
     assert not any(k.startswith(("a.steps_to_success_", "b.steps_to_success_")) and k.endswith(("_iqm", "_mean"))
                    for k in flat)
     assert aggregate(runs)[0] == flat  # a fixed bootstrap state: the same numbers every time
@@ -288,12 +304,8 @@ def test_study_with_seeds_trains_them_in_parallel_and_evaluates_each(tmp_path):
     summary = read_summary(out)
     returns = [read_summary(evals / f"seed{s}")["return_mean"] for s in range(3)]
     assert summary["on-delay.seeds"] == 3 and summary["on-delay.return_mean"] == pytest.approx(np.mean(returns))
-    # 3 seeds: no IQM (it would be the mean); the mean's 95% interval where the seeds differ at all
-    if len(set(returns)) > 1:
-        assert (summary["on-delay.return_mean_ci_low"] <= summary["on-delay.return_mean"]
-                <= summary["on-delay.return_mean_ci_high"])
-    else:
-        assert "on-delay.return_mean_ci_low" not in summary
+    # 3 seeds: no IQM (it would be the mean) and no 95% CI (a bootstrap of 3 seeds is about their range)
+    assert not any(k.startswith("on-delay.return_") and "_ci_" in k for k in summary), summary
     assert summary["fast.seeds"] == 3 and "fast.return_iqm" not in summary and "on-delay.return_iqm" not in summary
 
     again = run_cli("run", recipe, "--out", out, "--resume")  # resumes: every seed kept

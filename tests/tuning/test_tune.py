@@ -272,23 +272,33 @@ def test_steps_objective_censors_unsolved_seeds_and_never_shows_the_budget_as_a_
     assert scores == [(800.0, False), (1600.0, False), (3000.0, True)]
     assert objective.combine([v for v, _ in scores]) == pytest.approx(1800.0)
     assert objective.statistic(3) == "restricted mean"
-    assert objective.describe(scores, number) == ("2 of 3 seeds; median 1,600 steps (Kaplan–Meier); "
-                                                 "restricted mean 1,800")
+    assert objective.describe(scores, number) == (
+        "2 of 3 seeds, 95% Wilson interval [21%, 94%]; median 1,600 steps (Kaplan–Meier), no interval "
+        "(n = 3: too few seeds for a confidence interval, which needs 5); restricted mean 1,800")
     assert seeds_text(objective, scores) == "800, 1,600, > 3,000"
     fresh = Fresh([100, 101, 102], scores, objective).to_summary()
     assert (fresh["fresh_solved"], fresh["fresh_median"], fresh["fresh_ci"]) == (2, 1600.0, None)
+    assert fresh["fresh_solved_ci"] == pytest.approx([0.2077, 0.9385], abs=1e-4)  # Wilson, 2 of 3
+    assert fresh["fresh_median_ci"] is None and "too few seeds" in fresh["fresh_median_ci_method"]
     assert fresh["fresh_censored"] == [False, False, True]
     # fewer than half solved: no median, only a bound; the report's finding says so
     few = [(800.0, False), (3000.0, True), (3000.0, True)]
-    assert objective.describe(few, number).startswith("1 of 3 seeds; median > 3,000 (budget)")
+    assert objective.describe(few, number).startswith("1 of 3 seeds, 95% Wilson interval [6%, 79%]; "
+                                                      "median > 3,000 (budget)")
     finding = _finding("steps", "fresh", "steps_to_success", 2266.7, ["seed0", "seed1", "seed2"],
                        [v for v, _ in few], [c for _, c in few])
     assert finding.values == ["800", "> 3,000", "> 3,000"]
-    assert finding.aggregate.startswith("1 of 3 seeds; median > 3,000") and finding.ci is None
-    # a return objective keeps the across-seed rule: the mean below 4 seeds, its interval from 3
+    assert finding.aggregate.startswith("1 of 3 seeds, 95% Wilson interval") and finding.ci is None
+    assert "median > 3,000 (budget)" in finding.aggregate
+    # a return objective keeps the across-seed rule: the mean below 4 seeds, a CI from 5, the range below
     returns = Objective.make("final_return", None)
     assert returns.statistic(3) == "mean" and returns.statistic(4) == "IQM"
-    assert Fresh([100, 101], [(10.0, False), (20.0, False)], returns).to_summary()["fresh_ci"] is None
+    two = Fresh([100, 101], [(10.0, False), (20.0, False)], returns).to_summary()
+    assert two["fresh_ci"] is None and two["fresh_range"] == [10.0, 20.0]
+    assert "range of 2 seeds" in two["fresh_ci_method"]
+    five = Fresh(list(range(5)), [(float(v), False) for v in (10, 20, 30, 40, 50)], returns).to_summary()
+    assert 10.0 <= five["fresh_ci"][0] < five["fresh_ci"][1] <= 50.0
+    assert five["fresh_ci_method"] == "95% stratified-bootstrap CI over 5 seeds"
 
 
 def test_a_search_records_no_credential_of_its_target(tmp_path):
