@@ -668,6 +668,10 @@ def write_runs(args, name: str, sac: list[dict], oracle: list[dict] | None, loop
     return path
 
 
+# MbrlSettings fields that differ between a configuration's runs (scripts/devlog_from_history.py drops them too)
+PER_RUN = ("seed", "until_return", "resume")
+
+
 def eval_interval(name: str, budget: int, overrides: dict) -> int:
     """The loop's env steps per round (it evaluates after each): SAC is evaluated as often. A round of
     episodes that end early (the pendulum) is shorter: capped at the loop's STEPS_PER_ROUND."""
@@ -742,15 +746,15 @@ def main(argv: list[str] | None = None) -> None:
     # every setting the numbers depend on, resolved (the catalogue's entries included): its hash is the
     # configuration the development log counts, and a headline's record
     rounds = QUICK_LOOP["rounds"] if args.quick else None
-    resolved = MbrlSettings(**loop_settings(name, 0, budget, rounds, None, overrides)).model_dump(mode="json")
-    resolved.pop("seed")
+    resolved = {k: v for k, v in MbrlSettings(**loop_settings(name, 0, budget, rounds, None, overrides))
+                .model_dump(mode="json").items() if k not in PER_RUN}
     settings = {"env": name, "env_id": env["id"], "threshold": env["threshold"], "loop_budget": budget,
                 "loop": resolved, "sac": {"cap": args.sac_steps, "eval_every": args.eval_every,
                                           "variants": sac_params, "full": args.sac_full},
                 "eval_episodes": EVAL_EPISODES, "oracle": {"episodes": args.oracle_episodes, **oracle_settings},
                 "fixed_budgets": budgets}
     harness = Harness("mbrl")
-    run = harness.start(seeds, settings, log=f"mbrl-{name}{'-quick' if args.quick else ''}")
+    run = harness.start(seeds, settings, log=f"mbrl-{name}{'-quick' if args.quick else ''}", in_sample_key="loop")
     started = time.perf_counter()
     walls: dict[str, float | None] = {}
     say(f"{name} ({env['id']}): {run.mode} run on seeds {seeds}; threshold {env['threshold']}; loop budget "
@@ -890,9 +894,9 @@ def main(argv: list[str] | None = None) -> None:
         out["loop_resumed_seeds"] = [r["seed"] for r in loop if r["resumed"]]
     if args.keep:
         out["runs"] = str(write_runs(args, name, sac, oracle, loop))
-    seed_free = {f"loop seed {r['seed']}": {k: v for k, v in r["settings_resolved"].items() if k not in ("seed",
-                 "until_return", "resume")} for r in loop}
-    expected = {k: v for k, v in resolved.items() if k not in ("until_return", "resume")}
+    seed_free = {f"loop seed {r['seed']}": {k: v for k, v in r["settings_resolved"].items() if k not in PER_RUN}
+                 for r in loop}
+    expected = json.loads(json.dumps(resolved))
     for where, used in seed_free.items():  # each seed's process resolved the settings itself: the same?
         differ = sorted(k for k in {*used, *expected} if used.get(k) != expected.get(k))
         if differ:

@@ -188,9 +188,12 @@ class Harness:
                  devlog: Path = DEVLOG):
         self.name, self.seeds, self.results, self.devlog = name, seeds, results, devlog
 
-    def start(self, seeds: list[int], settings: Any, *, log: str | None = None) -> HarnessRun:
+    def start(self, seeds: list[int], settings: Any, *, log: str | None = None,
+              in_sample_key: str | None = None) -> HarnessRun:
         """Begin a run on `seeds` with `settings` (every setting it uses, resolved: the catalogue's
-        included); `log`: the devlog's name (default the harness's, e.g. mbrl-reacher per env)."""
+        included); `log`: the devlog's name (default the harness's, e.g. mbrl-reacher per env);
+        `in_sample_key`: the part of the settings whose development runs a headline shows as its
+        in-sample numbers (default: runs with the same hash of all of them)."""
         mode = self.seeds.mode(list(seeds))
         recorder = Recorder(self.name, results=self.results)
         if mode == "headline":
@@ -200,7 +203,7 @@ class Harness:
                                  f"uncommitted: {', '.join(dirty) or recorder.git.get('error')}. Commit, or run "
                                  f"from a worktree of the commit (git worktree add)")
         return HarnessRun(self, list(seeds), mode, json.loads(json.dumps(settings, default=str)), recorder,
-                          log or self.name)
+                          log or self.name, in_sample_key)
 
 
 @dataclass
@@ -211,6 +214,7 @@ class HarnessRun:
     settings: Any
     recorder: Recorder
     log: str
+    in_sample_key: str | None = None
 
     @property
     def settings_hash(self) -> str:
@@ -246,9 +250,13 @@ class HarnessRun:
         if end.get("changed_during_run"):
             raise SystemExit("the code changed during the headline run (a commit or an edit): nothing recorded; run "
                              "it again from a worktree of one commit")
-        same = [e for e in entries if e["settings_hash"] == self.settings_hash]
+        key = self.in_sample_key
+        same = [e for e in entries if (e["settings_hash"] == self.settings_hash if key is None else
+                                       isinstance(e.get("settings"), dict) and key in e["settings"]
+                                       and e["settings"][key] == self.settings.get(key))]
         development = {"log": f"benchmarks/devlog/{self.log}.jsonl", "configurations_tried": configurations_tried(entries),
                        "runs": len(entries), "runs_with_these_settings": len(same),
+                       "these_settings": "all of them" if key is None else f"the same {key!r} settings",
                        "in_sample": [{"seeds": e["seeds"], "date": e["date"], "result": e["result"]} for e in same]}
         return self.recorder.record({**result, "provenance": {
             "mode": "headline", "seeds": self.seeds, "seed_plan": {"development": _span(self.harness.seeds.development),

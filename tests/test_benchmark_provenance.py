@@ -133,3 +133,13 @@ def test_a_headline_needs_committed_code_and_refuses_code_that_changed(tmp_path,
     with pytest.raises(SystemExit, match="changed during the headline"):
         run.finish({"r": 1})
     assert not (tmp_path / "results").exists()
+
+
+def test_a_headlines_in_sample_numbers_can_be_matched_on_one_part_of_its_settings(tmp_path, monkeypatch, capsys):
+    _clean(monkeypatch)
+    harness = Harness("demo", PLAN, results=tmp_path / "results", devlog=tmp_path / "devlog")
+    harness.start([0], {"loop": {"h": 15}, "sac": "3 seeds"}).finish({"k": 5})  # the loop as the headline runs it
+    harness.start([0], {"loop": {"h": 20}, "sac": "3 seeds"}).finish({"k": 2})
+    out = harness.start([100], {"loop": {"h": 15}, "sac": "5 seeds, tuned"}, in_sample_key="loop").finish({"k": 3})
+    dev = out["provenance"]["development"]
+    assert [e["result"] for e in dev["in_sample"]] == [{"k": 5}] and dev["configurations_tried"] == 2
