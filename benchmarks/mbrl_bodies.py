@@ -1,0 +1,466 @@
+"""motorlab's model-based defaults on generated bodies no one tuned them on (issue 53, item 3).
+
+    .venv/bin/python benchmarks/mbrl_bodies.py [--bodies 100-109] [--only 100,101] [--keep DIR] [--resume] [--quick]
+
+The bodies: benchmarks/bodies.py's generated planar arms (2-4 links, random lengths, masses, damping and
+torques; half vertical, with gravity), reaching a new random target every episode. A body's generator
+seed is the seed the harness judges (benchmarks/provenance.py, Harness("mbrl_bodies")): development
+bodies 0-99 (settings are chosen on them; a run writes one line to benchmarks/devlog/mbrl_bodies.jsonl),
+headline bodies 100-999, of which this benchmark reports 100-109 (benchmarks/results/mbrl_bodies.json,
+at a commit, with the hash of every setting and the count of configurations the devlog tried).
+Odd seeds are muscle arms (bodies:GeneratedMuscleArm-sN-v0: an antagonist pair of MuJoCo muscles per
+joint, excitations in [0, 1]), even seeds motor arms (bodies:GeneratedArm-sN-v0): 5 and 5 of 100-109.
+
+Per body, on the same 10 evaluation episodes (reset seeds N * 1,000,000 + 900,000 + j, j < 10: the loop's
+own evaluation seeds with its seed = N, so a headline body meets episodes no development run played):
+  random   uniform random actions (the action space seeded with each episode's reset seed)
+  oracle   motorlab.control.oracle.oracle_episodes: CEM on the true simulator, its defaults (horizon 15,
+           population 100, 3 iterations, 10 elites), the planner seeded with N
+  one-shot as a user runs it, through motorlab's Python API (the CLI's steps): dynamics collect (400
+           random episodes) -> dynamics fit --learn-reward -> mpc with the user's torch reward
+           (--reward bodies:reward) and with the learned reward head (--reward learned)
+  loop     motorlab mbrl --reward bodies:reward, 3,000 env steps (max_env_steps; rounds never bind),
+           its evaluation after the round that reaches the budget
+No catalogue entry and no per-body setting: motorlab's defaults everywhere, except what a benchmark must
+give (recorded, the same for every body): the env, the reward, episodes, seeds, device=cpu, parallel=10
+(the 10 evaluation episodes in one batched planner call), workers=1 (one core per body).
+
+Score per body and method: the share of the gap between random actions and the oracle it closes,
+(R - R_random) / (R_oracle - R_random) (None where the oracle is no better than random). Targets (the
+issue's): the loop >= 0.70, the one-shot path with the user's reward >= 0.60, with the learned reward
+>= 0.50, each on >= 8 of the 10 headline bodies (the issue gives a count for the loop only; the one-shot
+targets are judged the same way here, and the median share is reported beside k of n, with k of n's
+Wilson interval). "met" is judged only on the 10 headline bodies (null on development bodies).
+
+Compute (2 cores): bodies run --jobs (2) at a time, each in its own process on one torch thread.
+Measured 2026-11-29 on this 2-core machine, shared with other work (load average ~5), development bodies 0
+and 1 side by side: ~16-17 min a body (the oracle 4.8-6 min at 255-340 ms a control step, the loop
+10.5 min, collect + fit + both mpc runs ~0.5 min), 17.2 min for the pair. So 10 headline bodies take
+~85 min on 2 processes: split them, e.g. --only 100-105 --keep DIR (~51 min), then --only 106-109
+--keep DIR --resume (~34 min; the last invocation, with every body of --bodies finished, records).
+An idle machine is faster. --quick (a smoke run: 20 collected episodes, 5 epochs, 2 evaluation
+episodes, a 400-step loop, a cheap oracle): ~1.5 min for 2 bodies; development bodies only, logged to
+benchmarks/devlog/mbrl_bodies-quick.jsonl.
+
+--keep DIR: each body's run folders (DIR/body-sN/{collect,fit,mpc-user,mpc-learned,mbrl}) and its result
+(DIR/body-sN/body.json); --resume reads a finished body back (its settings and commit checked equal to
+this run's) and runs an unfinished one again from scratch. --only: run these bodies of --bodies now and
+record nothing until all are finished (prints what is done and what is left).
+
+Output: ONE JSON object on stdout (progress on stderr): the devlog line (development), or the result
+file's content (headline), or a partial summary (--only with bodies left).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+from provenance import Harness, git_state  # noqa: E402  (benchmarks/ is the script's folder)
+
+NAME = "mbrl_bodies"
+HEADLINE_BODIES = list(range(100, 110))
+SEED_STRIDE, EVAL_OFFSET = 1_000_000, 900_000  # motorlab.control.mbrl's evaluation reset seeds (checked in main)
+TARGETS = {"loop": 0.70, "mpc_user": 0.60, "mpc_learned": 0.50}
+K_NEEDED, N_JUDGED = 8, 10
+BODY_RESULT = "body.json"
+
+
+@dataclass(frozen=True)
+class Budgets:
+    """The benchmark's own numbers, the same for every body."""
+
+    eval_episodes: int = 10
+    collect_episodes: int = 400
+    fit_epochs: int | None = None  # None: dynamics fit's default
+    loop_env_steps: int = 3000
+    oracle: tuple[tuple[str, int], ...] = (("horizon", 15), ("population", 100), ("iterations", 3), ("elites", 10))
+
+
+FULL = Budgets()
+QUICK = Budgets(eval_episodes=2, collect_episodes=20, fit_epochs=5, loop_env_steps=400,
+                oracle=(("horizon", 10), ("population", 50), ("iterations", 2), ("elites", 5)))
+
+
+def say(msg: str) -> None:
+    print(f"[mbrl-bodies {time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
+
+
+def muscles_of(seed: int) -> bool:
+    """Odd generator seeds are muscle arms, even ones motor arms."""
+    return seed % 2 == 1
+
+
+def body_env(seed: int) -> str:
+    import bodies
+
+    return f"bodies:{bodies.env_id(seed, muscles_of(seed))}"
+
+
+def eval_resets(seed: int, episodes: int) -> list[int]:
+    """The evaluation episodes' reset seeds: the loop's own (its seed = the body's), for every method."""
+    return [seed * SEED_STRIDE + EVAL_OFFSET + j for j in range(episodes)]
+
+
+# ---------------------------------------------------------------------------------------- settings
+
+# where a step reads the previous step's folder: recorded as this placeholder (the folder differs per run)
+FROM_PREVIOUS = "<the previous step's folder>"
+
+
+def step_fields(seed: int, budgets: Budgets) -> dict[str, dict[str, Any]]:
+    """What the benchmark gives each motorlab step (everything else: motorlab's defaults)."""
+    env, n = body_env(seed), budgets.eval_episodes
+    mpc = {"env": env, "model": FROM_PREVIOUS, "episodes": n, "parallel": n, "seed": eval_resets(seed, 1)[0],
+           "device": "cpu"}
+    fit = {"transitions": FROM_PREVIOUS, "learn_reward": True, "device": "cpu"}
+    if budgets.fit_epochs is not None:
+        fit["epochs"] = budgets.fit_epochs
+    return {
+        "collect": {"env": env, "episodes": budgets.collect_episodes, "workers": 1},
+        "fit": fit,
+        "mpc_user": {**mpc, "reward": "bodies:reward"},
+        "mpc_learned": {**mpc, "reward": "learned"},
+        "mbrl": {"env": env, "reward": "bodies:reward", "seed": seed, "device": "cpu", "eval_episodes": n,
+                 "parallel": n, "max_env_steps": budgets.loop_env_steps, "rounds": budgets.loop_env_steps},
+    }
+
+
+def kinds() -> dict[str, Any]:
+    from motorlab.control.steps import MBRL, MPC
+    from motorlab.dynamics.steps import DYNAMICS_COLLECT, DYNAMICS_FIT
+
+    return {"collect": DYNAMICS_COLLECT, "fit": DYNAMICS_FIT, "mpc_user": MPC, "mpc_learned": MPC, "mbrl": MBRL}
+
+
+def resolved_settings(seed: int, budgets: Budgets) -> dict[str, Any]:
+    """Every setting a body's run uses: each motorlab step's settings as motorlab resolves them (its
+    defaults, and a catalogue entry if the env had one), the oracle's and random actions'."""
+    from motorlab.api import steps
+
+    step = {name: steps.settings(kinds()[name], **fields).model_dump(mode="json")
+            for name, fields in step_fields(seed, budgets).items()}
+    resets = eval_resets(seed, budgets.eval_episodes)
+    return {**step, "oracle": {**dict(budgets.oracle), "seed": seed, "reset_seeds": resets},
+            "random": {"reset_seeds": resets, "actions": "action_space.sample(), the space seeded with the reset seed"}}
+
+
+BODY_ENV, BODY_SEED = "<the body's env>", "<the body's seed>"
+BODY_RESETS, BODY_FIRST_RESET = "<the body's evaluation reset seeds>", "<the body's first evaluation reset seed>"
+
+
+def body_free(seed: int, settings: dict[str, Any]) -> dict[str, Any]:
+    """A body's resolved settings with what names the body (its env id, its seeds) replaced by placeholders:
+    the same for every body when motorlab gives none of them settings of its own."""
+    env, resets = body_env(seed), settings["oracle"]["reset_seeds"]
+
+    def swap(x: Any) -> Any:
+        if isinstance(x, dict):
+            return {k: swap(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return BODY_RESETS if x == resets else [swap(v) for v in x]
+        return BODY_ENV if x == env else x
+
+    out = swap(settings)
+    out["mbrl"]["seed"] = out["oracle"]["seed"] = BODY_SEED
+    out["mpc_user"]["seed"] = out["mpc_learned"]["seed"] = BODY_FIRST_RESET
+    return out
+
+
+def generator() -> dict[str, Any]:
+    """What makes the bodies (a changed generator is another configuration, as a changed setting is)."""
+    import bodies
+
+    return {"ranges": asdict(bodies.RANGES), "episode_steps": bodies.EPISODE_STEPS, "control_dt": bodies.CONTROL_DT,
+            "action_cost": bodies.ACTION_COST, "muscle_force_margin": bodies.MUSCLE_FORCE_MARGIN,
+            "target_min_reach": bodies.TARGET_MIN_REACH, "muscles": "odd generator seeds"}
+
+
+def run_settings(per_body: dict[str, Any], budgets: Budgets) -> dict[str, Any]:
+    """The run's settings, the same whichever bodies it runs (so the devlog counts configurations, not bodies):
+    the budgets, the generator, and every body's resolved settings with the body named by placeholders.
+    --jobs is not one: each body runs alone on one thread."""
+    return {"budgets": asdict(budgets), "generator": generator(), "per_body": per_body,
+            "per_body_placeholders": {BODY_ENV: "bodies:GeneratedArm-sN-v0 (even N), bodies:GeneratedMuscleArm-sN-v0 "
+                                                "(odd N)", BODY_SEED: "N",
+                                      BODY_RESETS: f"N * {SEED_STRIDE} + {EVAL_OFFSET} + j, j < eval_episodes",
+                                      BODY_FIRST_RESET: f"N * {SEED_STRIDE} + {EVAL_OFFSET}"}}
+
+
+def common_settings(bodies: list[int], resolved: dict[int, dict[str, Any]]) -> dict[str, Any]:
+    """The bodies' shared body-free settings; refused where a body has settings of its own (a catalogue entry)."""
+    free = {s: body_free(s, resolved[s]) for s in bodies}
+    first = free[bodies[0]]
+    for s in bodies[1:]:
+        if free[s] != first:
+            differ = sorted(k for k in first if free[s].get(k) != first[k])
+            raise SystemExit(f"body {s} resolves other settings than body {bodies[0]} ({', '.join(differ)}): a body "
+                             "must go through motorlab's defaults, with no settings of its own")
+    return first
+
+
+# ---------------------------------------------------------------------------------------- one body
+
+
+def random_returns(env_id: str, resets: list[int]) -> list[float]:
+    import gymnasium as gym
+
+    env = gym.make(env_id)
+    out = []
+    for s in resets:
+        env.reset(seed=s)
+        env.action_space.seed(s)
+        total, done = 0.0, False
+        while not done:
+            _, r, terminated, truncated, _ = env.step(env.action_space.sample())
+            total += float(r)
+            done = terminated or truncated
+        out.append(total)
+    env.close()
+    return out
+
+
+def oracle_returns(env_id: str, seed: int, resets: list[int], planner: dict[str, int]) -> tuple[list[float], float]:
+    """The oracle's returns and its median planning time per control step (ms)."""
+    import numpy as np
+
+    from motorlab.control.oracle import oracle_episodes
+
+    result = oracle_episodes(env_id, len(resets), resets, seed=seed, **planner)
+    return [float(x) for x in result.returns], float(np.median(result.plan_ms))
+
+
+def loop_curve(folder: Path) -> list[dict[str, float | None]]:
+    import csv
+
+    def num(x: str | None) -> float | None:
+        return float(x) if x not in (None, "", "None", "nan") else None
+
+    with open(folder / "curve.csv", newline="") as f:
+        return [{"round": int(r["round"]), "env_steps": int(r["env_steps"]), "return_mean": num(r["eval_return_mean"]),
+                 "return_min": num(r.get("eval_return_min"))} for r in csv.DictReader(f)]
+
+
+def run_body(seed: int, budgets: Budgets, folder: Path) -> dict[str, Any]:
+    """One body, every method, in this (spawned) process on one torch thread; writes folder/body.json."""
+    import bodies
+    import numpy as np
+    import torch
+
+    from motorlab.api import steps
+
+    torch.set_num_threads(1)
+    env_id, resets = body_env(seed), eval_resets(seed, budgets.eval_episodes)
+    settings = resolved_settings(seed, budgets)  # resolved here too: the run checks it equals the parent's
+    fields, walls, returns = step_fields(seed, budgets), {}, {}
+    folder.mkdir(parents=True)
+
+    def timed(name: str, fn, *args):
+        start = time.perf_counter()
+        out = fn(*args)
+        walls[name] = round(time.perf_counter() - start, 1)
+        return out
+
+    def step(name: str, previous: Path | None = None):
+        given = {k: (str(previous) if v == FROM_PREVIOUS else v) for k, v in fields[name].items()}
+        checked = steps.settings(kinds()[name], **given)
+        return timed(name, steps.run, kinds()[name], checked, folder / name.replace("_", "-"), False)
+
+    returns["random"] = timed("random", random_returns, env_id, resets)
+    say(f"body {seed}: random {np.mean(returns['random']):.2f}")
+    returns["oracle"], plan_ms = timed("oracle", oracle_returns, env_id, seed, resets, dict(budgets.oracle))
+    say(f"body {seed}: oracle {np.mean(returns['oracle']):.2f} ({plan_ms:.0f} ms a step)")
+    data = step("collect")
+    model = step("fit", data.path)
+    for name in ("mpc_user", "mpc_learned"):
+        result = step(name, model.path)
+        returns[name] = [float(x) for x in np.load(result.path / "episodes.npz")["returns"]]
+        say(f"body {seed}: {name} {np.mean(returns[name]):.2f}")
+    loop = step("mbrl")
+    curve = loop_curve(loop.path)
+    say(f"body {seed}: loop {curve[-1]['return_mean']:.2f} after {curve[-1]['env_steps']} env steps")
+    means = {k: float(np.mean(v)) for k, v in returns.items()}
+    means["loop"] = curve[-1]["return_mean"]
+    out = {"seed": seed, "env_id": env_id, "muscles": muscles_of(seed),
+           "body": asdict(bodies.generate(seed, muscles_of(seed))), "eval_reset_seeds": resets,
+           "return_mean": means, "gap_closed": gap_shares(means), "returns": returns,
+           "loop": {"curve": curve, "env_steps": curve[-1]["env_steps"], "rounds": len(curve)},
+           "oracle_plan_ms_median": plan_ms, "valid_mse": model.summary.get("valid_mse"),
+           "wall_seconds": {**walls, "total": round(sum(walls.values()), 1)},
+           "settings": settings, "git": git_state()}
+    write_json(out, folder / BODY_RESULT)
+    return out
+
+
+def gap_shares(means: dict[str, float | None]) -> dict[str, float | None]:
+    """(R - R_random) / (R_oracle - R_random) per method; None where the oracle does not beat random."""
+    gap = means["oracle"] - means["random"]
+    return {k: (None if gap <= 0 or means.get(k) is None else (means[k] - means["random"]) / gap) for k in TARGETS}
+
+
+def write_json(out: dict, path: Path) -> None:
+    from provenance import write_result
+
+    write_result(out, path)
+
+
+# ---------------------------------------------------------------------------------------- over bodies
+
+
+def judge(results: list[dict[str, Any]], headline: bool) -> dict[str, Any]:
+    """Per method: every body's share, the median, k of n meeting the target (Wilson interval), met."""
+    from motorlab.intervals import wilson
+
+    n = len(results)
+    out = {}
+    for method, target in TARGETS.items():
+        shares = [r["gap_closed"][method] for r in results]
+        k = sum(1 for s in shares if s is not None and s >= target)
+        judged = headline and n == N_JUDGED
+        out[method] = {"target": f">= {target} of the gap on >= {K_NEEDED} of {N_JUDGED} headline bodies",
+                       "per_body": {str(r["seed"]): s for r, s in zip(results, shares)},
+                       "median": statistics.median([s for s in shares if s is not None]) if any(
+                           s is not None for s in shares) else None,
+                       "k": k, "of": n, "k_of_n_wilson_95": list(wilson(k, n)),
+                       "met": (k >= K_NEEDED) if judged else None}
+    return out
+
+
+def summarize(results: list[dict[str, Any]], headline: bool, budgets: Budgets) -> dict[str, Any]:
+    return {
+        "bodies": [r["seed"] for r in results],
+        "targets": judge(results, headline),
+        "return_mean": {str(r["seed"]): r["return_mean"] for r in results},
+        "per_body": [{k: r[k] for k in ("seed", "env_id", "muscles", "body", "eval_reset_seeds", "return_mean",
+                                        "gap_closed", "returns", "loop", "oracle_plan_ms_median", "valid_mse",
+                                        "wall_seconds")} for r in results],
+        "budgets": asdict(budgets),
+        "wall_seconds_per_body": {str(r["seed"]): r["wall_seconds"]["total"] for r in results},
+        "note": "gap_closed = (R - R_random) / (R_oracle - R_random) on the body's evaluation episodes; loop = its "
+                "evaluation after the round that reached the budget of env steps",
+    }
+
+
+# ---------------------------------------------------------------------------------------- main
+
+
+def parse_seeds(text: str) -> list[int]:
+    """"100-109", "0,1,5", "0-2,7" -> a sorted list without repeats."""
+    out: set[int] = set()
+    for part in text.split(","):
+        lo, _, hi = part.strip().partition("-")
+        out.update(range(int(lo), int(hi or lo) + 1))
+    return sorted(out)
+
+
+def parse(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--bodies", type=parse_seeds, default=HEADLINE_BODIES,
+                        help="the generator seeds judged together (default the headline 100-109); development: 0-99")
+    parser.add_argument("--only", type=parse_seeds, default=None,
+                        help="run only these of --bodies now (needs --keep); records when all are finished")
+    parser.add_argument("--jobs", type=int, default=2, help="bodies at once, each in its own process")
+    parser.add_argument("--keep", type=Path, default=None, help="keep each body's run folders and result here")
+    parser.add_argument("--resume", action="store_true", help="with --keep: read finished bodies back")
+    parser.add_argument("--quick", action="store_true", help=f"a smoke run: {asdict(QUICK)}")
+    args = parser.parse_args(argv)
+    if (args.resume or args.only) and not args.keep:
+        parser.error("--resume and --only work on the bodies kept in --keep DIR: give --keep")
+    if args.only and not set(args.only) <= set(args.bodies):
+        parser.error(f"--only {args.only} must be among --bodies {args.bodies}")
+    return args
+
+
+def read_back(seed: int, folder: Path, settings: dict[str, Any], headline: bool) -> dict[str, Any]:
+    """A finished body of an earlier invocation, checked to be this run's (settings; commit for a headline)."""
+    saved = json.loads((folder / BODY_RESULT).read_text())
+    if saved["settings"] != settings:
+        raise SystemExit(f"{folder} was run with other settings: choose another --keep")
+    now = git_state()
+    if headline and (saved["git"].get("commit") != now.get("commit") or saved["git"].get("dirty")):
+        raise SystemExit(f"{folder} was run at another commit ({saved['git'].get('commit')}) or with uncommitted "
+                         "changes: a headline's bodies run at one commit")
+    say(f"body {seed}: read back from {folder}")
+    return saved
+
+
+def in_processes(jobs: list[tuple], workers: int) -> dict[int, dict[str, Any]]:
+    out = {}
+    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+        futures = {pool.submit(run_body, *job): job[0] for job in jobs}
+        for fut in as_completed(futures):
+            r = fut.result()
+            out[r["seed"]] = r
+            say(f"body {r['seed']} done in {r['wall_seconds']['total']} s: gap closed " +
+                ", ".join(f"{k} {v:.2f}" if v is not None else f"{k} -" for k, v in r["gap_closed"].items()))
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = parse(argv)
+    from motorlab.control import mbrl as loop_module
+
+    if (loop_module.SEED_STRIDE, loop_module.EVAL_OFFSET) != (SEED_STRIDE, EVAL_OFFSET):
+        raise SystemExit("the loop's evaluation reset seeds changed: update SEED_STRIDE, EVAL_OFFSET here")
+    # motorlab's own child processes import `bodies` (MOTORLAB_IMPORTS): they need benchmarks/ on their path
+    os.environ["PYTHONPATH"] = os.pathsep.join([str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])])
+    budgets = QUICK if args.quick else FULL
+    harness = Harness(NAME)
+    mode = harness.seeds.mode(args.bodies)
+    if args.quick and mode == "headline":
+        raise SystemExit("--quick is a smoke run: run it on development bodies (0-99)")
+    per_body = common_settings(args.bodies, {s: resolved_settings(s, budgets) for s in args.bodies})
+    settings = run_settings(per_body, budgets)
+    run = harness.start(args.bodies, settings, log=f"{NAME}-quick" if args.quick else None)
+    headline = mode == "headline"
+    now = args.only or args.bodies
+    say(f"{mode} bodies {args.bodies}" + (f", running {now} now" if args.only else "") + f"; budgets {asdict(budgets)}")
+    with tempfile.TemporaryDirectory() as tmp:
+        root = args.keep or Path(tmp)
+        root.mkdir(parents=True, exist_ok=True)
+        results, jobs = {}, []
+        for seed in args.bodies:
+            folder = root / f"body-s{seed}"
+            if (folder / BODY_RESULT).is_file() and args.resume:
+                results[seed] = read_back(seed, folder, resolved_settings(seed, budgets), headline)
+            elif folder.exists() and not args.resume:
+                raise SystemExit(f"{folder} exists: pass --resume to read it back (or run it again), or choose "
+                                 "another --keep")
+            elif seed in now:
+                if folder.exists():  # an unfinished body of an earlier invocation: from scratch
+                    shutil.rmtree(folder)
+                jobs.append((seed, budgets, folder))
+        started = time.perf_counter()
+        results.update(in_processes(jobs, args.jobs) if jobs else {})
+        wall = round(time.perf_counter() - started, 1)
+    left = [s for s in args.bodies if s not in results]
+    if left:
+        print(json.dumps({"benchmark": NAME, "status": "partial: nothing recorded", "mode": mode,
+                          "finished": sorted(results), "left": left, "wall_seconds": wall,
+                          "next": f"--only {','.join(map(str, left))} --keep {args.keep} --resume",
+                          "gap_closed": {str(s): r["gap_closed"] for s, r in sorted(results.items())}}, indent=2))
+        return
+    ordered = [results[s] for s in args.bodies]
+    # each body as its own process resolved it (or an earlier invocation's, read back): the run's settings
+    used = {f"body {r['seed']}": {**settings, "per_body": body_free(r["seed"], r["settings"])} for r in ordered}
+    result = {**summarize(ordered, headline, budgets), "quick": args.quick, "jobs": args.jobs,
+              "wall_seconds_this_invocation": wall,
+              "read_back": sorted(set(args.bodies) - {j[0] for j in jobs})}
+    run.finish(result, used=used)
+
+
+if __name__ == "__main__":
+    main()
