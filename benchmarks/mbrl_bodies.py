@@ -88,6 +88,10 @@ class Budgets:
     fit_epochs: int | None = None  # None: dynamics fit's default
     loop_env_steps: int = 3000
     oracle: tuple[tuple[str, int], ...] = (("horizon", 15), ("population", 100), ("iterations", 3), ("elites", 10))
+    # development only (a headline runs motorlab's defaults): settings tried on a step, (step, key, value),
+    # and whether the loop runs (a search of the one-shot path's settings can leave its ~10 min out)
+    overrides: tuple[tuple[str, str, str], ...] = ()
+    loop: bool = True
 
 
 FULL = Budgets()
@@ -129,7 +133,7 @@ def step_fields(seed: int, budgets: Budgets) -> dict[str, dict[str, Any]]:
     fit = {"transitions": FROM_PREVIOUS, "learn_reward": True, "device": "cpu"}
     if budgets.fit_epochs is not None:
         fit["epochs"] = budgets.fit_epochs
-    return {
+    fields = {
         "collect": {"env": env, "episodes": budgets.collect_episodes, "workers": 1},
         "fit": fit,
         "mpc_user": {**mpc, "reward": "bodies:reward"},
@@ -137,6 +141,13 @@ def step_fields(seed: int, budgets: Budgets) -> dict[str, dict[str, Any]]:
         "mbrl": {"env": env, "reward": "bodies:reward", "seed": seed, "device": "cpu", "eval_episodes": n,
                  "parallel": n, "max_env_steps": budgets.loop_env_steps, "rounds": budgets.loop_env_steps},
     }
+    for step, key, value in budgets.overrides:  # pydantic reads "1", "true" into the field's type
+        targets = ("mpc_user", "mpc_learned") if step == "mpc" else (step,)
+        for name in targets:
+            fields[name][key] = json.loads(value) if value.startswith("[") else value  # a list: hidden=[200,200]
+    if not budgets.loop:
+        del fields["mbrl"]
+    return fields
 
 
 def kinds() -> dict[str, Any]:
@@ -151,7 +162,7 @@ def resolved_settings(seed: int, budgets: Budgets) -> dict[str, Any]:
     defaults, and a catalogue entry if the env had one), the oracle's and random actions'."""
     from motorlab.api import steps
 
-    step = {name: steps.settings(kinds()[name], **fields).model_dump(mode="json")
+    step = {name: steps.settings(kinds()[name], **fields).model_dump(mode="json")  # type: ignore[arg-type]
             for name, fields in step_fields(seed, budgets).items()}
     resets = eval_resets(seed, budgets.eval_episodes)
     return {**step, "oracle": {**dict(budgets.oracle), "seed": seed, "reset_seeds": resets},
@@ -175,7 +186,9 @@ def body_free(seed: int, settings: dict[str, Any]) -> dict[str, Any]:
         return BODY_ENV if x == env else x
 
     out = swap(settings)
-    out["mbrl"]["seed"] = out["oracle"]["seed"] = BODY_SEED
+    out["oracle"]["seed"] = BODY_SEED
+    if "mbrl" in out:
+        out["mbrl"]["seed"] = BODY_SEED
     out["mpc_user"]["seed"] = out["mpc_learned"]["seed"] = BODY_FIRST_RESET
     return out
 
@@ -254,7 +267,8 @@ def loop_curve(folder: Path) -> list[dict[str, float | None]]:
                  "return_min": num(r.get("eval_return_min"))} for r in csv.DictReader(f)]
 
 
-def run_body(seed: int, budgets: Budgets, folder: Path) -> dict[str, Any]:
+def run_body(seed: int, budgets: Budgets, folder: Path, baselines: dict[str, list[float]] | None = None
+             ) -> dict[str, Any]:
     """One body, every method, in this (spawned) process on one torch thread; writes folder/body.json."""
     import bodies
     import numpy as np
@@ -279,9 +293,12 @@ def run_body(seed: int, budgets: Budgets, folder: Path) -> dict[str, Any]:
         checked = steps.settings(kinds()[name], **given)
         return timed(name, steps.run, kinds()[name], checked, folder / name.replace("_", "-"), False)
 
-    returns["random"] = timed("random", random_returns, env_id, resets)
+    if baselines is not None:  # random's and the oracle's returns of an earlier run of these episodes
+        returns["random"], returns["oracle"], plan_ms = baselines["random"], baselines["oracle"], baselines["plan_ms"]
+    else:
+        returns["random"] = timed("random", random_returns, env_id, resets)
+        returns["oracle"], plan_ms = timed("oracle", oracle_returns, env_id, seed, resets, dict(budgets.oracle))
     say(f"body {seed}: random {np.mean(returns['random']):.2f}")
-    returns["oracle"], plan_ms = timed("oracle", oracle_returns, env_id, seed, resets, dict(budgets.oracle))
     say(f"body {seed}: oracle {np.mean(returns['oracle']):.2f} ({plan_ms:.0f} ms a step)")
     data = step("collect")
     model = step("fit", data.path)
@@ -289,16 +306,18 @@ def run_body(seed: int, budgets: Budgets, folder: Path) -> dict[str, Any]:
         result = step(name, model.path)
         returns[name] = [float(x) for x in np.load(result.path / "episodes.npz")["returns"]]
         say(f"body {seed}: {name} {np.mean(returns[name]):.2f}")
-    loop = step("mbrl")
-    curve = loop_curve(loop.path)
-    say(f"body {seed}: loop {curve[-1]['return_mean']:.2f} after {curve[-1]['env_steps']} env steps")
-    means = {k: float(np.mean(v)) for k, v in returns.items()}
-    means["loop"] = curve[-1]["return_mean"]
+    curve: list[dict[str, float | None]] = []
+    if budgets.loop:
+        curve = loop_curve(step("mbrl").path)
+        say(f"body {seed}: loop {curve[-1]['return_mean']:.2f} after {curve[-1]['env_steps']} env steps")
+    means: dict[str, float | None] = {k: float(np.mean(v)) for k, v in returns.items()}
+    means["loop"] = curve[-1]["return_mean"] if curve else None
     out = {"seed": seed, "env_id": env_id, "muscles": muscles_of(seed),
            "body": asdict(bodies.generate(seed, muscles_of(seed))), "eval_reset_seeds": resets,
            "return_mean": means, "gap_closed": gap_shares(means), "returns": returns,
-           "loop": {"curve": curve, "env_steps": curve[-1]["env_steps"], "rounds": len(curve)},
+           "loop": {"curve": curve, "env_steps": curve[-1]["env_steps"], "rounds": len(curve)} if curve else None,
            "oracle_plan_ms_median": plan_ms, "valid_mse": model.summary.get("valid_mse"),
+           "baselines_reused": baselines is not None,
            "wall_seconds": {**walls, "total": round(sum(walls.values()), 1)},
            "settings": settings, "git": git_state()}
     write_json(out, folder / BODY_RESULT)
@@ -376,7 +395,23 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--keep", type=Path, default=None, help="keep each body's run folders and result here")
     parser.add_argument("--resume", action="store_true", help="with --keep: read finished bodies back")
     parser.add_argument("--quick", action="store_true", help=f"a smoke run: {asdict(QUICK)}")
+    parser.add_argument("--set", action="append", default=[], metavar="STEP.KEY=VALUE", dest="overrides",
+                        help="development bodies only: try a setting on a step (collect, fit, mpc, mbrl), e.g. "
+                             "collect.noise_beta=1; a headline runs motorlab's defaults")
+    parser.add_argument("--no-loop", action="store_true",
+                        help="development bodies only: leave the loop out (a search of the one-shot path's settings)")
+    parser.add_argument("--baselines-from", type=Path, default=None, metavar="DIR",
+                        help="take random's and the oracle's returns from DIR/body-sN/body.json (a --keep of an "
+                             "earlier run on the same episodes, generator and oracle), instead of playing them again")
     args = parser.parse_args(argv)
+    overrides = []
+    for item in args.overrides:
+        key, eq, value = item.partition("=")
+        step, dot, field = key.partition(".")
+        if not (eq and dot and step in ("collect", "fit", "mpc", "mbrl")):
+            parser.error(f"--set {item!r}: give STEP.KEY=VALUE, STEP one of collect, fit, mpc, mbrl")
+        overrides.append((step, field, value))
+    args.overrides = tuple(overrides)
     if (args.resume or args.only) and not args.keep:
         parser.error("--resume and --only work on the bodies kept in --keep DIR: give --keep")
     if args.only and not set(args.only) <= set(args.bodies):
@@ -395,6 +430,23 @@ def read_back(seed: int, folder: Path, settings: dict[str, Any], headline: bool)
                          "changes: a headline's bodies run at one commit")
     say(f"body {seed}: read back from {folder}")
     return saved
+
+
+def baselines_of(seed: int, root: Path | None, budgets: Budgets) -> dict[str, Any] | None:
+    """Random's and the oracle's returns for this body from an earlier run kept in root, checked to be
+    the same episodes, generator and oracle settings; None without root."""
+    if root is None:
+        return None
+    path = root / f"body-s{seed}" / BODY_RESULT
+    if not path.is_file():
+        raise SystemExit(f"--baselines-from: no {path}")
+    saved = json.loads(path.read_text())
+    now = resolved_settings(seed, budgets)
+    if saved["settings"]["oracle"] != now["oracle"] or saved["settings"]["random"] != now["random"] or \
+            saved["body"] != json.loads(json.dumps(asdict(__import__("bodies").generate(seed, muscles_of(seed))))):
+        raise SystemExit(f"--baselines-from: {path} played other episodes, another body or another oracle")
+    return {"random": saved["returns"]["random"], "oracle": saved["returns"]["oracle"],
+            "plan_ms": saved["oracle_plan_ms_median"]}
 
 
 def in_processes(jobs: list[tuple], workers: int) -> dict[int, dict[str, Any]]:
@@ -417,9 +469,14 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit("the loop's evaluation reset seeds changed: update SEED_STRIDE, EVAL_OFFSET here")
     # motorlab's own child processes import `bodies` (MOTORLAB_IMPORTS): they need benchmarks/ on their path
     os.environ["PYTHONPATH"] = os.pathsep.join([str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])])
-    budgets = QUICK if args.quick else FULL
+    from dataclasses import replace
+
+    budgets = replace(QUICK if args.quick else FULL, overrides=args.overrides, loop=not args.no_loop)
     harness = Harness(NAME)
     mode = harness.seeds.mode(args.bodies)
+    if mode == "headline" and (args.overrides or args.no_loop or args.baselines_from):
+        raise SystemExit("a headline runs motorlab's defaults on every method, from scratch: --set, --no-loop and "
+                         "--baselines-from are for development bodies (0-99)")
     if args.quick and mode == "headline":
         raise SystemExit("--quick is a smoke run: run it on development bodies (0-99)")
     per_body = common_settings(args.bodies, {s: resolved_settings(s, budgets) for s in args.bodies})
@@ -442,7 +499,7 @@ def main(argv: list[str] | None = None) -> None:
             elif seed in now:
                 if folder.exists():  # an unfinished body of an earlier invocation: from scratch
                     shutil.rmtree(folder)
-                jobs.append((seed, budgets, folder))
+                jobs.append((seed, budgets, folder, baselines_of(seed, args.baselines_from, budgets)))
         started = time.perf_counter()
         results.update(in_processes(jobs, args.jobs) if jobs else {})
         wall = round(time.perf_counter() - started, 1)

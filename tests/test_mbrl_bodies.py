@@ -133,3 +133,19 @@ def test_one_body_end_to_end_split_over_two_invocations_into_a_development_log(t
     other = mb.resolved_settings(0, replace(TINY, collect_episodes=5))
     with pytest.raises(SystemExit, match="other settings"):
         mb.read_back(0, keep / "body-s0", other, headline=False)
+
+
+def test_development_settings_are_tried_on_development_bodies_only(capsys):
+    args = mb.parse(["--bodies", "2", "--set", "fit.hidden=[200,200]", "--set", "collect.noise_beta=1", "--no-loop"])
+    budgets = replace(mb.FULL, overrides=args.overrides, loop=False)
+    fields = mb.step_fields(2, budgets)
+    assert fields["fit"]["hidden"] == [200, 200] and fields["collect"]["noise_beta"] == "1"
+    assert "mbrl" not in fields  # --no-loop: the one-shot path alone
+    tried = mb.resolved_settings(2, budgets)
+    assert tried["fit"]["hidden"] == [200, 200] and tried["collect"]["noise_beta"] == 1.0  # as motorlab reads them
+    assert settings_hash(mb.body_free(2, tried)) != settings_hash(mb.body_free(2, mb.resolved_settings(2, mb.FULL)))
+    with pytest.raises(SystemExit):
+        mb.parse(["--set", "fit.hidden"])  # no value
+    for given in (["--set", "fit.epochs=100"], ["--no-loop"], ["--baselines-from", "/tmp"]):
+        with pytest.raises(SystemExit, match="headline runs motorlab's defaults"):
+            mb.main(["--bodies", "100", *given])  # a headline: the defaults, every method, from scratch

@@ -64,8 +64,25 @@ def episode_arrays(obs, actions, rewards, terminated, truncated, layout: StateLa
     )
 
 
+def random_actions(rng: np.random.Generator, low: np.ndarray, high: np.ndarray, episodes: int, steps: int,
+                   beta: float) -> np.ndarray:
+    """(episodes, steps, A) random actions within [low, high]. beta 0: independent uniform draws; beta > 0:
+    each action dimension is Gaussian noise whose power falls as 1/f^beta along time (1 pink, 2 red:
+    slow, sweeping commands that carry a body across its workspace, where white noise jitters in place),
+    mapped through the normal CDF, so each action is spread over its bounds near uniformly (a Gaussian copula; a
+    short red sequence leans to its ends)."""
+    if beta == 0:
+        return rng.uniform(low, high, size=(episodes, steps, len(low)))
+    import colorednoise
+    from scipy.special import ndtr
+
+    z = colorednoise.powerlaw_psd_gaussian(beta, (episodes, len(low), steps), random_state=rng)
+    z /= z.std(axis=-1, keepdims=True).clip(min=1e-12)  # unit variance per sequence: a uniform spread in bounds
+    return low + (high - low) * ndtr(z).transpose(0, 2, 1)
+
+
 def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers: int, simulator: str,
-                     bar, task) -> dict:
+                     bar, task, noise_beta: float = 0.0) -> dict:
     rng = np.random.default_rng(seed)
     steps = env.spec.max_episode_steps or 50
     low, high = env.action_space.low, env.action_space.high
@@ -82,7 +99,7 @@ def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers
     for start in range(0, episodes, CHUNK):
         n = min(CHUNK, episodes - start)
         qpos, qvel = sample_initial_states(env, n, rng)
-        actions = rng.uniform(low, high, size=(n, steps, len(low)))
+        actions = random_actions(rng, low, high, n, steps, noise_beta)
         obs, rewards = rollout_reacher(env, qpos, qvel, actions, threads=workers, simulator=simulator)
         bad = ~(np.isfinite(obs).all(axis=(1, 2)) & np.isfinite(rewards).all(axis=1))
         faults += [f"seed={seed} episode={start + i}: non-finite observation or reward" for i in np.flatnonzero(bad)]
@@ -107,12 +124,13 @@ def _collect_reacher(env, episodes: int, seed: int, layout: StateLayout, workers
 _worker: dict[str, Any] = {}
 
 
-def _init_worker(env_cfg: dict, policy_dir: str | None, parent: int | None = None) -> None:
+def _init_worker(env_cfg: dict, policy_dir: str | None, noise_beta: float = 0.0, parent: int | None = None) -> None:
     if parent is not None:  # a pool process: stopped by the parent's terminate(), or its death, not by Ctrl-C
         processes.serve_parent(parent)
     torch.set_num_threads(1)
     _worker["env"] = make_env(EnvConfig.model_validate(env_cfg))
     _worker["policy"] = load_policy_files(Path(policy_dir)) if policy_dir else None
+    _worker["noise_beta"] = noise_beta
 
 
 def _run_episode(seed: int) -> tuple:
@@ -124,8 +142,17 @@ def _run_episode(seed: int) -> tuple:
     low, high = env.action_space.low, env.action_space.high
     observations, actions, rewards, terminated, truncated = [obs], [], [], [], []
     fault, done = None, False
+    # random actions come a block at a time (the episode's time limit, at most 1,000 steps): colored
+    # noise is drawn along a whole sequence
+    block = min(env.spec.max_episode_steps or 1000, 1000) if env.spec is not None else 1000
+    planned: list[np.ndarray] = []
     while not done:
-        action = rng.uniform(low, high) if policy is None else np.asarray(policy.act(obs[None])[0])
+        if policy is None:
+            if not planned:
+                planned = list(random_actions(rng, low, high, 1, block, _worker.get("noise_beta", 0.0))[0])
+            action = planned.pop(0)
+        else:
+            action = np.asarray(policy.act(obs[None])[0])
         obs, reward, term, trunc, info = env.step(action)
         fault = fault_of(info)
         if fault:  # the step that diverged is not a transition of the dynamics; the episode ends before it
@@ -144,9 +171,9 @@ def _run_episode(seed: int) -> tuple:
 
 
 def _collect_pool(env_cfg: EnvConfig, policy_dir: str | None, episodes: int, seed: int, layout: StateLayout,
-                  workers: int, bar, task) -> dict:
+                  workers: int, bar, task, noise_beta: float = 0.0) -> dict:
     seeds = [seed + i for i in range(episodes)]
-    init_args = (env_cfg.model_dump(), policy_dir)
+    init_args = (env_cfg.model_dump(), policy_dir, noise_beta)
     results = []
     if workers <= 1:
         _init_worker(*init_args)
@@ -183,7 +210,8 @@ def require_continuous(env: gym.Env, env_id: str, user: str, random: bool = Fals
 
 def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "random", workers: int | None = None,
                         seed: int = 0, state: str = "auto", simulator: str = "auto",
-                        progress: bool = True, before_work: Callable[[], None] | None = None) -> Transitions:
+                        progress: bool = True, before_work: Callable[[], None] | None = None,
+                        noise_beta: float = 0.0) -> Transitions:
     """Transitions of `episodes` episodes of an env.
 
     Args:
@@ -202,6 +230,8 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
         before_work: called once the inputs are checked, before the first episode (`dynamics
             collect` refuses a finished run's --out there: a mistake in the input is named first,
             and a refusal costs no episodes).
+        noise_beta: the random policy's color (`random_actions`): 0 white (independent uniform
+            draws), 1 pink, 2 red.
 
     Raises:
         MotorlabError: bad counts, unknown env or layout, a policy folder that does not fit the env,
@@ -211,6 +241,10 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
         raise MotorlabError(f"--episodes must be positive, got {episodes}.")
     if workers is not None and workers <= 0:
         raise MotorlabError(f"--workers must be positive, got {workers}.")
+    if not (np.isfinite(noise_beta) and noise_beta >= 0):
+        raise MotorlabError(f"--noise-beta must be a number >= 0 (0 white, 1 pink, 2 red), got {noise_beta}.")
+    if noise_beta and policy != "random":
+        raise MotorlabError("--noise-beta colors random actions; a --policy run folder chooses its own: drop one.")
     if simulator not in SIMULATORS:
         raise MotorlabError(f"--simulator {simulator!r}: choose {', '.join(SIMULATORS[:-1])} or {SIMULATORS[-1]}.")
     env_cfg = env if isinstance(env, EnvConfig) else EnvConfig(id=env)
@@ -255,9 +289,11 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
         with Progress(disable=not progress, transient=False) as bar:
             task = bar.add_task(f"{env_id} episodes", total=episodes)
             if fast:
-                arrays, faults = _collect_reacher(env, episodes, seed, layout, workers, used, bar, task)
+                arrays, faults = _collect_reacher(env, episodes, seed, layout, workers, used, bar, task,
+                                                  noise_beta)
             else:
-                arrays, faults = _collect_pool(env_cfg, policy_dir, episodes, seed, layout, workers, bar, task)
+                arrays, faults = _collect_pool(env_cfg, policy_dir, episodes, seed, layout, workers, bar, task,
+                                               noise_beta)
         if len(arrays["states"]) == 0:
             raise MotorlabError(f"every episode of {env_id} ended on a numerical fault before its first step "
                                 f"(first: {faults[0]}); nothing to collect.")

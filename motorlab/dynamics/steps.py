@@ -53,6 +53,9 @@ class DynamicsCollectSettings(EnvSettings):
         "(mujoco.rollout in C on every core, bit for bit Gymnasium's joints); gymnasium (the env itself, in a "
         "process pool)")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (initial states and actions)")
+    noise_beta: float = Field(0.0, ge=0, description="Color of the random actions along time, each still uniform in "
+                              "its bounds: 0 white (independent draws), 1 pink, 2 red (slow sweeps that carry "
+                              "a body across its workspace)")
 
 
 class DynamicsCollectSummary(Summary):
@@ -97,7 +100,7 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
 
         s = settings
         data = collect_transitions(s.env, s.episodes, s.policy, s.workers, s.seed, s.state, s.simulator, progress,
-                                   before_work=lambda: self.refuse_finished_out(out))
+                                   before_work=lambda: self.refuse_finished_out(out), noise_beta=s.noise_beta)
         run_dir = self.start(out)
         data.save(run_dir / TRANSITIONS)
         seconds = data.meta["seconds"]
