@@ -266,3 +266,15 @@ def snapshot(*roots: Path) -> dict[str, str]:
         for p in paths:
             files[str(p)] = hashlib.sha256(p.read_bytes()).hexdigest()
     return files
+
+
+def docs_hook(name: str):
+    """docs/hooks/NAME.py, a MkDocs hook (not a package module), loaded by path; registered in
+    sys.modules, where its dataclasses look their module up."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, Path(__file__).resolve().parents[1] / "docs" / "hooks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module

@@ -4,28 +4,22 @@ yet run"."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import re
 import shutil
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests.helpers import docs_hook
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.fast
 
 
-def _hook():
-    spec = importlib.util.spec_from_file_location("benchmark_table", ROOT / "docs/hooks/benchmark_table.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclass looks its module up
-    spec.loader.exec_module(module)
-    return module
 
 
-table = _hook()
+table = docs_hook("benchmark_table")
 RESULTS = ROOT / "benchmarks" / "results"
 
 

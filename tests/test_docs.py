@@ -6,7 +6,6 @@ no broken internal link or anchor and no missing image; and the CLI reference ho
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import re
@@ -18,19 +17,15 @@ from urllib.parse import unquote, urlsplit
 
 import pytest
 
+from tests.helpers import docs_hook
+
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = "/usr/bin/chromium"
 
 
-def _hook():
-    """docs/hooks/cli_reference.py, the MkDocs hook that generates the CLI reference."""
-    spec = importlib.util.spec_from_file_location("cli_reference", ROOT / "docs/hooks/cli_reference.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
-cli_reference = _hook()
+cli_reference = docs_hook("cli_reference")
 
 
 @pytest.fixture(scope="module")

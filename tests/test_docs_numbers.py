@@ -26,7 +26,6 @@ removing it, or marking it as a definition. docs/benchmarks.md states the rule f
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import re
@@ -40,18 +39,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.helpers import docs_hook
+
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.fast
 
 
-def _hook():
-    spec = importlib.util.spec_from_file_location("results", ROOT / "docs/hooks/results.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
-results = _hook()
+results = docs_hook("results")
 
 NUM = r"\d[\d,]*(?:\.\d+)?"
 SPAN = rf"[~≈]?{NUM}(?:\s?(?:–|-|to)\s?{NUM})?"  # one figure or a range: 58-72, ~1.9–3.6
