@@ -40,7 +40,8 @@ class DynamicsCollectSettings(EnvSettings):
     env: EnvConfig = Field(description="The env to collect from: its id (e.g. Reacher-v5) and motorlab's "
                            "wrappers, given flat (--delay, --history, ...)")
     episodes: int = Field(1000, gt=0, description="Episodes to run, each to its end")
-    policy: str = Field("random", description="random (uniform actions) or a run folder from `motorlab train`")
+    policy: str = Field("random", description="random (random actions, colored by --noise-beta) or a run folder "
+                        "from `motorlab train`")
     workers: int | None = Field(None, gt=0, description="Processes or threads (default: all cores)")
     state: Literal["auto", "reacher", "observation"] = Field(
         "auto", description="State layout: auto (Reacher: cos, sin, joint velocities, fingertip x-y; else the "
@@ -53,9 +54,23 @@ class DynamicsCollectSettings(EnvSettings):
         "(mujoco.rollout in C on every core, bit for bit Gymnasium's joints); gymnasium (the env itself, in a "
         "process pool)")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (initial states and actions)")
-    noise_beta: float = Field(0.0, ge=0, description="Color of the random actions along time, each still uniform in "
-                              "its bounds: 0 white (independent draws), 1 pink, 2 red (slow sweeps that carry "
-                              "a body across its workspace)")
+    # pink by default: on generated arms (benchmarks/mbrl_bodies.py, development bodies 0-7, a fit of
+    # [200, 200] units) pink random actions took the one-shot path from 0.74 to 0.90 of the random-to-
+    # oracle gap with the user's reward and from 0.45 to 0.72 with the learned one (medians); white noise
+    # jitters a body in place, pink sweeps it across its workspace (benchmarks/devlog/mbrl_bodies.jsonl)
+    noise_beta: float = Field(1.0, ge=0, description="Color of the random actions along time, each spread over its "
+                              "bounds: 0 white (independent uniform draws), 1 pink (the default), 2 red (slow "
+                              "sweeps that carry a body across its workspace)")
+
+    @model_validator(mode="after")
+    def _color_only_random_actions(self):
+        if self.policy != "random" and "noise_beta" in self.model_fields_set and self.noise_beta:
+            raise MotorlabError("--noise-beta colors random actions; a --policy run folder chooses its own: drop one.")
+        return self
+
+    def random_noise_beta(self) -> float:
+        """The color collect_transitions gets: this one for random actions, none for a trained policy."""
+        return self.noise_beta if self.policy == "random" else 0.0
 
 
 class DynamicsCollectSummary(Summary):
@@ -100,7 +115,7 @@ class DynamicsCollectKind(StepKind[DynamicsCollectSettings, DynamicsCollectSumma
 
         s = settings
         data = collect_transitions(s.env, s.episodes, s.policy, s.workers, s.seed, s.state, s.simulator, progress,
-                                   before_work=lambda: self.refuse_finished_out(out), noise_beta=s.noise_beta)
+                                   before_work=lambda: self.refuse_finished_out(out), noise_beta=s.random_noise_beta())
         run_dir = self.start(out)
         data.save(run_dir / TRANSITIONS)
         seconds = data.meta["seconds"]
@@ -182,6 +197,13 @@ class ModelSettings(Settings):
 
 class DynamicsFitSettings(ModelSettings):
     transitions: str = Field(description="transitions.npz (or its folder) from `dynamics collect`")
+    # [200, 200] (PETS' and mbrl-lib's width): on the generated arms' 40,000 transitions [64, 64] left the
+    # one-shot path at 0.42 of the gap (median, user's reward) where [200, 200] reached 0.90 with pink
+    # collection ([128, 128]: 0.74); the loop keeps its own [64, 64] (it refits every round)
+    hidden: list[int] = Field(default_factory=lambda: [200, 200], min_length=1, description="Hidden layer widths")
+    epochs: int | None = Field(None, gt=0, description="Passes over the training data (the most, with --patience); "
+                               "default: 50, or more (up to 500) where the data is small, so the fit takes at "
+                               "least 4,000 gradient steps")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (initialization, batch order, validation split)")
 
 

@@ -92,13 +92,29 @@ def normalized_mse(model: ForwardModel, x: torch.Tensor, y: torch.Tensor, batch:
 KEEP_WEIGHTS = ("best", "last")
 
 
-def check_settings(epochs: int, hidden: tuple[int, ...], ensemble: int, lr: float, batch_size: int,
+# `dynamics fit`'s default passes: 50, or more where the data is small, so every fit takes at least
+# MIN_GRADIENT_STEPS steps. 50 epochs of 400 generated-arm episodes (36,000 rows in batches of 2,000) are
+# 900 steps, and those fits were still improving at their last epoch (benchmarks/mbrl_bodies.py,
+# development bodies; benchmarks/devlog/mbrl_bodies.jsonl). Reacher's million rows keep their 50.
+# At most MAX_AUTO_EPOCHS: each epoch also scores the held-out rows, which a tiny dataset would repeat
+# thousands of times.
+DEFAULT_EPOCHS, MIN_GRADIENT_STEPS, MAX_AUTO_EPOCHS = 50, 4000, 500
+
+
+def auto_epochs(train_rows: int, batch_size: int) -> int:
+    """Passes over `train_rows` rows that give at least MIN_GRADIENT_STEPS steps: at least DEFAULT_EPOCHS,
+    at most MAX_AUTO_EPOCHS."""
+    per_epoch = max(1, -(-train_rows // batch_size))
+    return max(DEFAULT_EPOCHS, min(MAX_AUTO_EPOCHS, -(-MIN_GRADIENT_STEPS // per_epoch)))
+
+
+def check_settings(epochs: int | None, hidden: tuple[int, ...], ensemble: int, lr: float, batch_size: int,
                    valid_fraction: float, patience: int | None, nll_beta: float = 0.0) -> None:
     """Raise MotorlabError for settings fit_model cannot use (before any file is touched)."""
     if not 0 <= nll_beta <= 1:
         raise MotorlabError(f"--nll-beta must be in [0, 1] (0: PETS' plain NLL; 0.5: beta-NLL's advice), "
                             f"got {nll_beta}.")
-    if epochs <= 0 or batch_size <= 0 or ensemble <= 0 or lr <= 0:
+    if (epochs is not None and epochs <= 0) or batch_size <= 0 or ensemble <= 0 or lr <= 0:
         raise MotorlabError(f"--epochs, --batch-size, --ensemble and --lr must be positive "
                             f"(got {epochs}, {batch_size}, {ensemble}, {lr}).")
     if not 0 <= valid_fraction < 1:
@@ -109,7 +125,7 @@ def check_settings(epochs: int, hidden: tuple[int, ...], ensemble: int, lr: floa
         raise MotorlabError(f"--hidden widths must be positive, got {','.join(map(str, hidden))}.")
 
 
-def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64, 64), ensemble: int = 1,
+def fit_model(data: Transitions, epochs: int | None = DEFAULT_EPOCHS, hidden: tuple[int, ...] = (64, 64), ensemble: int = 1,
               lr: float = 2e-3, batch_size: int = 2000, valid_fraction: float = 0.1, patience: int | None = None,
               seed: int = 0, threads: int | None = None, run_dir: Path | None = None,
               progress: bool = True, checked: bool = False, probabilistic: bool = False,
@@ -121,7 +137,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
 
     Args:
         data: checked transitions.
-        epochs: passes over the training rows (the most, with `patience`).
+        epochs: passes over the training rows (the most, with `patience`); None: `auto_epochs`.
         hidden: hidden layer widths.
         ensemble: K members, each with its own initialization and batch order.
         lr, batch_size: Adam's initial learning rate (cosine-decayed to 0 over `epochs`) and batch rows.
@@ -190,6 +206,7 @@ def fit_model(data: Transitions, epochs: int = 50, hidden: tuple[int, ...] = (64
     params = list(model.net.parameters()) + ([model.max_logvar, model.min_logvar] if probabilistic else [])
     optimizer = torch.optim.Adam(params, lr=lr, foreach=True)
     steps_per_epoch = max(1, -(-len(x_train) // batch_size))
+    epochs = auto_epochs(len(x_train), batch_size) if epochs is None else epochs
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, T_max=epochs * steps_per_epoch)
     writer = metrics = None
     if run_dir is not None:

@@ -28,7 +28,7 @@ def test_collect_fit_check_mpc(pipeline, tmp_path):
     assert 0 < fit["valid_mse"] < 1 and fit["wall_seconds"] > 0 and fit["epochs_run"] == 3
     model_json = json.loads((pipeline / "model" / "model.json").read_text())
     assert model_json["env_id"] == "Reacher-v5" and model_json["state_layout"] == "reacher"
-    assert model_json["architecture"]["hidden"] == [64, 64]
+    assert model_json["architecture"]["hidden"] == [200, 200]  # dynamics fit's default width
     assert_png(pipeline / "model" / "plots" / "loss.png")
     assert (pipeline / "model" / "metrics.csv").read_text().count("\n") == 4
     assert any((pipeline / "model" / "tensorboard").rglob("events.out.tfevents.*"))
