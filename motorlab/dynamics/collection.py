@@ -219,7 +219,7 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
             (delay, noise, history, reward shaping, synergy actions, ...), whose observations, actions
             and rewards are what the transitions record.
         episodes: number of episodes, each to its end (termination or time limit).
-        policy: "random" (uniform actions) or a run folder from `motorlab train`.
+        policy: "random" (random actions, colored by `noise_beta`) or a run folder from `motorlab train`.
         workers: processes or threads (default: all cores).
         state: state layout, "auto" (the env's catalogue entry: reacher for Reacher ids, else the observation),
             "reacher", "observation".
