@@ -60,6 +60,11 @@ SECONDS = {
     "tests/adversarial/test_run_folder_lifecycle.py": 3, "tests/adversarial/test_credentials.py": 3,
     "tests/control/test_oracle.py": 12, "tests/control/test_planning.py": 20,
     "tests/envs/test_cartpole_swingup.py": 3, "tests/studies/test_mbrl_cartpole_recipe.py": 40,
+    # issue 53's
+    "tests/test_intervals_generated.py": 20, "tests/test_bodies.py": 20, "tests/test_mbrl_bodies.py": 11,
+    "tests/dynamics/test_colored_actions.py": 18, "tests/test_docs_numbers.py": 8, "tests/test_benchmark_mbrl.py": 5,
+    "tests/test_benchmark_table.py": 14, "tests/test_benchmark_provenance.py": 3, "tests/test_intervals.py": 6,
+    "tests/dynamics/test_auto_epochs.py": 2,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[sar_synergies]": 85,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[your_own_body]": 45,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[robust_pendulum]": 40,
