@@ -14,7 +14,7 @@ from motorlab import intervals
 from motorlab.intervals import MIN_SEEDS_FOR_INTERVAL, across_seeds, p_better, wilson
 from motorlab.stats import steps_ratio, steps_to_threshold
 
-pytestmark = pytest.mark.fast
+# not in `make test-fast` (~20 s of generated cases): `make test` runs it
 
 FEW = settings(max_examples=50, deadline=None, derandomize=True, database=None)
 SLOW = settings(max_examples=50, deadline=None, derandomize=True, database=None)  # bootstraps of KM medians

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from motorlab.dynamics.collection import collect_transitions, random_actions
 from motorlab.errors import MotorlabError
 
-pytestmark = pytest.mark.fast
+# not in `make test-fast` (~20 s of generated cases): `make test` runs it
 
 
 @given(beta=st.floats(0, 3), steps=st.integers(2, 300), seed=st.integers(0, 2**32 - 1),
