@@ -146,5 +146,10 @@ def test_a_science_result_without_a_headline_record_is_marked_in_sample():
     headline = {"provenance": {"mode": "headline", "seeds": [100, 101, 102, 103, 104],
                                "development": {"configurations_tried": 6, "log": "benchmarks/devlog/mbrl-pusher.jsonl"}}}
     note = provenance_note("mbrl", headline)
-    assert "100–104" in note and "6 configuration(s)" in note and "in-sample" not in note
+    assert "100–104" in note and "6 configuration(s)" in note and not note.startswith("**in-sample**")
+    assert "no development run" in note  # no run of these settings in the log: said so, with the last one
+    headline["provenance"]["development"]["in_sample"] = [
+        {"seeds": [0, 1, 2, 3, 4], "result": {"loop": {"steps_to_threshold": {"text": "5 of 5 seeds; median 600"}}}}]
+    assert "in-sample with these settings (1 run(s), seeds [0, 1, 2, 3, 4]): loop 5 of 5 seeds; median 600" in \
+        provenance_note("mbrl", headline)  # beside the held-out numbers, so a reader sees how they differ
     assert provenance_note("tune", old) == ""  # a speed or tuning benchmark has no development seeds to mark

@@ -260,7 +260,28 @@ def provenance_note(script: str, data: dict[str, Any]) -> str:
     dev = prov.get("development") or {}
     seeds = prov.get("seeds") or []
     return (f"headline on held-out seeds {seeds[0]}–{seeds[-1]}, after {dev.get('configurations_tried', 0)} "
-            f"configuration(s) in `{dev.get('log')}`: ")
+            f"configuration(s) in `{dev.get('log')}`; {in_sample(dev)}: ")
+
+
+def in_sample(dev: dict[str, Any]) -> str:
+    """The development runs' numbers beside a headline: those of its own settings where the log has them,
+    else the log's last run (other settings), so a reader sees how much held-out and in-sample differ."""
+    runs = dev.get("in_sample") or []
+    if runs:
+        return f"in-sample with these settings ({len(runs)} run(s), seeds {runs[-1]['seeds']}): " \
+               f"{_loop_text(runs[-1]['result'])}"
+    log = ROOT / str(dev.get("log", ""))
+    lines = [json.loads(x) for x in log.read_text().splitlines() if x.strip()] if log.is_file() else []
+    if not lines:
+        return "no development run"
+    last = lines[-1]
+    return f"no development run of these settings; the log's last (seeds {last['seeds']}, other settings): " \
+           f"{_loop_text(last['result'])}"
+
+
+def _loop_text(result: dict[str, Any]) -> str:
+    steps = ((result.get("loop") or {}).get("steps_to_threshold") or {})
+    return f"loop {steps['text']}" if steps.get("text") else "(no loop result)"
 
 
 def rows(results: Path = BENCHMARKS / "results") -> list[tuple[str, str, str, str, str]]:
