@@ -1,7 +1,7 @@
 """The model-based pipeline on Reacher-v5: motorlab's collect -> fit -> batched-CEM MPC vs the reference planner.
 
 motorlab: `motorlab run reacher`'s steps in one process, timed end to end: collect 20,000
-random episodes, fit the forward model (defaults), 50 MPC episodes on Reacher-v5 with the
+random episodes, fit the forward model (the recipe's: [64, 64] units, else defaults), 50 MPC episodes on Reacher-v5 with the
 default planner (one episode at a time, `--parallel 1`). Reports the env's mean return,
 the mean final fingertip-to-target distance and the median planning time per control step.
 
@@ -100,6 +100,10 @@ def reference_episodes(model, episodes: int, seed: int) -> dict[str, float]:
             "episodes": episodes}
 
 
+# the reacher recipe's fit settings besides its defaults (motorlab/recipes/reacher.toml): what it times
+RECIPE_FIT = {"hidden": [64, 64]}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--collect-episodes", type=int, default=20000)
@@ -114,8 +118,8 @@ def main() -> None:
         start = time.perf_counter()
         collected = DYNAMICS_COLLECT.run(DYNAMICS_COLLECT.make(env="Reacher-v5", episodes=args.collect_episodes,
                                                                seed=args.seed), tmp / "data", progress=False)
-        fitted = DYNAMICS_FIT.run(DYNAMICS_FIT.make(transitions=str(tmp / "data"), seed=args.seed), tmp / "model",
-                                  progress=False)
+        fitted = DYNAMICS_FIT.run(DYNAMICS_FIT.make(transitions=str(tmp / "data"), seed=args.seed, **RECIPE_FIT),
+                                  tmp / "model", progress=False)
         env = make_env(EnvConfig(id="Reacher-v5"), shaped=False)
         plan = MpcSettings(env="Reacher-v5", model=str(tmp / "model")).plan()  # motorlab mpc's defaults
         policy = build_policy(env, "Reacher-v5", tmp / "model", seed=args.seed, **plan)
