@@ -64,7 +64,10 @@ class DynamicsCollectSettings(EnvSettings):
 
     @model_validator(mode="after")
     def _color_only_random_actions(self):
-        if self.policy != "random" and "noise_beta" in self.model_fields_set and self.noise_beta:
+        # a changed color with a trained policy is a mistake; the default is just unused (a saved config.toml
+        # holds it, and must read back)
+        default = type(self).model_fields["noise_beta"].default
+        if self.policy != "random" and self.noise_beta != default:
             raise MotorlabError("--noise-beta colors random actions; a --policy run folder chooses its own: drop one.")
         return self
 
