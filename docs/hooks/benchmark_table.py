@@ -136,8 +136,11 @@ def _mbrl() -> list[Fact]:
     return [Fact("loop:", ("loop", "steps_to_threshold"), "steps"),
             Fact("target", ("targets", "loop_seeds", "target"), "text"),
             Fact("target met:", ("targets", "loop_seeds", "met"), "met"),
-            Fact("SAC:", ("sac", "steps_to_threshold"), "steps"),
+            Fact("SAC (SB3's defaults):", ("sac", "steps_to_threshold"), "steps"),
             Fact("SAC / loop", ("loop", "steps_to_threshold"), "steps_ratio", other=("sac", "steps_to_threshold")),
+            Fact("tuned SAC (benchmarks/sac_tune.py):", ("sac_tuned", "steps_to_threshold"), "steps"),
+            Fact("tuned SAC / loop", ("loop", "steps_to_threshold"), "steps_ratio",
+                 other=("sac_tuned", "steps_to_threshold")),
             Fact("plan per control step:", ("targets", "plan_ms", "median"), "ms")]
 
 
