@@ -69,7 +69,7 @@ from typing import Any
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from provenance import Harness, git_state  # noqa: E402  (benchmarks/ is the script's folder)
+from provenance import Harness, git_state, seed_list  # noqa: E402  (benchmarks/ is the script's folder)
 
 NAME = "mbrl_bodies"
 HEADLINE_BODIES = list(range(100, 110))
@@ -378,11 +378,7 @@ def summarize(results: list[dict[str, Any]], headline: bool, budgets: Budgets) -
 
 def parse_seeds(text: str) -> list[int]:
     """"100-109", "0,1,5", "0-2,7" -> a sorted list without repeats."""
-    out: set[int] = set()
-    for part in text.split(","):
-        lo, _, hi = part.strip().partition("-")
-        out.update(range(int(lo), int(hi or lo) + 1))
-    return sorted(out)
+    return sorted(seed_list(text))
 
 
 def parse(argv: list[str] | None = None) -> argparse.Namespace:

@@ -155,6 +155,17 @@ def _span(r: range) -> str:
 SCIENCE_SEEDS = SeedPlan(development=range(0, 100), headline=range(100, 1000))
 
 
+def seed_list(text: str) -> list[int]:
+    """"100-104" or "100,102,7": the seeds, in the order given, without repeats."""
+    out: list[int] = []
+    for part in text.split(","):
+        lo, _, hi = part.strip().partition("-")
+        for s in range(int(lo), int(hi or lo) + 1):
+            if s not in out:
+                out.append(s)
+    return out
+
+
 def settings_hash(settings: Any) -> str:
     """sha256 of the settings as canonical JSON (sorted keys), first 16 hex digits."""
     text = json.dumps(settings, sort_keys=True, default=str, separators=(",", ":"))
@@ -223,9 +234,13 @@ class HarnessRun:
     def check_settings(self, used: Any, where: str) -> None:
         """Refuse when settings a part of the run actually used (e.g. a seed's process, resolved there)
         differ from the settings the run started with."""
-        if settings_hash(json.loads(json.dumps(used, default=str))) != self.settings_hash:
-            raise SystemExit(f"{where} ran with other settings than the run started with (the code or the catalogue "
-                             f"changed during the run): nothing recorded")
+        used = json.loads(json.dumps(used, default=str))
+        if settings_hash(used) != self.settings_hash:
+            differ = sorted(k for k in {*used, *self.settings} if used.get(k) != self.settings.get(k)) \
+                if isinstance(used, dict) and isinstance(self.settings, dict) else []
+            raise SystemExit(f"{where} ran with other settings" + (f" ({', '.join(differ)})" if differ else "") +
+                             " than the run started with (the code or the catalogue changed during the run): "
+                             "nothing recorded")
 
     def finish(self, result: dict, file: str | None = None, *, used: dict[str, Any] | None = None) -> dict:
         """Record the run. `used`: {where: settings} as each part of the run resolved them, each checked equal

@@ -40,7 +40,16 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import mbrl  # noqa: E402
-from provenance import DEVLOG, SCIENCE_SEEDS, Harness, configurations_tried, devlog_entries, git_state, write_result  # noqa: E402
+from provenance import (  # noqa: E402
+    DEVLOG,
+    SCIENCE_SEEDS,
+    Harness,
+    configurations_tried,
+    devlog_entries,
+    git_state,
+    seed_list,
+    write_result,
+)
 
 TUNED = mbrl.TUNED
 
@@ -69,7 +78,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--trials", type=int, default=None,
                         help="trials in all, a resumed search counting its earlier ones (default: twice the loop's "
                              "configurations in its development log, at least 6)")
-    parser.add_argument("--seeds", type=mbrl.seed_list, default=[0, 1], help="development seeds, e.g. 0,1")
+    parser.add_argument("--seeds", type=seed_list, default=[0, 1], help="development seeds, e.g. 0,1")
     parser.add_argument("--steps", type=int, default=5_000, help="env steps per trial and seed")
     parser.add_argument("--jobs", type=int, default=2, help="SAC processes at once")
     parser.add_argument("--sampler-seed", type=int, default=0)
