@@ -25,7 +25,7 @@ Held-out episodes: of the episodes numbered 0, 1, 2, ... across rounds, every `h
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -127,6 +127,7 @@ class LoopPlan:
     plan: dict[str, Any]  # the optimizer's settings
     scoring: dict[str, Any]  # build_policy's reward, termination, propagation, particles, device
     collect_noise: float = 0.0  # exploration noise on the collected episodes' actions (MPCPolicy's explore)
+    eval_every: int = 1  # evaluate every Nth round and the last (the others' records carry no return)
 
 
 def holdout(episodes: np.ndarray, every: int, per_round: int) -> np.ndarray:
@@ -198,6 +199,16 @@ def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | N
     return Transitions(**arrays, meta={}), faults
 
 
+def is_last_round(plan: LoopPlan, r: int, env_steps: int) -> bool:
+    """Whether round r ends the loop whatever its evaluation says: the rounds' cap, or the env-step budget."""
+    return r == plan.rounds - 1 or (plan.max_env_steps is not None and env_steps >= plan.max_env_steps)
+
+
+def evaluates(plan: LoopPlan, r: int, env_steps: int) -> bool:
+    """Whether round r is evaluated: every eval_every-th round, and always the last (its return is the loop's)."""
+    return (r + 1) % plan.eval_every == 0 or is_last_round(plan, r, env_steps)
+
+
 def _evaluate(plan: LoopPlan, model: ForwardModel, r: int, progress: bool) -> tuple[dict[str, float | None],
                                                                                    PhaseFaults]:
     if plan.eval_episodes == 0:
@@ -249,6 +260,8 @@ def _flat(settings: dict[str, Any]) -> dict[str, Any]:
 # values (what those loops ran with) they are left out of loop.json, so a folder written before them
 # stays resumable
 _ADDED_LATER = {"collect_noise": 0.0, "nll_beta": 0.0}
+# what only sets which rounds are evaluated: a resumed loop may change it (no model depends on it)
+_EVALUATION_ONLY = ("eval_every",)
 
 
 def _without_later_defaults(settings: dict[str, Any]) -> dict[str, Any]:
@@ -259,7 +272,7 @@ def _comparable(plan: dict[str, Any]) -> dict[str, Any]:
     """The settings a resumed loop must share with the interrupted one (JSON-shaped, rounds left out)."""
     import json
 
-    left_out = ("rounds", "until_return", "until_every_episode", "max_env_steps")
+    left_out = ("rounds", "until_return", "until_every_episode", "max_env_steps", *_EVALUATION_ONLY)
     kept = _without_later_defaults({k: v for k, v in plan.items() if k not in left_out})
     return json.loads(json.dumps({**kept, "fit": _without_later_defaults(kept["fit"])}))
 
@@ -333,7 +346,10 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                     round_faults = PhaseFaults.from_json(done.get("faults"))
                 else:
                     bar.update(task, status="evaluating")
-                    numbers, evaluated = _evaluate(plan, model, r, progress=False)
+                    # the evaluation's planner and resets are seeded apart from collection's and the fit's, so
+                    # evaluating fewer rounds changes no model, only the curve's points and the time they cost
+                    numbers, evaluated = _evaluate(plan if evaluates(plan, r, len(everything)) else
+                                                   replace(plan, eval_episodes=0), model, r, progress=False)
                     round_faults = collected + evaluated
                     record = RoundRecord(
                         round=r + 1, env_steps=len(everything), episodes=len(np.unique(everything.episode)),
@@ -366,7 +382,7 @@ def run_loop(plan: LoopPlan, run_dir: Path, progress: bool = True, resume: bool 
                 bar.update(task, advance=1, status=f"{record.env_steps:,} steps, {shown}")
                 if reached(record, plan.until_return, plan.until_every_episode):
                     break
-                if plan.max_env_steps is not None and record.env_steps >= plan.max_env_steps:
+                if is_last_round(plan, r, record.env_steps):
                     break
     finally:
         curve.close()

@@ -330,6 +330,10 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
                                  "to the bounds (evaluation episodes plan without it)")
     eval_episodes: int = Field(3, ge=0, description="MPC episodes evaluating each round's model (fixed reset seeds; "
                                "not added to the data)")
+    # evaluation plans every step of eval_episodes episodes (in one batched call), which costs several
+    # times the round's collection: the generated bodies' loop (10 episodes a round) spent ~3/4 of its time there
+    eval_every: int = Field(1, gt=0, description="Evaluate every Nth round's model, and always the last round's "
+                            "(--until-return can stop only on an evaluated round); the models do not depend on it")
     # PETS by default: in benchmarks/mbrl.py (3 seeds, same budgets) probabilistic members with TS-inf
     # reached higher returns than deterministic members with mean propagation on all three envs
     # (final-return IQM: Pusher -48.3 vs -56.2, InvertedPendulum 263.5 vs 135.0, the arm -4.55 vs
@@ -394,7 +398,7 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
                         until_every_episode=self.until_every_episode, max_env_steps=self.max_env_steps,
                         state=layout_name(self.env, self.state), fit=fit,
                         optimizer=self.optimizer, plan=self.plan(), scoring=self.scoring(),
-                        collect_noise=self.collect_noise)
+                        collect_noise=self.collect_noise, eval_every=self.eval_every)
 
 
 class MbrlSummary(PlannerFaultsSummary):

@@ -101,8 +101,10 @@ def mbrl_curve(rows: list[dict], path: Path, title: str = "") -> Path | None:
         evals = np.array([np.nan if r["eval_return_mean"] is None else r["eval_return_mean"] for r in rows], float)
         if np.isfinite(evals).any():
             spread = np.array([0.0 if r["eval_return_std"] is None else r["eval_return_std"] for r in rows], float)
-            line, = ax.plot(steps, evals, "o-", label="MPC on the round's model (evaluation)")
-            ax.fill_between(steps, evals - spread, evals + spread, color=line.get_color(), alpha=0.2, lw=0)
+            done = np.isfinite(evals)  # rounds left unevaluated (--eval-every) are no gap in the line
+            line, = ax.plot(steps[done], evals[done], "o-", label="MPC on the round's model (evaluation)")
+            ax.fill_between(steps[done], (evals - spread)[done], (evals + spread)[done], color=line.get_color(),
+                            alpha=0.2, lw=0)
         ax.plot(steps, [r["collect_return_mean"] for r in rows], "s--", color="tab:gray", ms=4,
                 label="episodes collected (round 1: random)")
         ax.set_xlabel("env steps collected")

@@ -10,11 +10,14 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from motorlab.control.steps import MPC
 from motorlab.dynamics.collection import collect_transitions
@@ -434,7 +437,6 @@ def test_exploration_noise_widens_the_collected_actions_and_leaves_the_plan_and_
     """MPCPolicy's `explore`: Gaussian noise of that share of each action's half-range on the planned
     actions, clipped to the bounds, seeded; 0 is the plan itself. In the loop (--collect-noise) it
     changes what the later rounds collect, not how a round's model is evaluated."""
-    from dataclasses import asdict
     from types import SimpleNamespace
 
     from motorlab.control.mbrl import _comparable
@@ -478,3 +480,48 @@ def test_exploration_noise_widens_the_collected_actions_and_leaves_the_plan_and_
     assert _comparable(asdict(MBRL.make(env=IP, collect_noise=0.5).loop_plan()))["collect_noise"] == 0.5
     assert "nll_beta" not in _comparable(asdict(MBRL.make(env=IP).loop_plan()))["fit"]
     assert _comparable(asdict(MBRL.make(env=IP, nll_beta=0.5).loop_plan()))["fit"]["nll_beta"] == 0.5
+
+
+@settings(max_examples=200, deadline=None)
+@given(rounds=st.integers(1, 30), every=st.integers(1, 12), per_round=st.integers(1, 400),
+       budget=st.one_of(st.none(), st.integers(1, 6000)))
+def test_eval_every_always_evaluates_the_round_that_ends_the_loop(rounds, every, per_round, budget):
+    """Whatever the cap, the budget and --eval-every, the loop's last round is evaluated (its return is
+    the loop's) and the others exactly on multiples of eval_every: walked as run_loop walks them."""
+    from motorlab.control.mbrl import evaluates, is_last_round
+    from motorlab.control.steps import MBRL
+
+    plan = replace(MBRL.make(env=IP).loop_plan(), rounds=rounds, eval_every=every, max_env_steps=budget)
+    walked = []
+    for r in range(rounds):
+        steps = (r + 1) * per_round
+        walked.append(evaluates(plan, r, steps))
+        if is_last_round(plan, r, steps):
+            break
+    assert walked[-1]
+    assert walked[:-1] == [(r + 1) % every == 0 for r in range(len(walked) - 1)]
+    assert len(walked) == (rounds if budget is None else min(rounds, -(-budget // per_round)))
+
+
+def test_eval_every_leaves_the_models_alone_and_a_resume_may_change_it(tmp_path):
+    """Evaluating every 2nd round (and the last) skips round 1's evaluation and changes nothing the
+    rounds learn: the same collected returns, held-out errors and evaluated returns as every round's."""
+    from motorlab.control.mbrl import _comparable
+    from motorlab.control.steps import MBRL
+
+    kept = {}
+    for every in (1, 2):
+        out = tmp_path / f"every{every}"
+        s = run_kind(MBRL, out, rounds=3, episodes_per_round=3, eval_episodes=1, ensemble=2, epochs=5, seed=4,
+                     eval_every=every, **TINY_PLAN, env=IP)
+        kept[every] = curve(out), s
+    (whole, s1), (sparse, s2) = kept[1], kept[2]
+    assert [r["eval_return_mean"] for r in sparse][0] == ""  # round 1: not evaluated
+    assert all(r["eval_return_mean"] != "" for r in sparse[1:])  # round 2 (every 2nd) and round 3 (the last)
+    same = ("env_steps", "collect_return_mean", "valid_mse", "valid_mse_first")
+    assert [{k: r[k] for k in same} for r in whole] == [{k: r[k] for k in same} for r in sparse]
+    assert [r["eval_return_mean"] for r in whole[1:]] == [r["eval_return_mean"] for r in sparse[1:]]
+    assert s1["final_return_mean"] == s2["final_return_mean"]
+    assert "eval_every" not in _comparable(asdict(MBRL.make(env=IP, eval_every=3).loop_plan()))
+    with pytest.raises(Exception, match="eval_every|greater"):
+        MBRL.make(env=IP, eval_every=0)
