@@ -153,3 +153,17 @@ def test_a_science_result_without_a_headline_record_is_marked_in_sample():
     assert "in-sample with these settings (1 run(s), seeds [0, 1, 2, 3, 4]): loop 5 of 5 seeds; median 600" in \
         provenance_note("mbrl", headline)  # beside the held-out numbers, so a reader sees how they differ
     assert provenance_note("tune", old) == ""  # a speed or tuning benchmark has no development seeds to mark
+
+
+def test_the_bodies_row_shows_each_methods_share_of_the_gap_and_its_in_sample_runs():
+    """mbrl_bodies' row: per method the median share of the random-to-oracle gap, k of n bodies at the
+    target and whether the target was met; a headline's in-sample runs are shown the same way."""
+    targets = {m: {"median": share, "k": k, "of": 10, "met": k >= 8}
+               for m, share, k in (("loop", 0.62, 3), ("mpc_user", 0.88, 10), ("mpc_learned", 0.71, 9))}
+    data = {"benchmark": "mbrl_bodies", "targets": targets}
+    shown = "; ".join(f.text(data) for f in table.facts("mbrl_bodies", data))
+    assert "loop: median share of the random-to-oracle gap 62%; bodies at its target, of 10: 3" in shown
+    assert "one-shot, user's reward: median share of the random-to-oracle gap 88%" in shown
+    assert "loop met: **no**" in shown and "mpc_user met: yes" in shown
+    dev = {"in_sample": [{"seeds": [0, 1], "result": {"targets": targets}}]}
+    assert "loop median 62% of the gap (3 of 10 at its target)" in table.in_sample(dev)

@@ -171,6 +171,10 @@ NAMED = {
                            Fact("RL-E2E:", ("study", "arms", "rl-e2e", "return", "per_seed"), "seeds"),
                            Fact("", ("study", "arms", "sar-rl", "return", "per_seed"), "p_better",
                                 other=("study", "arms", "rl-e2e", "return", "per_seed"), sides=("SAR-RL", "RL-E2E"))],
+    "mbrl_bodies": lambda d: [f for m, label in BODY_METHODS.items() for f in (
+        Fact(f"{label}: median share of the random-to-oracle gap", ("targets", m, "median"), "percent"),
+        Fact(f"bodies at its target, of {(d.get('targets') or {}).get(m, {}).get('of')}:", ("targets", m, "k"),
+             "count"))],
     "dynamics_fit": lambda d: [Fact("fit speedup over the reference:", ("speedup",), "ratio"),
                                Fact("validation MSE / the reference's:", ("mse_ratio",), "ratio")],
     "dynamics_collect": lambda d: [Fact("transitions/s over the reference's:", ("ratio",), "ratio")],
@@ -284,7 +288,21 @@ def in_sample(dev: dict[str, Any]) -> str:
 
 def _loop_text(result: dict[str, Any]) -> str:
     steps = ((result.get("loop") or {}).get("steps_to_threshold") or {})
-    return f"loop {steps['text']}" if steps.get("text") else "(no loop result)"
+    if steps.get("text"):
+        return f"loop {steps['text']}"
+    shares = _shares_text(result)  # mbrl_bodies: the share of the gap each method closed
+    return shares or "(no loop result)"
+
+
+BODY_METHODS = {"loop": "loop", "mpc_user": "one-shot, user's reward", "mpc_learned": "one-shot, learned reward"}
+
+
+def _shares_text(result: dict[str, Any]) -> str:
+    targets = result.get("targets") or {}
+    parts = [f"{label} median {show(targets[m]['median'], 'percent')} of the gap ({targets[m]['k']} of "
+             f"{targets[m]['of']} at its target)" for m, label in BODY_METHODS.items()
+             if isinstance(targets.get(m), dict) and "median" in targets[m]]
+    return "; ".join(parts)
 
 
 def rows(results: Path = BENCHMARKS / "results") -> list[tuple[str, str, str, str, str]]:
