@@ -188,9 +188,9 @@ def _collect(plan: LoopPlan, r: int, first_episode: int, model: ForwardModel | N
     result = run_episodes(collect_config(plan), policy, n, base, min(plan.parallel, n), progress=progress,
                           seeds=[base + i for i in range(n)], record=True)
     faults = PhaseFaults.of(result, f"round {r + 1} collect", policy.task.reward_source, f"rounds/{r - 1:02d}/model")
-    # an episode whose simulation diverged is no transition of the dynamics: it is left out
-    kept = [i for i, p in enumerate(result.paths)
-            if np.isfinite(p.observations).all() and np.isfinite(p.rewards).all()]
+    # an episode that ended on a numerical fault is left out whole (motorlab.dynamics.collection.whole_episodes)
+    kept = [i for i, p in enumerate(result.paths) if i not in result.faulted
+            and np.isfinite(p.observations).all() and np.isfinite(p.rewards).all()]
     if not kept:
         raise MotorlabError(f"round {r + 1}: every episode ended on a numerical fault "
                             f"({result.fault_log[0] if result.fault_log else 'non-finite observations'}).")

@@ -144,6 +144,7 @@ class MPCEpisodes(NamedTuple):
     paths: list[EpisodePath] | None = None  # each episode's transitions, when recorded
     planner: FaultCounts = FaultCounts()  # the non-finite predictions and rewards the planner met
     first_planner_fault: str | None = None  # where the planner first met one: "seed=S step=T"
+    faulted: tuple[int, ...] = ()  # the episodes (their index) that ended on a numerical fault
 
 
 def planner_fault_line(counts: FaultCounts, reward: str, model: str, first: str | None = None) -> str:
@@ -165,7 +166,7 @@ def run_episodes(env: str | EnvConfig, policy: MPCPolicy, episodes: int, seed: i
     env_id = cfg.id
     seeds = list(seeds) if seeds is not None else [seed + i for i in range(episodes)]
     envs = [make_env(cfg, shaped=False) for _ in range(parallel)]
-    returns, distances, call_ms, per_env_ms, fault_log, paths = [], [], [], [], [], []
+    returns, distances, call_ms, per_env_ms, fault_log, paths, faulted = [], [], [], [], [], [], []
     before, first_fault = policy.faults.counts(), None
     with Progress(disable=not progress) as bar:
         task = bar.add_task(f"MPC on {env_id}", total=episodes)
@@ -198,6 +199,7 @@ def run_episodes(env: str | EnvConfig, policy: MPCPolicy, episodes: int, seed: i
                     fault = fault_of(info)
                     if fault:
                         fault_log.append(fault_line(seeds[first + i], len(dist[i]) - 1, fault))
+                        faulted.append(first + i)
             for i, rows in enumerate(steps if record else ()):
                 o, a, r, te, tr = zip(*rows)
                 paths.append(EpisodePath(np.array([first_obs[i], *o], dtype=np.float64), np.array(a, dtype=np.float64),
@@ -213,7 +215,7 @@ def run_episodes(env: str | EnvConfig, policy: MPCPolicy, episodes: int, seed: i
     planner = policy.faults.counts()
     planner = FaultCounts(*(getattr(planner, k) - getattr(before, k) for k in FaultCounts.__dataclass_fields__))
     return MPCEpisodes(np.array(returns), padded, np.array(call_ms), np.array(per_env_ms), fault_log,
-                       paths if record else None, planner, first_fault)
+                       paths if record else None, planner, first_fault, tuple(sorted(set(faulted))))
 
 
 def record_video(env: str | EnvConfig, policy: MPCPolicy, path: Path, seed: int) -> Path:

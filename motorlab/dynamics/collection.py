@@ -189,7 +189,22 @@ def _collect_pool(env_cfg: EnvConfig, policy_dir: str | None, episodes: int, see
         if workers > 1:
             pool.terminate()
     faults = [fault_line(s, len(r[1]) + 1, r[-1]) for s, r in zip(seeds, results) if r[-1]]
-    return episode_arrays(*zip(*(r[:-1] for r in results)), layout=layout, episode_ids=range(episodes)), faults
+    kept = whole_episodes([r[-1] for r in results])
+    if not kept:
+        raise MotorlabError(f"every episode of {env_cfg.id} ended on a numerical fault (first: {faults[0]}); "
+                            "nothing to collect. A diverging simulation: a smaller timestep, more joint damping or "
+                            "armature, or the RK4 integrator in the model's XML makes it stable.")
+    arrays = episode_arrays(*zip(*(results[i][:-1] for i in kept)), layout=layout, episode_ids=kept)
+    return arrays, faults
+
+
+def whole_episodes(faults: list[str | None]) -> list[int]:
+    """The episodes kept: those that ended on no numerical fault. A faulted episode is left out whole, not
+    cut at its fault: MuJoCo warns of a diverging state only once a value passes 1e10, so the steps
+    before its warning were already leaving the physics. A generated arm's pink-noise episodes ran up
+    to 1e7 rad/s first; kept, their few rows set the model's normalizers (a state change's std of 2e5)
+    and every plan on that model went NaN (benchmarks/mbrl_bodies.py, headline body 100)."""
+    return [i for i, fault in enumerate(faults) if not fault]
 
 
 def require_continuous(env: gym.Env, env_id: str, user: str, random: bool = False) -> None:

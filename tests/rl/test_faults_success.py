@@ -186,19 +186,22 @@ def test_evaluate_without_faults_writes_no_faults_log(tmp_path):
     assert not (tmp_path / "eval" / "faults.log").exists() and "numerical fault" not in result.stderr
 
 
-def test_dynamics_collect_drops_the_faulted_step(tmp_path):
-    """Transitions stop before the step that diverged: every kept transition is finite, a faulty
-    episode keeps its FAULT_STEP - 1 good steps and ends there, and the faults are logged."""
+def test_dynamics_collect_leaves_a_faulted_episode_out_whole(tmp_path):
+    """A faulty episode gives no transition at all, not its steps before the fault (the run-up to a
+    diverging simulation is no physics either: tests/dynamics/test_diverging_episodes.py); every kept
+    episode is whole and finite, and the faults are logged."""
     from motorlab.dynamics.transitions import load_transitions
 
     episodes = 10
     faulty = np.array(expected_faults(range(episodes)))
+    assert 0 < faulty.sum() < episodes
     summary = run_kind(DYNAMICS_COLLECT, tmp_path / "data", env=FAULTY_ID, episodes=episodes, workers=1)
     data = load_transitions(tmp_path / "data")
     lengths = np.bincount(data.episode, minlength=episodes)
-    np.testing.assert_array_equal(lengths, np.where(faulty, FAULT_STEP - 1, EPISODE_STEPS))
+    np.testing.assert_array_equal(lengths, np.where(faulty, 0, EPISODE_STEPS))
+    assert np.isfinite(data.states).all() and np.isfinite(data.next_states).all()
     ends = np.flatnonzero(np.diff(data.episode, append=episodes))  # the last row of each episode
-    assert data.dones[ends].all() and data.dones.sum() == episodes
+    assert data.dones[ends].all() and data.dones.sum() == episodes - faulty.sum()
     assert summary["numerical_faults"] == data.meta["numerical_faults"] == faulty.sum()
     assert len((tmp_path / "data" / "faults.log").read_text().splitlines()) == faulty.sum()
 
