@@ -7,7 +7,9 @@ torques; half vertical, with gravity), reaching a new random target every episod
 seed is the seed the harness judges (benchmarks/provenance.py, Harness("mbrl_bodies")): development
 bodies 0-99 (settings are chosen on them; a run writes one line to benchmarks/devlog/mbrl_bodies.jsonl),
 headline bodies 100-999, of which this benchmark reports 100-109 (benchmarks/results/mbrl_bodies.json,
-at a commit, with the hash of every setting and the count of configurations the devlog tried).
+at a commit, with the hash of every setting and the count of configurations the devlog tried). A fix
+that a headline prompted is judged on fresh bodies, e.g. --bodies 110-119
+(benchmarks/results/mbrl_bodies-110-119.json, beside the first).
 Odd seeds are muscle arms (bodies:GeneratedMuscleArm-sN-v0: an antagonist pair of MuJoCo muscles per
 joint, excitations in [0, 1]), even seeds motor arms (bodies:GeneratedArm-sN-v0): 5 and 5 of 100-109.
 
@@ -381,6 +383,13 @@ def summarize(results: list[dict[str, Any]], headline: bool, budgets: Budgets) -
 # ---------------------------------------------------------------------------------------- main
 
 
+def result_file(bodies: list[int]) -> str:
+    """The headline's file: results/mbrl_bodies.json for the bodies this benchmark reports (100-109), else
+    results/mbrl_bodies-FIRST-LAST.json: a fix prompted by what one headline showed is judged on bodies
+    no run has shown, beside that headline rather than over it."""
+    return NAME if bodies == HEADLINE_BODIES else f"{NAME}-{bodies[0]}-{bodies[-1]}"
+
+
 def parse_seeds(text: str) -> list[int]:
     """"100-109", "0,1,5", "0-2,7" -> a sorted list without repeats."""
     return sorted(seed_list(text))
@@ -518,7 +527,7 @@ def main(argv: list[str] | None = None) -> None:
     result = {**summarize(ordered, headline, budgets), "quick": args.quick, "jobs": args.jobs,
               "wall_seconds_this_invocation": wall,
               "read_back": sorted(set(args.bodies) - {j[0] for j in jobs})}
-    run.finish(result, used=used)
+    run.finish(result, result_file(args.bodies), used=used)
 
 
 if __name__ == "__main__":

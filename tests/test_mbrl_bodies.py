@@ -149,3 +149,10 @@ def test_development_settings_are_tried_on_development_bodies_only(capsys):
     for given in (["--set", "fit.epochs=100"], ["--no-loop"], ["--baselines-from", "/tmp"]):
         with pytest.raises(SystemExit, match="headline runs motorlab's defaults"):
             mb.main(["--bodies", "100", *given])  # a headline: the defaults, every method, from scratch
+
+
+def test_a_headline_on_other_bodies_is_recorded_beside_the_first_not_over_it():
+    import mbrl_bodies
+
+    assert mbrl_bodies.result_file(list(range(100, 110))) == "mbrl_bodies"
+    assert mbrl_bodies.result_file(list(range(110, 120))) == "mbrl_bodies-110-119"
