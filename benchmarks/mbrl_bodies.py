@@ -36,11 +36,11 @@ targets are judged the same way here, and the median share is reported beside k 
 Wilson interval). "met" is judged only on the 10 headline bodies (null on development bodies).
 
 Compute (2 cores): bodies run --jobs (2) at a time, each in its own process on one torch thread.
-Measured 2026-11-29 on this 2-core machine, shared with other work (load average ~5), development bodies 0
-and 1 side by side: ~16-17 min a body (the oracle 4.8-6 min at 255-340 ms a control step, the loop
-10.5 min, collect + fit + both mpc runs ~0.5 min), 17.2 min for the pair. So 10 headline bodies take
-~85 min on 2 processes: split them, e.g. --only 100-105 --keep DIR (~51 min), then --only 106-109
---keep DIR --resume (~34 min; the last invocation, with every body of --bodies finished, records).
+Measured 2026-11-29 on this 2-core machine, headline bodies 100-105 two at a time with the loop
+evaluated every 5th round: 5-9.5 min a body (the oracle 1.5-4 min, the loop 2.3-3.7 min, collect + fit
++ both mpc runs 1-2.2 min; the first pair shared the cores with other work), 21.7 min for the six. So 10 bodies take ~36 min on
+2 processes; split them to stay well inside an hour, e.g. --only 100-105 --keep DIR, then --only
+106-109 --keep DIR --resume (the last invocation, with every body of --bodies finished, records).
 An idle machine is faster. --quick (a smoke run: 20 collected episodes, 5 epochs, 2 evaluation
 episodes, a 400-step loop, a cheap oracle): ~1.5 min for 2 bodies; development bodies only, logged to
 benchmarks/devlog/mbrl_bodies-quick.jsonl.
