@@ -155,9 +155,7 @@ def _run_episode(seed: int) -> tuple:
             action = np.asarray(policy.act(obs[None])[0])
         obs, reward, term, trunc, info = env.step(action)
         fault = fault_of(info)
-        if fault:  # the step that diverged is not a transition of the dynamics; the episode ends before it
-            if truncated:
-                truncated[-1] = True
+        if fault:  # the episode ends here, and _collect_pool leaves it out whole (whole_episodes)
             break
         done = term or trunc
         observations.append(obs)
