@@ -90,6 +90,18 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
+DEFAULT_BUDGET = (5_000, (0, 1))  # --steps, --seeds
+
+
+def study_name(env: str, steps: int, seeds: list[int]) -> str:
+    """The Optuna study a search resumes: one per budget, so trials at other --steps or --seeds never
+    share a study (their scores are not comparable). The default budget keeps the name the first
+    searches were recorded under."""
+    if (steps, tuple(seeds)) == DEFAULT_BUDGET:
+        return f"sac-{env}"
+    return f"sac-{env}-{steps}steps-seeds{'-'.join(map(str, seeds))}"
+
+
 def main(argv: list[str] | None = None) -> dict:
     import optuna
     from optuna.storages import JournalStorage
@@ -100,7 +112,8 @@ def main(argv: list[str] | None = None) -> dict:
     every = mbrl.eval_interval(args.env, env["budget"], {})
     DEVLOG.mkdir(parents=True, exist_ok=True)
     storage = JournalStorage(JournalFileBackend(str(DEVLOG / f"sac_tune-{args.env}.journal")))
-    study = optuna.create_study(study_name=f"sac-{args.env}", storage=storage, direction="maximize",
+    study = optuna.create_study(study_name=study_name(args.env, args.steps, args.seeds), storage=storage,
+                                direction="maximize",
                                 sampler=optuna.samplers.TPESampler(seed=args.sampler_seed), load_if_exists=True)
     harness = Harness("sac_tune")
     started = git_state()

@@ -48,3 +48,15 @@ def test_returns_at_fixed_budgets_take_the_last_evaluation_at_or_before_each():
 def test_sac_is_evaluated_as_often_as_the_loop_evaluates():
     assert mbrl.eval_interval("reacher", 3000, {}) == 200  # 4 episodes of 50 steps a round
     assert mbrl.eval_interval("arm", 3000, {}) == 150  # one 150-step episode a round
+
+
+def test_a_tune_at_another_budget_is_its_own_study():
+    """sac_tune.py resumes the study of its --steps and --seeds only: trials scored at 5k and at 15k
+    env steps never share a study (or a best trial)."""
+    import sac_tune
+
+    steps, seeds = sac_tune.DEFAULT_BUDGET
+    assert sac_tune.parse(["cartpole"]).steps == steps and tuple(sac_tune.parse(["cartpole"]).seeds) == seeds
+    assert sac_tune.study_name("cartpole", steps, list(seeds)) == "sac-cartpole"  # the first searches' name
+    names = {sac_tune.study_name("cartpole", n, s) for n in (5_000, 15_000) for s in ([0, 1], [0, 1, 2])}
+    assert len(names) == 4
