@@ -188,10 +188,8 @@ def _collect_pool(env_cfg: EnvConfig, policy_dir: str | None, episodes: int, see
             pool.terminate()
     faults = [fault_line(s, len(r[1]) + 1, r[-1]) for s, r in zip(seeds, results) if r[-1]]
     kept = whole_episodes([r[-1] for r in results])
-    if not kept:
-        raise MotorlabError(f"every episode of {env_cfg.id} ended on a numerical fault (first: {faults[0]}); "
-                            "nothing to collect. A diverging simulation: a smaller timestep, more joint damping or "
-                            "armature, or the RK4 integrator in the model's XML makes it stable.")
+    if not kept:  # nothing to stack: collect_transitions' check of an empty collection says so
+        return {"states": np.empty((0, layout.size))}, faults
     arrays = episode_arrays(*zip(*(results[i][:-1] for i in kept)), layout=layout, episode_ids=kept)
     return arrays, faults
 
@@ -308,8 +306,9 @@ def collect_transitions(env: str | EnvConfig, episodes: int, policy: str = "rand
                 arrays, faults = _collect_pool(env_cfg, policy_dir, episodes, seed, layout, workers, bar, task,
                                                noise_beta)
         if len(arrays["states"]) == 0:
-            raise MotorlabError(f"every episode of {env_id} ended on a numerical fault before its first step "
-                                f"(first: {faults[0]}); nothing to collect.")
+            raise MotorlabError(f"every episode of {env_id} ended on a numerical fault (first: {faults[0]}); "
+                                "nothing to collect. A diverging simulation: a smaller timestep, more joint damping "
+                                "or armature, or the RK4 integrator in the model's XML makes it stable.")
         seconds = time.perf_counter() - start
         meta = {"env_id": env_id, "env": env_record(env_cfg), "state_layout": layout.name,
                 "state_labels": list(layout.labels), "goal_labels": list(layout.goal_labels),
