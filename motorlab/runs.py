@@ -533,23 +533,30 @@ def _open_no_follow(path: Path, how: int):
 
 
 def _rows_until(path: Path, fields: list[str], steps: int) -> str:
-    """metrics.csv's header and its whole rows with timesteps <= steps."""
+    """metrics.csv's header and its whole rows with timesteps <= steps, in `fields`' columns: a file
+    written by an older motorlab (other columns) keeps every row, its cells moved under their names
+    (a column it lacks stays empty; one `fields` lacks is dropped)."""
     text = path.read_text(errors="replace")
     lines = text.split("\n")
     if not text.endswith("\n"):
         lines = lines[:-1]  # the last line was cut short
-    header = ",".join(fields)
-    kept = [header]
+    old = next(csv.reader([lines[0].rstrip("\r")]), []) if lines else []
+    if "timesteps" not in old:
+        old = fields  # no header to read: the rows are taken as the current columns
+    out = io.StringIO()
+    writer = csv.DictWriter(out, fieldnames=fields, extrasaction="ignore")
+    writer.writeheader()
     for line in lines[1:]:
-        cells = next(csv.reader([line]), [])
-        if len(cells) != len(fields):
-            continue
+        cells = next(csv.reader([line.rstrip("\r")]), [])
+        if len(cells) != len(old):
+            continue  # torn by a kill
+        row = dict(zip(old, cells))
         try:
-            if float(cells[0]) <= steps:
-                kept.append(line.rstrip("\r"))
+            if float(row["timesteps"]) <= steps:
+                writer.writerow(row)
         except ValueError:
             continue
-    return "\r\n".join(kept) + "\r\n"  # csv's own line ending
+    return out.getvalue()
 
 
 def last_timesteps(run_dir: Path) -> int:

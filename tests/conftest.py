@@ -65,6 +65,8 @@ SECONDS = {
     "tests/dynamics/test_colored_actions.py": 18, "tests/test_docs_numbers.py": 8, "tests/test_benchmark_mbrl.py": 5,
     "tests/test_benchmark_table.py": 14, "tests/test_benchmark_provenance.py": 3, "tests/test_intervals.py": 6,
     "tests/dynamics/test_auto_epochs.py": 2,
+    # issue 54's
+    "tests/rl/test_sar_presets.py": 40, "tests/rl/test_wall_budget.py": 25,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[sar_synergies]": 85,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[your_own_body]": 45,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[robust_pendulum]": 40,

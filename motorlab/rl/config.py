@@ -43,6 +43,12 @@ class TrainConfig(EnvSettings):
                                        "maximum, 1000 for InvertedPendulum)")
     eval_every: int | None = Field(None, gt=0, description="Env steps between evaluations (default: "
                                    + algos.eval_cadence_help() + ")")
+    minutes: float | None = Field(None, gt=0, description="Wall-clock budget: minutes of training (evaluations "
+                                  "and checkpoints not counted); training stops at whichever of it and --timesteps "
+                                  "comes first, and summary.json says which (stopped_by)")
+    eval_every_minutes: float | None = Field(None, gt=0, description="Minutes of training between evaluations, "
+                                             "instead of env steps: learners of different speeds evaluated at "
+                                             "the same wall times")
     n_envs: int = Field(1, gt=0, description="Parallel envs (subprocesses when > 1)")
     normalize: bool = Field(False, description="Normalize observations with running statistics (VecNormalize)")
     device: str = Field("auto", description="auto (CUDA when present) | cpu | cuda")
@@ -76,6 +82,13 @@ class TrainConfig(EnvSettings):
     def _known_algo(cls, v: str) -> str:
         algos.get(v)  # one line with close matches for an unknown name
         return v
+
+    @model_validator(mode="after")
+    def _one_evaluation_clock(self):
+        if self.eval_every is not None and self.eval_every_minutes is not None:
+            raise MotorlabError("--eval-every counts env steps and --eval-every-minutes minutes of training: "
+                                "give one of them.")
+        return self
 
     @model_validator(mode="after")
     def _algo_takes_settings(self):

@@ -24,7 +24,7 @@ from motorlab.rl.config import TrainConfig
 from motorlab.runs import METRICS, MetricsWriter
 
 METRIC_FIELDS = ["timesteps", "wall_seconds", "episode_return", "episode_length", "episode_success",
-                 "success_rate_100", "eval_return_mean", "eval_return_min", "eval_success_rate", FAULT_KEY]
+                 "success_rate_100", "eval_return_mean", "eval_return_min", "eval_success_rate", FAULT_KEY, "train_seconds"]
 
 EVAL_SEED_OFFSET = 10_000  # evaluation episodes never share seeds with training episodes
 
@@ -82,6 +82,10 @@ class TrainingMonitor:
         self.steps_to_success: int | None = None
         self.last_eval_steps = -1
         self.evaluations = 0
+        # seconds spent evaluating and checkpointing: not training, so not counted against --minutes
+        # (learners evaluated at different cadences meet the same budget of training)
+        self.paused = 0.0
+        self.out_of_time = False  # stopped by --minutes
         if resume is not None:
             self.restore(monitor_record(resume))
 
@@ -89,7 +93,7 @@ class TrainingMonitor:
         """What a checkpoint keeps of the monitor (JSON)."""
         return {"wall": self.wall(), "recent": list(self.recent), "recent_success": list(self.recent_success),
                 "episodes": self.episodes, "faults": self.faults, "steps_to_success": self.steps_to_success,
-                "last_eval_steps": self.last_eval_steps, "evaluations": self.evaluations}
+                "last_eval_steps": self.last_eval_steps, "evaluations": self.evaluations, "paused": self.paused}
 
     def restore(self, state: dict) -> None:
         self.t0 = time.perf_counter() - state["wall"]
@@ -97,15 +101,26 @@ class TrainingMonitor:
         self.recent_success.extend(state["recent_success"])
         for key in ("episodes", "faults", "steps_to_success", "last_eval_steps", "evaluations"):
             setattr(self, key, state[key])
+        self.paused = state.get("paused", 0.0)  # checkpoints written before --minutes existed
 
     def wall(self) -> float:
         return time.perf_counter() - self.t0
+
+    def train_seconds(self) -> float:
+        """Wall seconds spent training: the run's wall time less its evaluations and checkpoints."""
+        return self.wall() - self.paused
+
+    def pause(self, started: float) -> None:
+        """Count the time since `started` (time.perf_counter()) as not training."""
+        self.paused += time.perf_counter() - started
 
     def episode(self, steps: int, ret: float, length: int, success: bool | None = None, fault: str | None = None) -> None:
         """A finished training episode; `success` is "solved at any step" where the env says."""
         self.episodes += 1
         self.recent.append(ret)
-        row = {"timesteps": steps, "wall_seconds": self.wall(), "episode_return": ret, "episode_length": length}
+        wall = self.wall()  # both clocks from one reading
+        row = {"timesteps": steps, "wall_seconds": wall, "train_seconds": wall - self.paused,
+               "episode_return": ret, "episode_length": length}
         self.tb.add_scalar("train/episode_return", ret, steps)
         self.tb.add_scalar("train/episode_return_mean100", float(np.mean(self.recent)), steps)
         if success is not None:
@@ -127,6 +142,7 @@ class TrainingMonitor:
 
     def evaluate(self, steps: int, policy: Policy) -> bool:
         """Evaluate `policy` (trained on `steps` env steps); True when solved."""
+        started = time.perf_counter()
         stop_below = self.solve_return if self.cfg.until_solved else None
         result = self.evaluator.run(policy, stop_below=stop_below)
         self.last_eval_steps = steps
@@ -134,7 +150,10 @@ class TrainingMonitor:
         solved = (not result.aborted and self.solve_return is not None
                   and bool(np.all(result.returns >= self.solve_return)))
         s = result.summary()
-        self.metrics.write({"timesteps": steps, "wall_seconds": self.wall(), "eval_return_mean": s["return_mean"],
+        self.pause(started)
+        wall = self.wall()
+        self.metrics.write({"timesteps": steps, "wall_seconds": wall, "train_seconds": wall - self.paused,
+                            "eval_return_mean": s["return_mean"],
                             "eval_return_min": s["return_min"], "eval_success_rate": 1.0 if solved else s["success_rate"]})
         self.tb.add_scalar("eval/return_mean", s["return_mean"], steps)
         self.tb.add_scalar("eval/return_min", s["return_min"], steps)

@@ -14,6 +14,7 @@ import io
 import os
 import sys
 import tempfile
+import time
 import typing
 from pathlib import Path
 
@@ -50,14 +51,21 @@ class MonitorCallback(BaseCallback):
 
     On-policy algorithms change their policy only between rollouts, so they are
     evaluated at the start of each rollout (right after the update); off-policy
-    ones every `eval_every` steps.
+    ones every `eval_every` steps, or every `eval_minutes` minutes of training.
+    With `minutes`, training stops at the first step past that many minutes of
+    training (the monitor's train_seconds: evaluations and checkpoints not counted).
     """
 
     def __init__(self, monitor: TrainingMonitor, eval_every: int, on_policy: bool, until_solved: bool,
-                 run_dir: Path | None = None, checkpoint_every: int = 0, start: int = 0):
+                 run_dir: Path | None = None, checkpoint_every: int = 0, start: int = 0,
+                 minutes: float | None = None, eval_minutes: float | None = None):
         super().__init__()
         self.monitor, self.eval_every, self.on_policy, self.until_solved = monitor, eval_every, on_policy, until_solved
         self.next_eval = (start // eval_every + 1) * eval_every if start else eval_every
+        self.budget_s = minutes * 60 if minutes is not None else None
+        self.eval_period_s = eval_minutes * 60 if eval_minutes is not None else None
+        if self.eval_period_s is not None:  # resumed: the next multiple of the period after the training so far
+            self.next_eval_s = (monitor.train_seconds() // self.eval_period_s + 1) * self.eval_period_s
         self.run_dir, self.checkpoint_every = run_dir, checkpoint_every
         self.next_checkpoint = (start // checkpoint_every + 1) * checkpoint_every if checkpoint_every else None
         self.solved = False
@@ -81,15 +89,24 @@ class MonitorCallback(BaseCallback):
         return SB3Policy(self.model.policy, algorithm=self.algorithm)
 
     def _maybe_evaluate(self) -> None:
-        if self.num_timesteps >= self.next_eval:
+        if self.eval_period_s is not None:
+            trained = self.monitor.train_seconds()
+            if trained < self.next_eval_s:
+                return
+            self.next_eval_s = (trained // self.eval_period_s + 1) * self.eval_period_s
+        elif self.num_timesteps >= self.next_eval:
             self.next_eval = (self.num_timesteps // self.eval_every + 1) * self.eval_every
-            self.solved = self.monitor.evaluate(self.num_timesteps, self.policy_now()) or self.solved
+        else:
+            return
+        self.solved = self.monitor.evaluate(self.num_timesteps, self.policy_now()) or self.solved
 
     def _maybe_checkpoint(self) -> None:
         if self.next_checkpoint is not None and self.num_timesteps >= self.next_checkpoint:
             from motorlab.rl.checkpoint import save_checkpoint
 
+            started = time.perf_counter()
             save_checkpoint(self.run_dir, self.model, self.monitor.state())
+            self.monitor.pause(started)
             self.next_checkpoint = (self.num_timesteps // self.checkpoint_every + 1) * self.checkpoint_every
 
     def _on_rollout_start(self) -> None:
@@ -107,6 +124,9 @@ class MonitorCallback(BaseCallback):
         if not self.on_policy:
             self._maybe_evaluate()
             self._maybe_checkpoint()
+        if self.budget_s is not None and self.monitor.train_seconds() >= self.budget_s:
+            self.monitor.out_of_time = True
+            return False
         return not (self.until_solved and self.solved)
 
 
@@ -224,8 +244,12 @@ def train_sb3(cfg: TrainConfig, model: BaseAlgorithm, run_dir: Path, monitor: Tr
     eval_every = cfg.eval_every or algo.eval_every(model, cfg.n_envs)
     every = cfg.checkpoint_every if cfg.checkpoint_every is not None else max(1, cfg.timesteps // 10)
     start = int(model.num_timesteps)
-    callback = MonitorCallback(monitor, eval_every, on_policy, cfg.until_solved, run_dir, every, start)
-    if start < cfg.timesteps and not (cfg.until_solved and monitor.steps_to_success is not None):
+    callback = MonitorCallback(monitor, eval_every, on_policy, cfg.until_solved, run_dir, every, start,
+                               minutes=cfg.minutes, eval_minutes=cfg.eval_every_minutes)
+    if cfg.minutes is not None and monitor.train_seconds() >= cfg.minutes * 60:  # resumed past it
+        monitor.out_of_time = True
+    out_of_time = monitor.out_of_time
+    if start < cfg.timesteps and not (cfg.until_solved and monitor.steps_to_success is not None) and not out_of_time:
         # resumed: SB3 counts on from num_timesteps; the schedules see the same total budget
         try:
             model.learn(total_timesteps=cfg.timesteps - start, callback=callback, progress_bar=cfg.progress,

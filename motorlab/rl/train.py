@@ -101,6 +101,11 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False, *, ki
         "steps_to_success": monitor.steps_to_success,
         "solved": monitor.steps_to_success is not None,
         "wall_seconds": round(wall, 3),
+        # what ended training: the env-step budget, --minutes of training, or --until-solved
+        "stopped_by": ("solved" if cfg.until_solved and monitor.steps_to_success is not None
+                       else "minutes" if monitor.out_of_time else "timesteps"),
+        "minutes": cfg.minutes,
+        "train_seconds": round(monitor.train_seconds(), 3),
         "evaluations": monitor.evaluations,
         "train_episodes": monitor.episodes,
         "train_success_rate_last100": monitor.success_rate(),

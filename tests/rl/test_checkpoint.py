@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from safetensors.numpy import load_file
 
 from motorlab.errors import MotorlabError
@@ -142,6 +144,28 @@ def test_metrics_writer_drops_rows_past_the_checkpoint_and_torn_lines(tmp_path):
     w.close()
     rows = list(csv.DictReader(path.read_text().splitlines()))
     assert [r["timesteps"] for r in rows] == ["10", "20", "25"]
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+@given(old_extra=st.lists(st.sampled_from(["a", "b", "c"]), unique=True),
+       new_extra=st.lists(st.sampled_from(["b", "c", "d"]), unique=True),
+       steps=st.lists(st.integers(0, 100), min_size=1, max_size=8), cut=st.integers(0, 100))
+def test_metrics_writer_keeps_every_row_when_resumed_under_other_columns(tmp_path_factory, old_extra, new_extra,
+                                                                         steps, cut):
+    """A run resumed by a motorlab whose metrics.csv has other columns (train_seconds came later) loses
+    no row: each cell moves under its name, a new column stays empty, a dropped one goes."""
+    path = tmp_path_factory.mktemp("m") / "metrics.csv"
+    old, new = ["timesteps", *old_extra], ["timesteps", *new_extra]
+    w = MetricsWriter(path, old)
+    for t in steps:
+        w.write({"timesteps": t, **{k: f"{k}{t}" for k in old_extra}})
+    w.close()
+    MetricsWriter(path, new, keep_until=cut).close()
+    rows = list(csv.DictReader(path.read_text().splitlines()))
+    assert [int(r["timesteps"]) for r in rows] == [t for t in steps if t <= cut]
+    for r in rows:
+        assert list(r) == new
+        assert all(r[k] == (f"{k}{r['timesteps']}" if k in old_extra else "") for k in new_extra)
 
 
 def test_resume_mistakes_are_one_clear_line(ppo_run, tmp_path):

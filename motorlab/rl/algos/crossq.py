@@ -6,7 +6,7 @@ and so takes no --her (HER needs the Dict of goals). Its actor's batch-renormali
 on their running statistics once the network is in eval mode, as every saved policy is.
 """
 
-from motorlab.rl.algos.base import OffPolicy
+from motorlab.rl.algos.base import OffPolicy, Preset
 
 ALGORITHM = OffPolicy(
     name="crossq",
@@ -18,4 +18,16 @@ ALGORITHM = OffPolicy(
     her=False,
     networks={"CrossQPolicy": "sb3_contrib.crossq.policies:CrossQPolicy"},
     zip_modules=("sb3_contrib.crossq.policies",),
+    presets={
+        # CrossQ (Bhatt et al. 2024) at one gradient step per env step, as published, with the SAR study's
+        # normalization, buffer and discount, and critics of [512, 512] instead of its [1024, 1024]: at
+        # ~4x fewer FLOPs an update, its few updates an hour of one core count for more (a contender of
+        # benchmarks/learner_per_hour.py)
+        "sar-crossq": Preset(
+            "CrossQ for muscle tasks on a small machine: one update per env step, [256, 256] actor, "
+            "[512, 512] critics",
+            {"normalize": True,
+             "hyperparams": {"buffer_size": 300_000, "learning_starts": 1000, "batch_size": 256, "gamma": 0.98,
+                             "policy_kwargs": {"net_arch": {"pi": [256, 256], "qf": [512, 512]}}}}),
+    },
 )

@@ -28,6 +28,17 @@ ALGORITHM = OffPolicy(
         # Training in synergy space uses the same settings with a longer warm-up.
         "sar-sac-synergy": Preset("sar-sac with a 5000-step warm-up, for training in synergy space",
                                   {**SAR_SAC, "hyperparams": {**SAR_SAC["hyperparams"], "learning_starts": 5000}}),
+        # The reference at fewer gradient steps per env step (one every k env steps), and with smaller
+        # networks: the contenders of benchmarks/learner_per_hour.py, which measures which learns most
+        # in an hour of one core.
+        **{f"sar-sac-{name}": Preset(f"sar-sac with one gradient step per {k} env steps",
+                                     {**SAR_SAC, "hyperparams": {**SAR_SAC["hyperparams"], "train_freq": [k, "step"],
+                                                                 "gradient_steps": 1}})
+           for name, k in (("half", 2), ("quarter", 4), ("eighth", 8))},
+        "sar-sac-256": Preset("sar-sac with [256, 256] networks (~half the FLOPs of an update)",
+                              {**SAR_SAC, "hyperparams": {**SAR_SAC["hyperparams"],
+                                                          "policy_kwargs": {"net_arch": {"pi": [256, 256],
+                                                                                         "qf": [256, 256]}}}}),
         # The reference SAC with what a 2-core CPU can afford: the same networks, learning rate,
         # buffer, batch, tau, gamma and normalization, four env processes, and one gradient step
         # per 25 env steps instead of one per env step. An update of the [400, 300] nets on a
