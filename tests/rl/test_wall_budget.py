@@ -12,7 +12,6 @@ from motorlab.rl.config import resolve
 from tests.helpers import ENV_ID, assert_ok, assert_one_line_error, read_summary, run_cli
 
 
-
 def test_minutes_stop_training_and_evaluations_follow_the_training_clock(tmp_path):
     out = tmp_path / "sac"
     budget_s = 4.0
