@@ -11,6 +11,9 @@ from motorlab.report.steps import COMPARE, VIDEO
 from motorlab.rl.steps import TRAIN
 from motorlab.robustness_curves.steps import ROBUSTNESS
 from motorlab.stepkind import StepKind
+from motorlab.synergies.ablation_steps import ABLATE
+from motorlab.synergies.compare_steps import SIMILARITY
+from motorlab.synergies.emg_steps import IMPORT_EMG
 from motorlab.synergies.steps import COLLECT, FIT, VAF
 
 KINDS: dict[str, StepKind] = {k.name: k for k in (
@@ -20,6 +23,9 @@ KINDS: dict[str, StepKind] = {k.name: k for k in (
     COLLECT,
     VAF,
     FIT,
+    ABLATE,
+    IMPORT_EMG,
+    SIMILARITY,
     ZEROSHOT,
     ROBUSTNESS,
     COMPARE,

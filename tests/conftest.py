@@ -65,6 +65,9 @@ SECONDS = {
     "tests/dynamics/test_colored_actions.py": 18, "tests/test_docs_numbers.py": 8, "tests/test_benchmark_mbrl.py": 5,
     "tests/test_benchmark_table.py": 14, "tests/test_benchmark_provenance.py": 3, "tests/test_intervals.py": 6,
     "tests/dynamics/test_auto_epochs.py": 2,
+    "tests/synergies/test_emg.py": 25,  # issue 55's
+    "tests/synergies/test_analysis.py": 17, "tests/synergies/test_analysis_cli.py": 36,
+    "tests/synergies/test_ablation.py": 35,  # issue 55's
     # issue 54's
     "tests/rl/test_sar_presets.py": 40, "tests/rl/test_wall_budget.py": 25, "tests/test_benchmark_learner_per_hour.py": 3,
     "tests/test_gpu_check.py": 95, "tests/test_benchmark_sar_hand_scaled.py": 5,

@@ -28,6 +28,9 @@ PACKAGES = {"motorlab.evaluation.figures": FEATURES, "motorlab.evaluation.videos
             "motorlab.evaluation.activations": DOMAIN, "motorlab.evaluation": ROLLOUTS_AND_MODELS,
             "motorlab.dynamics": ROLLOUTS_AND_MODELS, "motorlab.rl.algos": ALGORITHMS,
             "motorlab.controllers": CONTROLLERS, "motorlab.report": REPORT, "motorlab.envs": ENVS,
+            "motorlab.synergies.ablation_steps": STEP_KINDS, "motorlab.synergies.ablation": DOMAIN,
+            "motorlab.synergies.emg_steps": STEP_KINDS, "motorlab.synergies.compare_steps": STEP_KINDS,
+            "motorlab.synergies.figures": DOMAIN,
             "motorlab.synergies": SYNERGY_SPACE, "motorlab.trackers": GROUND}
 
 

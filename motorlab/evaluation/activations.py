@@ -125,6 +125,31 @@ def signal_bounds(env, signal: str) -> tuple[np.ndarray, np.ndarray]:
     return low, high
 
 
+def signal_names(env, signal: str, size: int) -> list[str]:
+    """A name for each element of a resolved signal, read from the MuJoCo model: the actuator whose
+    activation state (act) or control (ctrl) it is (MyoSuite's muscle names, a user model's actuator
+    names); an action element is its actuator's where the action is one command per actuator. An
+    unnamed actuator is `actuator<i>`; an element with no actuator is `<signal><k>`."""
+    found = mujoco_of(env)
+    if found is None:
+        return [f"{signal}{k}" for k in range(size)]
+    model = found[0]
+
+    def actuator(i: int) -> str:
+        return model.actuator(i).name or f"actuator{i}"
+
+    if signal == "act":
+        names = [f"act{k}" for k in range(model.na)]
+        for i in range(model.nu):
+            first, count = int(model.actuator_actadr[i]), int(model.actuator_actnum[i])
+            for j in range(count if first >= 0 else 0):
+                names[first + j] = actuator(i) if count == 1 else f"{actuator(i)}[{j}]"
+        return names[:size] + [f"act{k}" for k in range(len(names), size)]
+    if signal == "ctrl" or size == model.nu:
+        return [actuator(i) for i in range(min(size, model.nu))] + [f"{signal}{k}" for k in range(model.nu, size)]
+    return [f"{signal}{k}" for k in range(size)]
+
+
 def read_signal(env, signal: str, action: np.ndarray, bounds: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """The signal after a step: data.act, data.ctrl or `action`, as float32; ctrl and action
     clipped to their bounds, as MuJoCo's ctrlrange clamp and the action space bound them
@@ -207,6 +232,7 @@ class Collection:
     signal: str = "act"  # what `activations` holds: act, ctrl or action
     low: np.ndarray | None = None  # the signal's per-element bounds
     high: np.ndarray | None = None
+    names: list[str] | None = None  # each element's name: its actuator's in the MuJoCo model (signal_names)
 
     def activations(self) -> np.ndarray:
         """Every kept step's signal (muscle activations, controls or actions), (samples, n_signals)."""
@@ -246,6 +272,7 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
                         "an env with Box actions")
         signal = resolve_signal(probe, signal)  # fail early for a signal the env does not have
         low, high = signal_bounds(probe, signal)
+        names = signal_names(probe, signal, len(low))
     finally:
         probe.close()
     if before_work is not None:
@@ -284,18 +311,21 @@ def collect(run_dir: Path, episodes: int, percentile: float = 80.0, preview: int
     if not kept:
         raise MotorlabError(f"no episode in {tried} reached the threshold {threshold:.3g}; "
                             "lower --percentile or train the policy longer.")
-    return Collection(cfg.id, run_dir, kept, np.array(preview_returns), threshold, tried, fault_log, signal, low, high)
+    return Collection(cfg.id, run_dir, kept, np.array(preview_returns), threshold, tried, fault_log, signal, low, high,
+                      names)
 
 
 def save_activations(path: Path, c: Collection, meta: dict[str, Any]) -> None:
     """activations.npz: `activations` (S, n_signals), `episode` (S,) index into the kept episodes,
     `returns` (N,), `seeds` (N,), `solved` (N,), `threshold`, `preview_returns` (M,), `signal`
-    (act, ctrl or action), `low` and `high` (n_signals,: its bounds, +-inf where unbounded) and
-    `metadata` (JSON string, with `signal` too). Plain arrays: loading it needs no pickle."""
+    (act, ctrl or action), `low` and `high` (n_signals,: its bounds, +-inf where unbounded), `names`
+    (n_signals,: each element's actuator name, a unicode array) and `metadata` (JSON string, with
+    `signal` too). Plain arrays: loading it needs no pickle."""
     n = c.kept[0].activations.shape[1]
     low = np.full(n, -np.inf) if c.low is None else c.low
     high = np.full(n, np.inf) if c.high is None else c.high
-    atomic_write_npz(path, activations=c.activations(),
+    names = c.names if c.names is not None and len(c.names) == n else [f"{c.signal}{k}" for k in range(n)]
+    atomic_write_npz(path, activations=c.activations(), names=np.array(names, dtype=str),
                      episode=np.concatenate([np.full(e.length, i) for i, e in enumerate(c.kept)]),
                      returns=np.array([e.ret for e in c.kept]), seeds=np.array([e.seed for e in c.kept]),
                      solved=np.array([e.solved for e in c.kept]), threshold=np.array(c.threshold),
@@ -347,4 +377,19 @@ def load_activations(path: Path) -> tuple[np.ndarray, dict]:
     for key, fallback in zip(("low", "high"), default, strict=True):
         value = bounds.get(key)
         meta[key] = value if value is not None and value.shape == (n,) else fallback
+    meta["names"] = signal_labels(data, n, meta["signal"])
+    episode = np.asarray(data["episode"]).ravel() if "episode" in data else None
+    # each sample's episode (cross-validation holds out whole episodes); one episode where none is recorded
+    meta["episode"] = episode.astype(np.int64) if episode is not None and episode.shape == (acts.shape[0],) \
+        else np.zeros(acts.shape[0], dtype=np.int64)
     return acts, meta
+
+
+def signal_labels(data: dict[str, Any], n: int, signal: str) -> list[str]:
+    """The `names` array of an activations file as n distinct strings; generic ones (`act0`, ...) where
+    it has none (files written before names were recorded) or they do not fit."""
+    raw = data.get("names")
+    names = [str(x) for x in np.asarray(raw).ravel()] if raw is not None else []
+    if len(names) != n or len(set(names)) != n or any(not x for x in names):
+        return [f"{signal}{k}" for k in range(n)]
+    return names

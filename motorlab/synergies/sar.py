@@ -466,6 +466,7 @@ def fit_sar(
     source_env: str | None = None,
     signal: str | None = None,
     bounds: tuple[Any, Any] | None = None,
+    names: list[str] | None = None,
 ) -> SAR:
     """Fit a synergy model to recorded muscle activations (or another motor signal).
 
@@ -480,6 +481,8 @@ def fit_sar(
         signal: what the activations are ("act", "ctrl", "action"; metadata, read by
             `SynergyActionWrapper`); None for muscle activations of unknown origin.
         bounds: the signal's per-element (low, high), +-inf where unbounded (metadata).
+        names: each muscle's (signal element's) name, e.g. the MuJoCo actuator's (metadata
+            `names`: heatmaps label rows with them, `synergies compare` matches on them).
 
     Returns:
         The fitted `SAR`; metadata["vaf"] is the VAF the chosen N achieves.
@@ -540,6 +543,7 @@ def fit_sar(
         "created": utc_now(),
         "versions": library_versions(),
         **_signal_metadata(signal, bounds, m),
+        **({"names": [str(x) for x in names]} if names is not None and len(names) == m else {}),
     }
     scaler = MinMaxScaler(feature_range=(-1, 1))
     arrays: dict[str, np.ndarray] = {}

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 from rich.console import Console
 from rich.table import Table
 
@@ -17,7 +17,7 @@ from motorlab.evaluation.activations import ACTIVATIONS, collect, load_activatio
 from motorlab.report.results import Metric, Number
 from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
-from motorlab.synergies.sar import fit_sar, require_sklearn, save_sar, smallest_n, vaf_curve
+from motorlab.synergies.sar import fit_sar, require_sklearn, save_sar, vaf_curve
 
 SAR_FILE = "sar.npz"
 
@@ -113,9 +113,15 @@ class CollectKind(StepKind[CollectSettings, CollectSummary]):
         warn_faults(s)
 
 
+def signal_words(signal: str) -> str:
+    """What a recorded signal is, in words, for titles."""
+    return {"act": "activations", "ctrl": "actuator controls", "action": "actions",
+            "emg": "EMG envelopes"}.get(signal, "signals")
+
+
 def _size_label(n: Number, signal: str | None) -> Number:
     """The signal's size as readers name it: muscles, actuators or action dimensions."""
-    if n.key != "n_muscles" or signal in (None, "act"):
+    if n.key != "n_muscles" or signal in (None, "act", "emg"):  # emg: envelopes of recorded muscles (import-emg)
         return n
     return Number(n.key, "actuators" if signal == "ctrl" else "action dimensions", n.value, n.text, n.setup)
 
@@ -132,6 +138,11 @@ class VafSettings(Settings):
     method: Literal["pca", "pca-ica", "nmf"] = Field("pca", description="pca (also pca-ica: same VAF) or nmf "
                                                      "(classic, uncentered)")
     max_n: int | None = Field(None, gt=0, description="Largest N (saves time with nmf)")
+    cv: int | None = Field(None, ge=2, description="Cross-validate: fit on K-1 folds of episodes, score the held-out "
+                           "fold; the curve is the folds' mean, with their spread (default: in-sample, one fit)")
+    muscle_threshold: float = Field(0.75, gt=0, le=1, description="Also report the smallest N at which every "
+                                    "muscle's own VAF reaches this")
+    workers: int | None = Field(None, gt=0, description="Processes for the fits (default: all cores)")
 
 
 class VafSummary(Summary):
@@ -140,8 +151,16 @@ class VafSummary(Summary):
     samples: int
     threshold: float
     n_for_threshold: int | None
-    vaf: list[float]
+    vaf: list[float]  # the curve (held out: the folds' mean)
     signal: str = "act"
+    vaf_definition: str = "centred"  # uncentred (NMF) or centred (PCA)
+    cv_folds: int = 0  # 0: in-sample
+    vaf_std: list[float] = []  # over folds (zeros in-sample)
+    muscle_threshold: float = 0.75
+    n_by_muscle_vaf: int | None = None
+    n_by_elbow: int | None = None
+    names: list[str] = []
+    muscle_vaf: list[list[float]] = []  # (N, muscles): each muscle's VAF (held out: the folds' mean)
 
 
 
@@ -155,7 +174,12 @@ def _import_sklearn() -> None:
 
 
 class VafKind(StepKind[VafSettings, VafSummary]):
-    """Variance accounted for by N = 1..n_muscles synergies: vaf.png and the smallest N reaching the threshold."""
+    """Variance accounted for by N = 1..n_muscles synergies, and the N each criterion chooses.
+
+    In-sample, or cross-validated over episodes (--cv K: fit on K-1 folds, score the held-out one). Criteria:
+    total VAF (--threshold), every muscle's own VAF (--muscle-threshold), the curve's elbow (d'Avella et al.
+    2003: a line fits the rest of the curve with MSE < 1e-4). NMF's VAF is uncentred (1 - SSE / sum x^2),
+    PCA's centred (explained variance); vaf.png and the table say which."""
 
     name = "vaf"
     what = "VAF of {activations} ({method})"
@@ -165,28 +189,35 @@ class VafKind(StepKind[VafSettings, VafSummary]):
     command = "synergies vaf"
     refs = (Ref("activations", ("activations",)),)
     arguments = ("activations",)
-    examples = ("motorlab synergies vaf runs/collect/activations.npz --threshold 0.8",)
+    examples = ("motorlab synergies vaf runs/collect/activations.npz --threshold 0.8",
+                "motorlab synergies vaf runs/collect --method nmf --cv 5 --max-n 20 --threshold 0.9")
 
     def warm_up(self) -> None:
         _import_sklearn()
 
     def run(self, settings: VafSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> VafSummary:
-        from motorlab.report.plots import vaf_plot
+        from motorlab.synergies.analysis import choices, cross_validated_vaf
+        from motorlab.synergies.figures import vaf_with_band
 
         acts, meta = load_activations(Path(settings.activations))
-        curve = vaf_curve(acts, method=settings.method, max_n=settings.max_n)
-        try:
-            n_needed: int | None = smallest_n(curve, settings.threshold)
-        except MotorlabError:
-            n_needed = None  # reported as null; the curve is still worth having
+        if settings.method == "nmf":
+            vaf_curve(acts[:2], method="nmf", max_n=1)  # negative or all-zero activations: NMF's one-line refusal
+        self.refuse_finished_out(out)
+        cv = cross_validated_vaf(acts, meta["episode"], settings.method, settings.max_n, settings.cv,
+                                 workers=settings.workers)
+        chosen = choices(cv, settings.threshold, settings.muscle_threshold)
         run_dir = self.start(out)
-        what = {"act": "activations", "ctrl": "actuator controls", "action": "actions"}.get(meta["signal"], "signals")
-        vaf_plot(curve, settings.threshold, n_needed, run_dir / "vaf.png",
-                 f"VAF of {meta.get('env_id', 'recorded')} {what} ({settings.method})")
+        vaf_with_band(cv, chosen, run_dir / "vaf.png",
+                      f"VAF of {meta.get('env_id', 'recorded')} {signal_words(meta['signal'])} ({settings.method})")
+        by = {c.criterion: c.n for c in chosen}
         summary = VafSummary(method=settings.method, n_muscles=acts.shape[1], samples=acts.shape[0],
-                             threshold=settings.threshold, n_for_threshold=n_needed, vaf=[float(v) for v in curve],
-                             signal=meta["signal"])
+                             threshold=settings.threshold, n_for_threshold=by["total-vaf"],
+                             vaf=[float(v) for v in cv.mean], signal=meta["signal"], vaf_definition=cv.definition,
+                             cv_folds=cv.folds, vaf_std=[float(v) for v in cv.std],
+                             muscle_threshold=settings.muscle_threshold, n_by_muscle_vaf=by["muscle-vaf"],
+                             n_by_elbow=by["elbow"], names=meta["names"],
+                             muscle_vaf=[[round(float(v), 6) for v in row] for row in cv.muscle_mean])
         return self.finish(run_dir, settings, summary)
 
     def numbers(self, settings: VafSettings, h: dict[str, Any]) -> list[Number]:
@@ -199,14 +230,26 @@ class VafKind(StepKind[VafSettings, VafSummary]):
         return Metric(key, "synergies for the VAF threshold", "count") if key == "n_for_threshold" else super().metric(key)
 
     def report(self, s: VafSummary, settings: VafSettings, console: Console) -> None:
-        table = Table(title=f"VAF ({s.method}), {s.samples:,} samples x {s.n_muscles} muscles")
+        how = f"held out, {s.cv_folds} folds of episodes" if s.cv_folds else "in-sample"
+        table = Table(title=f"VAF ({s.method}, {s.vaf_definition}, {how}), {s.samples:,} samples x {s.n_muscles} muscles")
         table.add_column("N", justify="right")
         table.add_column("VAF", justify="right")
+        if s.cv_folds:
+            table.add_column("SD over folds", justify="right")
+        table.add_column("lowest muscle VAF", justify="right")
         for n, v in enumerate(s.vaf, 1):
-            table.add_row(str(n), f"{v:.1%}" + (" <-" if n == s.n_for_threshold else ""))
+            lowest = min(s.muscle_vaf[n - 1]) if s.muscle_vaf else float("nan")
+            tag = ", ".join(k for m, k in ((s.n_for_threshold, "total"), (s.n_by_muscle_vaf, "muscles"),
+                                           (s.n_by_elbow, "elbow")) if m == n)
+            table.add_row(str(n), f"{v:.1%}" + (f" <- {tag}" if tag else ""),
+                          *([f"{s.vaf_std[n - 1]:.1%}"] if s.cv_folds else []), f"{lowest:.1%}")
         console.print(table)
-        need = s.n_for_threshold
-        console.print(f"smallest N with VAF >= {settings.threshold:.0%}: {need if need is not None else 'none'}; "
+
+        def said(n: int | None) -> str:
+            return str(n) if n is not None else "none"
+
+        console.print(f"N by total VAF >= {s.threshold:.0%}: {said(s.n_for_threshold)}; by every muscle's VAF >= "
+                      f"{s.muscle_threshold:.0%}: {said(s.n_by_muscle_vaf)}; by the elbow: {said(s.n_by_elbow)}; "
                       f"written: {s.run_dir}/vaf.png")
 
 
@@ -219,10 +262,27 @@ VAF = VafKind()
 class FitSettings(Settings):
     activations: str = Field(description="activations.npz (or its folder)")
     n_synergies: int | None = Field(None, gt=0, description="Number of synergies N")
-    vaf: float | None = Field(None, gt=0, le=1, description="Or: the smallest N whose VAF reaches this, e.g. 0.8")
+    vaf: float | None = Field(None, gt=0, le=1, description="Or: the smallest N whose total VAF reaches this, e.g. 0.8")
+    muscle_vaf: float | None = Field(None, gt=0, le=1, description="Or: the smallest N at which every muscle's own VAF "
+                                     "reaches this, e.g. 0.75")
+    elbow: bool = Field(False, description="Or: N at the VAF curve's elbow (a line fits the rest of the curve with MSE "
+                        "< 1e-4, d'Avella et al. 2003)")
+    cv: int | None = Field(None, ge=2, description="Choose N on VAF held out over K folds of episodes (default: "
+                           "in-sample)")
+    max_n: int | None = Field(None, gt=0, description="Largest N a criterion considers (saves time with nmf)")
     method: Literal["pca-ica", "pca", "nmf"] = Field("pca-ica", description="pca-ica (PCA -> FastICA -> scale to "
                                                      "[-1,1], the reference), pca, or nmf")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (FastICA, NMF)")
+    workers: int | None = Field(None, gt=0, description="Processes for the criterion's fits (default: all cores)")
+
+    @model_validator(mode="after")
+    def _one_way_to_n(self):
+        given = [k for k, v in (("--n-synergies", self.n_synergies), ("--vaf", self.vaf), ("--muscle-vaf", self.muscle_vaf),
+                                ("--elbow", self.elbow or None)) if v is not None]
+        if len(given) > 1:  # none given is refused when it runs: a recipe may set N in a later layer
+            raise MotorlabError(f"give exactly one way to choose N: --n-synergies (--n), --vaf, --muscle-vaf or "
+                                f"--elbow (given: {', '.join(given)}).")
+        return self
 
 
 class FitSummary(Summary):
@@ -234,12 +294,19 @@ class FitSummary(Summary):
     source_env: str | None
     samples: int
     signal: str = "act"
+    chosen_by: str = "given"  # which criterion chose N, in words ("given": --n)
+    names: list[str] = []
 
 
 class FitKind(StepKind[FitSettings, FitSummary]):
-    """Fit a Synergistic Action Representation; writes sar.npz (plain arrays + JSON metadata, no pickle)."""
+    """Fit a Synergistic Action Representation; writes sar.npz (plain arrays + JSON metadata, no pickle).
+
+    Beside it: the muscle-weight heatmap (muscles named as the model names its actuators), the synergies'
+    activation coefficients over the first episodes, and, where a criterion chose N (--vaf with --cv,
+    --muscle-vaf, --elbow), the VAF curve it chose on."""
 
     name = "fit"
+    key_figures = ("heatmap.png", "coefficients.png", "vaf.png")
     headline_keys = ("n_synergies", "n_muscles", "vaf", "signal")
     metrics = (Metric("n_synergies", "synergies", "count"),
                Metric("vaf", "VAF", "percent"),
@@ -251,34 +318,81 @@ class FitKind(StepKind[FitSettings, FitSummary]):
     arguments = ("activations",)
     flags = {"n_synergies": ("--n-synergies", "--n")}
     examples = ("motorlab synergies fit activations.npz --vaf 0.8",
-                "motorlab synergies fit activations.npz --n 20 --method nmf")
+                "motorlab synergies fit activations.npz --n 20 --method nmf",
+                "motorlab synergies fit activations.npz --method nmf --muscle-vaf 0.75 --cv 5 --max-n 20")
 
     def warm_up(self) -> None:
         _import_sklearn()
 
     def run(self, settings: FitSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> FitSummary:
+        from motorlab.synergies import figures
+        from motorlab.synergies.vectors import vectors_of
+
+        if (settings.n_synergies, settings.vaf, settings.muscle_vaf, settings.elbow) == (None, None, None, False):
+            raise MotorlabError("give one way to choose N: --n-synergies (--n), --vaf, --muscle-vaf or --elbow.")
         acts, meta = load_activations(Path(settings.activations))
         self.refuse_finished_out(out)
-        sar = fit_sar(acts, n_synergies=settings.n_synergies, vaf=settings.vaf, method=settings.method,
-                      seed=settings.seed, source_env=meta.get("env_id"), signal=meta["signal"],
-                      bounds=(meta["low"], meta["high"]))
+        n, vaf, cv, chosen = settings.n_synergies, settings.vaf, None, None
+        if settings.muscle_vaf is not None or settings.elbow or (settings.vaf is not None and settings.cv):
+            n, cv, chosen = _choose_n(acts, meta, settings)
+            vaf = None
+        sar = fit_sar(acts, n_synergies=n, vaf=vaf, method=settings.method, seed=settings.seed,
+                      source_env=meta.get("env_id"), signal=meta["signal"], bounds=(meta["low"], meta["high"]),
+                      names=meta["names"])
+        chosen_by = (chosen.text if chosen is not None else
+                     f"in-sample VAF ({'uncentred' if settings.method == 'nmf' else 'centred'}) >= {settings.vaf:g}"
+                     if settings.vaf is not None else "given")
         run_dir = self.start(out)
         save_sar(sar, run_dir / SAR_FILE)
+        where = f"{meta.get('env_id', 'recorded')} {signal_words(meta['signal'])}"
+        figures.heatmap(vectors_of(sar), run_dir / "heatmap.png", f"{sar.n_synergies} synergies ({settings.method}) "
+                        f"of {where}")
+        shown = np.isin(meta["episode"], np.unique(meta["episode"])[:3])  # the first three episodes
+        figures.coefficients(sar.encode(acts[shown]), meta["episode"][shown], run_dir / "coefficients.png",
+                             f"synergy coefficients, {where}")
+        if cv is not None:
+            from motorlab.synergies.analysis import choices
+
+            figures.vaf_with_band(cv, choices(cv, settings.vaf or 0.9, settings.muscle_vaf or 0.75),
+                                  run_dir / "vaf.png", f"VAF of {where} ({settings.method}); N by {chosen.criterion}")
         summary = FitSummary(sar=str(run_dir / SAR_FILE), method=settings.method, n_synergies=sar.n_synergies,
                              n_muscles=sar.n_muscles, vaf=sar.metadata.get("vaf"), source_env=meta.get("env_id"),
-                             samples=acts.shape[0], signal=meta["signal"])
+                             samples=acts.shape[0], signal=meta["signal"], chosen_by=chosen_by, names=meta["names"])
         return self.finish(run_dir, settings, summary)
 
     def numbers(self, settings: FitSettings, h: dict[str, Any]) -> list[Number]:
         return [_size_label(n, h.get("signal")) for n in super().numbers(settings, h)]
 
     def describe(self, settings: FitSettings, copies: int = 1) -> str:
-        return (f"fit {settings.method} to {settings.activations}"
-                + (f", N = {settings.n_synergies}" if settings.n_synergies else f", VAF ≥ {settings.vaf}"))
+        how = (f"N = {settings.n_synergies}" if settings.n_synergies else f"VAF ≥ {settings.vaf}" if settings.vaf
+               else f"every muscle's VAF ≥ {settings.muscle_vaf}" if settings.muscle_vaf else "N at the VAF elbow")
+        return f"fit {settings.method} to {settings.activations}, {how}" + (f" ({settings.cv}-fold)" if settings.cv else "")
 
     def report(self, s: FitSummary, settings: FitSettings, console: Console) -> None:
-        console.print(f"{s.n_synergies} synergies ({s.method}) for {s.n_muscles} muscles, VAF {s.vaf:.1%} -> {s.sar}")
+        console.print(f"{s.n_synergies} synergies ({s.method}) for {s.n_muscles} muscles, VAF {s.vaf:.1%} -> {s.sar}; "
+                      f"N chosen by: {s.chosen_by}")
+
+
+def _choose_n(acts: np.ndarray, meta: dict[str, Any], settings: FitSettings):
+    """N by the criterion `settings` names, on the in-sample or cross-validated curve: (N, curve, choice).
+
+    Raises:
+        MotorlabError: no N up to max_n meets the criterion."""
+    from motorlab.synergies.analysis import choices, cross_validated_vaf
+
+    if settings.method == "nmf":
+        vaf_curve(acts[:2], method="nmf", max_n=1)  # negative or all-zero activations: NMF's one-line refusal
+    cv = cross_validated_vaf(acts, meta["episode"], settings.method, settings.max_n, settings.cv,
+                             seed=settings.seed, workers=settings.workers)
+    criterion = "muscle-vaf" if settings.muscle_vaf is not None else "elbow" if settings.elbow else "total-vaf"
+    choice = next(c for c in choices(cv, settings.vaf or 0.9, settings.muscle_vaf or 0.75) if c.criterion == criterion)
+    if choice.n is None:
+        best = (f"the lowest muscle's best is {cv.muscle_mean.min(axis=1).max():.3f}" if criterion == "muscle-vaf"
+                else f"the best is {cv.mean.max():.3f}")
+        fix = {"total-vaf": "lower --vaf", "muscle-vaf": "lower --muscle-vaf", "elbow": "give --n or --vaf"}[criterion]
+        raise MotorlabError(f"no N up to {len(cv.ns)} meets {choice.text} ({best}); {fix}, or raise --max-n.")
+    return choice.n, cv, choice
 
 
 FIT = FitKind()

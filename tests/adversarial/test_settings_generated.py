@@ -41,6 +41,8 @@ REQUIRED = {
     "env": "InvertedPendulum-v5", "transitions": "runs/collect", "model": "runs/fit", "source": "runs/train",
     "paths": ["runs/train"], "run_dir": "runs/train", "folder": "sk", "out": "sar.npz", "sar": "sar.npz",
     "recipe": "pendulum", "target": "evaluate random",
+    "file": "emg.csv", "rate": 2000.0,  # synergies import-emg
+    "a": "runs/fit", "b": "runs/fit-b",  # synergies compare
 }
 NON_FINITE = st.sampled_from([math.nan, math.inf, -math.inf, "nan", "inf", "-inf", "NaN", "1e999"])
 HUGE = st.sampled_from([MAX_SEED + 1, MAX_INT + 1, 10**30, -(10**30), 1e308, -1e308, 2**64])
