@@ -11,10 +11,10 @@ from motorlab.recipe_list import RECIPES
 from motorlab.report.commands import PLOT, REPORT
 from motorlab.studies.command import RUN
 from motorlab.sweeps.command import SWEEP
-from motorlab.synergies.commands import EXPORT_SKLEARN, IMPORT_SKLEARN
+from motorlab.synergies.commands import EXPORT_SKLEARN, IMPORT_SKLEARN, PLOT_SYNERGIES
 from motorlab.tuning.command import TUNE
 
-OTHERS: tuple[Command, ...] = (EXPORT, REPORT, PLOT, IMPORT_SKLEARN, EXPORT_SKLEARN, RUN, SWEEP, TUNE, RECIPES)
+OTHERS: tuple[Command, ...] = (EXPORT, REPORT, PLOT, IMPORT_SKLEARN, EXPORT_SKLEARN, PLOT_SYNERGIES, RUN, SWEEP, TUNE, RECIPES)
 # by the words that run them on the command line ("train", "dynamics fit"); kinds for recipes only have none
 COMMANDS: dict[str, Command] = {c.command: c for c in (*KINDS.values(), *OTHERS) if c.command}
 BY_NAME: dict[str, Command] = {c.name: c for c in (*KINDS.values(), *OTHERS)}

@@ -30,7 +30,8 @@ PACKAGES = {"motorlab.evaluation.figures": FEATURES, "motorlab.evaluation.videos
             "motorlab.controllers": CONTROLLERS, "motorlab.report": REPORT, "motorlab.envs": ENVS,
             "motorlab.synergies.ablation_steps": STEP_KINDS, "motorlab.synergies.ablation": DOMAIN,
             "motorlab.synergies.emg_steps": STEP_KINDS, "motorlab.synergies.compare_steps": STEP_KINDS,
-            "motorlab.synergies.figures": DOMAIN,
+            "motorlab.synergies.figures": DOMAIN, "motorlab.synergies.plotting": DOMAIN,
+            "motorlab.synergies.naming": DOMAIN,
             "motorlab.synergies": SYNERGY_SPACE, "motorlab.trackers": GROUND}
 
 

@@ -95,3 +95,48 @@ class ExportSklearnCommand(Command[ExportSklearnSettings]):
 
 
 EXPORT_SKLEARN = ExportSklearnCommand()
+
+
+class PlotSettings(Settings):
+    """Which synergy set `synergies plot` draws, from what, and where."""
+
+    sar: Path = Field(description="A sar.npz, or a `synergies fit` run folder")
+    out: Path = Field(description="Folder for heatmap.png, coefficients.png and vaf.png (created if missing)")
+    activations: Path | None = Field(None, description="activations.npz (or its folder) for the coefficients over "
+                                     "the first episodes (default: those a fit run folder was fitted to)")
+    vaf: Path | None = Field(None, description="A `synergies vaf` run folder: its curve, band over folds and chosen N")
+    episodes: int = Field(3, gt=0, description="Episodes whose coefficients are drawn")
+    names_from: str | None = Field(None, description="An env id whose MuJoCo actuator names label a SAR saved "
+                                   "without muscle names")
+
+
+class PlotCommand(Command[PlotSettings]):
+    """Draw a synergy set: the named muscle-weight heatmap, coefficients over episodes, the VAF curve with its band.
+
+    The heatmap's rows are the muscles in the model's order, named as the model names its actuators (or by
+    --names-from for a SAR saved without names); each synergy is scaled to unit length. The coefficients are the
+    SAR's encoding of the activations, over the first --episodes episodes. The VAF curve comes from a `synergies
+    vaf` run (--vaf): the folds' mean with +-1 SD and the N each criterion chose. `synergies fit` draws the same
+    figures into its own run folder.
+    """
+
+    name = "plot-synergies"
+    command = "synergies plot"
+    settings = PlotSettings
+    invocation = NoFolder
+    arguments = ("sar",)
+    examples = ("motorlab synergies plot runs/fit --vaf runs/vaf --out figures",
+                "motorlab synergies plot sar-hand.npz --names-from myoHandReorient8-v0 --activations runs/collect "
+                "--out figures")
+
+    def execute(self, settings: PlotSettings, how: NoFolder, console: Console | None, progress: bool) -> Any:
+        from motorlab.synergies.plotting import plot_synergies
+
+        return plot_synergies(settings.sar, settings.out, settings.activations, settings.vaf, settings.episodes,
+                              settings.names_from)
+
+    def report(self, written: Any, settings: PlotSettings, console: Console) -> None:
+        console.print("written: " + ", ".join(str(p) for p in written))
+
+
+PLOT_SYNERGIES = PlotCommand()

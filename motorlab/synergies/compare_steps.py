@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from pydantic import Field
@@ -76,31 +75,6 @@ def _activations_of(b: str) -> Path | None:
     return Path(given) if given and Path(given).exists() else None
 
 
-def _names(sar: Any, names_from: str | None, which: str) -> tuple[list[str], str]:
-    from motorlab.synergies.vectors import vectors_of
-
-    saved = vectors_of(sar).names
-    if saved is not None:
-        return saved, "saved"
-    if names_from is None:
-        raise MotorlabError(f"{which} was saved without muscle names (a published or older SAR): give --names-from ENV_ID, "
-                            "the env whose model it was fitted on (e.g. myoHandReorient8-v0), to read them.")
-    from motorlab.envs import EnvConfig, make_env
-    from motorlab.evaluation.activations import resolve_signal, signal_bounds, signal_names
-
-    env = make_env(EnvConfig(id=names_from))
-    try:
-        signal = resolve_signal(env, sar.metadata.get("signal", "auto") if sar.metadata.get("signal") in
-                                ("act", "ctrl", "action") else "auto")
-        names = signal_names(env, signal, len(signal_bounds(env, signal)[0]))
-    finally:
-        env.close()
-    if len(names) != sar.n_muscles:
-        raise MotorlabError(f"--names-from {names_from} has {len(names)} muscles and {which} decodes to "
-                            f"{sar.n_muscles}: name an env with the SAR's body.")
-    return names, names_from
-
-
 class CompareKind(StepKind[CompareSettings, CompareSummary]):
     """Match two synergy sets one to one and test each pair against a shuffled-data chance level.
 
@@ -130,13 +104,14 @@ class CompareKind(StepKind[CompareSettings, CompareSummary]):
     def run(self, settings: CompareSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> CompareSummary:
         from motorlab.evaluation.activations import load_activations
+        from motorlab.synergies.naming import names_for
         from motorlab.synergies.sar import load_sar
         from motorlab.synergies.similarity import aligned, chance, match
         from motorlab.synergies.vectors import vectors_of
 
         a, b = load_sar(_sar_path(settings.a)), load_sar(_sar_path(settings.b))
-        names_a, from_a = _names(a, settings.names_from, "A")
-        names_b, from_b = _names(b, settings.names_from, "B")
+        names_a, from_a = names_for(a, settings.names_from, "A")
+        names_b, from_b = names_for(b, settings.names_from, "B")
         order = aligned(names_a, names_b)  # B's columns in A's muscle order; refuses other muscles
         source = Path(settings.activations) if settings.activations else _activations_of(settings.b)
         if source is None:

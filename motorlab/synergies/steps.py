@@ -161,6 +161,8 @@ class VafSummary(Summary):
     n_by_elbow: int | None = None
     names: list[str] = []
     muscle_vaf: list[list[float]] = []  # (N, muscles): each muscle's VAF (held out: the folds' mean)
+    vaf_folds: list[list[float]] = []  # (folds, N): each fold's held-out VAF (in-sample: one row)
+    vaf_train: list[list[float]] = []  # (folds, N): the VAF on the folds each fit was fitted on
 
 
 
@@ -217,7 +219,8 @@ class VafKind(StepKind[VafSettings, VafSummary]):
                              cv_folds=cv.folds, vaf_std=[float(v) for v in cv.std],
                              muscle_threshold=settings.muscle_threshold, n_by_muscle_vaf=by["muscle-vaf"],
                              n_by_elbow=by["elbow"], names=meta["names"],
-                             muscle_vaf=[[round(float(v), 6) for v in row] for row in cv.muscle_mean])
+                             muscle_vaf=[[round(float(v), 6) for v in row] for row in cv.muscle_mean],
+                             vaf_folds=cv.total.tolist(), vaf_train=cv.train.tolist())
         return self.finish(run_dir, settings, summary)
 
     def numbers(self, settings: VafSettings, h: dict[str, Any]) -> list[Number]:
