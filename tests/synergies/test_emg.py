@@ -14,7 +14,6 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linear_sum_assignment
-from scipy.signal import butter, sosfilt
 
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.activations import load_activations
@@ -56,12 +55,10 @@ def ground_truth(seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def synthetic_emg(acts: np.ndarray, seed: int = 1) -> np.ndarray:
-    """Raw EMG: zero-mean Gaussian carrier noise, band-limited to 30-400 Hz (surface EMG's band), multiplied
-    by each muscle's activation, plus a little electrode noise; in millivolts."""
-    rng = np.random.default_rng(seed)
-    band = butter(4, (30, 400), btype="bandpass", fs=RATE, output="sos")
-    carrier = sosfilt(band, rng.normal(0, 1, acts.shape), axis=0)
-    return 1.5 * acts * carrier / carrier.std() + rng.normal(0, 0.01, acts.shape)
+    """Raw EMG: carrier noise modulated by each muscle's activation (motorlab.synergies.synthetic)."""
+    from motorlab.synergies.synthetic import synthetic_emg as made
+
+    return made(acts, RATE, seed)
 
 
 def write_csv(path: Path, header: list[str], rows) -> Path:
