@@ -32,8 +32,10 @@ def heatmap(vectors: SynergyVectors, path: Path, title: str) -> Path | None:
         ax.set_ylabel("muscle")
         ax.set_title(title, fontsize=9)
         fig.colorbar(image, ax=ax, label="weight (unit-length synergy)", shrink=0.6)
+        # the caption names each synergy's strongest muscle: what a reader looks for first, in text a page can search
+        top = "; ".join(f"S{i + 1} {names[int(np.argmax(np.abs(w[:, i])))]}" for i in range(w.shape[1]))
         return save_figure(fig, path, f"Muscle weights of {w.shape[1]} synergies over {w.shape[0]} muscles "
-                                      "(each synergy scaled to unit length), muscles in the model's order.")
+                                      f"(unit-length synergies, the model's order); strongest: {top}.")
 
 
 def coefficients(z: np.ndarray, episodes: np.ndarray, path: Path, title: str, shown: int = 3,

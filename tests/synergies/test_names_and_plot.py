@@ -72,3 +72,29 @@ def test_plot_draws_a_vaf_runs_band(hand_activations, tmp_path, folds):
     assert_ok(run_cli("synergies", "fit", hand_activations, "--n", "4", "--out", tmp_path / "fit"))
     assert_ok(run_cli("synergies", "plot", tmp_path / "fit", "--vaf", vaf, "--out", tmp_path / "figs"))
     assert {p.name for p in (tmp_path / "figs").iterdir()} == {"heatmap.png", "coefficients.png", "vaf.png"}
+
+
+def test_the_report_shows_the_named_heatmap_in_chromium(hand_activations, tmp_path):
+    """A fit's report, opened in headless Chromium: the heatmap decodes, and its caption names each synergy's
+    strongest muscle by the hand model's own names."""
+    from tests.report.test_html import CHROMIUM, Opened, check_captions
+
+    names, _ = model_names(HAND_ID)
+    fit = tmp_path / "fit"
+    assert_ok(run_cli("synergies", "fit", hand_activations, "--n", "4", "--out", fit))
+    assert_ok(run_cli("report", fit, "--out", tmp_path / "report.html"))
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=["--headless", "--no-sandbox", "--disable-gpu"])
+        opened = Opened(browser, tmp_path / "report.html")
+        figures = opened.page.eval_on_selector_all(
+            "figure", "fs => fs.map(f => [f.querySelector('img').title, f.querySelector('img').naturalWidth, "
+                      "(f.querySelector('figcaption') || {}).textContent || ''])")
+        check_captions(opened.page)
+        browser.close()
+    assert opened.errors == []
+    heat = [(w, caption) for title, w, caption in figures if "heatmap" in title]
+    assert len(heat) == 1 and heat[0][0] > 0
+    strongest = [part.split(" ", 1)[1].rstrip(".") for part in heat[0][1].split("strongest: ")[1].split("; ")]
+    assert len(strongest) == 4 and all(name in names for name in strongest)
