@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
@@ -16,6 +17,21 @@ TINY_PPO = ["--algo", "ppo", "--timesteps", "256", "--set", "n_steps=128", "--se
 
 
 USER_PACKAGES = str(Path(__file__).parent)  # tests/userpkg: a user's own env package (test_user_env.py)
+
+
+@contextlib.contextmanager
+def user_packages_importable():
+    """tests/userpkg importable as an installed package is, in every process motorlab starts (the
+    PYTHONPATH they inherit), for the block; PYTHONPATH is put back after."""
+    before = os.environ.get("PYTHONPATH")
+    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (USER_PACKAGES, before) if p)
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop("PYTHONPATH", None)
+        else:
+            os.environ["PYTHONPATH"] = before
 
 
 def ray_head(port: int) -> None:

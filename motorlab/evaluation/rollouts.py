@@ -285,18 +285,27 @@ def evaluate(policy: Policy, env_cfg: EnvConfig, episodes: int, seed: int, recor
     Raises:
         MotorlabError: workers < 1 (from Evaluator); an env worker that failed or died (one line).
     """
+    with open_evaluator(env_cfg, episodes, seed, workers, batch) as ev:
+        return ev.run(policy, record=record, first_seed=seed, count=episodes)
+
+
+def open_evaluator(env_cfg: EnvConfig, episodes: int, seed: int, workers: int | None, batch: int = 50,
+                   work: int | None = None) -> Evaluator:
+    """The Evaluator `evaluate` plays `episodes` episodes on: min(batch, episodes) envs in `workers` processes
+    (None: `pool.auto_workers` for `work` episodes in all, default `episodes`).
+
+    Raises:
+        MotorlabError: workers < 1; an env the workers cannot build when `workers` was given."""
     size = min(batch, episodes)
-    n = auto_workers(env_cfg, episodes, size) if workers is None else workers
+    n = auto_workers(env_cfg, work or episodes, size) if workers is None else workers
     try:
-        ev = Evaluator(env_cfg, size, seed, workers=n)
+        return Evaluator(env_cfg, size, seed, workers=n)
     except MotorlabError:
         if workers is not None or n == 1:
             raise
         # auto: an env the workers cannot build (registered only in this process, not by a module
         # they import) still evaluates here; a real error is raised again by the serial pool
-        ev = Evaluator(env_cfg, size, seed, workers=1)
-    with ev:
-        return ev.run(policy, record=record, first_seed=seed, count=episodes)
+        return Evaluator(env_cfg, size, seed, workers=1)
 
 
 def join_rollouts(parts: list[Rollouts]) -> Rollouts:

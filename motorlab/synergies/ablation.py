@@ -37,8 +37,7 @@ from rich.progress import Progress
 
 from motorlab.envs import EnvConfig
 from motorlab.errors import MotorlabError
-from motorlab.evaluation.pool import auto_workers
-from motorlab.evaluation.rollouts import Evaluator, Rollouts, trained_env_settings
+from motorlab.evaluation.rollouts import Rollouts, open_evaluator, trained_env_settings
 from motorlab.intervals import CONFIDENCE, MIN_SEEDS_FOR_INTERVAL, wilson
 from motorlab.policies import Policy, load_run_policy
 from motorlab.runs import require_run_dir
@@ -228,15 +227,7 @@ def _evaluate_all(cfg: EnvConfig, conditions: list[tuple[str, Policy]], episodes
                   workers: int | None, progress: bool) -> list[Rollouts]:
     """Each policy on the same episodes, in one set of envs built once (`Evaluator.run` resets them
     from the same seeds every time), as `motorlab.evaluation.evaluate` runs one policy."""
-    size = min(BATCH, episodes)
-    n = auto_workers(cfg, episodes * len(conditions), size) if workers is None else workers
-    try:
-        ev = Evaluator(cfg, size, seed, workers=n)
-    except MotorlabError:
-        if workers is not None or n == 1:
-            raise
-        # as `evaluate`: an env the workers cannot build (registered in this process only) runs here
-        ev = Evaluator(cfg, size, seed, workers=1)
+    ev = open_evaluator(cfg, episodes, seed, workers, BATCH, work=episodes * len(conditions))
     with ev, Progress(disable=not progress, transient=True) as bar:
         task = bar.add_task("conditions", total=len(conditions))
         results = []

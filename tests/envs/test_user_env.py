@@ -12,7 +12,15 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers import TINY_PPO, USER_PACKAGES, assert_ok, assert_one_line_error, read_summary, run_cli
+from tests.helpers import (
+    TINY_PPO,
+    USER_PACKAGES,
+    assert_ok,
+    assert_one_line_error,
+    read_summary,
+    run_cli,
+    user_packages_importable,
+)
 
 USER_PATH = USER_PACKAGES  # where the user's package lives (they would pip install -e it)
 ARM = "userpkg.arm:ArmReach-v0"
@@ -21,14 +29,9 @@ ARM = "userpkg.arm:ArmReach-v0"
 @pytest.fixture(scope="module", autouse=True)
 def user_package_on_path():
     """The package is importable as installed packages are, in every process motorlab starts."""
-    before = os.environ.get("PYTHONPATH")
-    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (USER_PATH, before) if p)
     os.environ.pop("MOTORLAB_IMPORTS", None)
-    yield
-    if before is None:
-        os.environ.pop("PYTHONPATH")
-    else:
-        os.environ["PYTHONPATH"] = before
+    with user_packages_importable():
+        yield
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,6 @@ something when a synergy it uses is. The paired interval's properties on generat
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +30,6 @@ from motorlab.synergies.ablation import (
 from motorlab.synergies.ablation_steps import ABLATE
 from tests.helpers import (
     TINY_PPO,
-    USER_PACKAGES,
     assert_ok,
     assert_one_line_error,
     assert_png,
@@ -39,6 +37,7 @@ from tests.helpers import (
     run_cli,
     run_here,
     run_kind,
+    user_packages_importable,
 )
 
 ARM = "userpkg.arm:ArmReach-v0"  # three motors, ctrlrange [-1, 1]
@@ -50,13 +49,8 @@ GENERATED = settings(max_examples=40, deadline=None, derandomize=True, database=
 def user_package_on_path():
     """Every process motorlab starts imports the arm's package as an installed one: once a run of it
     is read in this process, motorlab passes `userpkg.arm` on to them all (even to train the pendulum)."""
-    before = os.environ.get("PYTHONPATH")
-    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (USER_PACKAGES, before) if p)
-    yield
-    if before is None:
-        os.environ.pop("PYTHONPATH")
-    else:
-        os.environ["PYTHONPATH"] = before
+    with user_packages_importable():
+        yield
 
 
 @pytest.fixture(scope="module")
