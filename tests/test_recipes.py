@@ -544,10 +544,12 @@ CODE_STEPS = {
     "dynamics-collect": {"env": "InvertedPendulum-v5", "episodes": 2}, "dynamics-fit": {"transitions": "@dc"},
     "dynamics-check": {"model": "@df"}, "mpc": {"env": "InvertedPendulum-v5", "model": "@df"},
     "mbrl": {"env": "InvertedPendulum-v5"},
+    "ablate": {"run": "@t"}, "import-emg": {"file": "emg.csv", "rate": 2000.0}, "similarity": {"a": "@f", "b": "@f"},
 }
 EARLIER = [{"name": "t", "kind": "train", **CODE_STEPS["train"]}, {"name": "c0", "kind": "train", **CODE_STEPS["train"]},
            {"name": "c", "kind": "collect", "run": "@t"}, {"name": "dc", "kind": "dynamics-collect", "env": "Reacher-v5"},
-           {"name": "df", "kind": "dynamics-fit", "transitions": "@dc"}]
+           {"name": "df", "kind": "dynamics-fit", "transitions": "@dc"},
+           {"name": "f", "kind": "fit", "activations": "@c", "n_synergies": 2}]
 
 
 def _code_cases() -> list[tuple[str, str]]:

@@ -127,7 +127,7 @@ sar = "@collect"
 name = "vaf"
 kind = "vaf"
 activations = "@play"
-""", ["steps[2] (vaf)", "'@play'", "collect step", "collect steps so far: collect"]),
+""", ["steps[2] (vaf)", "'@play'", "names no earlier collect or import-emg step", "steps so far: collect"]),
     ("""
 [[steps]]
 name = "fit"
