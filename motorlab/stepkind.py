@@ -28,6 +28,7 @@ then its summary and files when `run` returns; it ends FAILED when `run` raises.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import statistics
@@ -45,7 +46,15 @@ from motorlab.errors import MotorlabError
 from motorlab.faults import write_faults_log
 from motorlab.intervals import across_seeds
 from motorlab.report.results import Metric, Number, RunResults, write_run_results
-from motorlab.runs import prepare_run_dir, read_text_file, refuse_finished, write_config, write_summary
+from motorlab.runs import (
+    FolderMode,
+    prepare_run_dir,
+    read_text_file,
+    refuse_finished,
+    run_folders,
+    write_config,
+    write_summary,
+)
 from motorlab.settings import Settings, Summary
 
 
@@ -127,8 +136,27 @@ class StepKind(Command[S], Generic[S, R]):
         interrupted run (`can_resume`) also takes `resume=True`."""
         raise NotImplementedError
 
+    def perform(self, settings: S, out: Path | None = None, *, folders: FolderMode | None = None,
+                track: list[str] | str | None = None, resume: bool = False, console: Console | None = None,
+                progress: bool = True) -> R:
+        """The one door every caller runs a step through: the CLI and a worker (`invoke`), a study's steps,
+        the Python API. Under the run-folder mode `folders` (motorlab.runs.run_folders; None: the enclosing
+        one, a study's) and the trackers `track` (None: as an enclosing block says), `run` checks its inputs,
+        opens the run folder (`start`, locked and tracked), works, and writes it whole (`finish`).
+        `resume`: continue the interrupted run in `out` (a kind that `can_resume`)."""
+        folder_mode = run_folders(folders) if folders is not None else contextlib.nullcontext()
+        with trackers.tracking(track), folder_mode:
+            if resume:
+                return self.run(settings, out, console=console, progress=progress, resume=True)  # type: ignore[call-arg]
+            return self.run(settings, out, console=console, progress=progress)
+
+    def invoke(self, settings: S, how: Any, console: Console | None = None, progress: bool = True) -> R:
+        """The command line's and a worker's way in: `execute`, which goes through `perform` with the
+        invocation's folder mode and trackers."""
+        return self.execute(settings, how, console, progress)
+
     def execute(self, settings: S, how: Tracked, console: Console | None, progress: bool) -> R:
-        return self.run(settings, how.out, console=console, progress=progress)
+        return self.perform(settings, how.out, folders=how.mode(), track=how.track, console=console, progress=progress)
 
     def report(self, result: R, settings: S, console: Console) -> None:
         console.print(f"written: {result.run_dir}/summary.json")

@@ -35,7 +35,6 @@ from motorlab import jobs, trackers  # noqa: E402
 from motorlab.cli import one_line_errors  # noqa: E402
 from motorlab.commands import BY_NAME  # noqa: E402
 from motorlab.errors import MotorlabError  # noqa: E402
-from motorlab.runs import run_folders  # noqa: E402
 from motorlab.user_modules import import_modules  # noqa: E402
 
 
@@ -49,8 +48,8 @@ def run_job(job: jobs.Job, console: Console) -> None:
     settings = cmd.make(how, **job.settings)  # as the command line makes them: under what `how` brings
     with trackers.adopted(job.tracking):
         if job.resume:  # the run's own settings, continued where its checkpoint is
-            with run_folders("resume"):
-                result = cmd.run(settings, Path(job.how["out"]), console=console, progress=job.progress, resume=True)
+            result = cmd.perform(settings, Path(job.how["out"]), folders="resume", resume=True, console=console,
+                                 progress=job.progress)
         else:
             result = cmd.invoke(settings, how, console=console, progress=job.progress)
     cmd.report(result, settings, console)

@@ -67,7 +67,7 @@ SECONDS = {
     "tests/dynamics/test_auto_epochs.py": 2,
     "tests/synergies/test_emg.py": 25,  # issue 55's
     "tests/synergies/test_analysis.py": 17, "tests/synergies/test_analysis_cli.py": 36,
-    "tests/synergies/test_names_and_plot.py": 40,
+    "tests/synergies/test_names_and_plot.py": 40, "tests/test_one_door.py": 12,
     "tests/synergies/test_ablation.py": 35,  # issue 55's
     # issue 54's
     "tests/rl/test_sar_presets.py": 40, "tests/rl/test_wall_budget.py": 25, "tests/test_benchmark_learner_per_hour.py": 3,

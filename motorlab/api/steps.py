@@ -12,7 +12,6 @@ from typing import Any
 
 from rich.console import Console
 
-from motorlab import trackers
 from motorlab.api.views import Result, as_path, load
 from motorlab.errors import MotorlabError
 from motorlab.kinds import KINDS
@@ -52,13 +51,12 @@ def settings(kind: StepKind, **fields: Any) -> Settings:
 
 
 def run(kind: StepKind, checked: Settings, out: str | Path | None, progress: bool, track: Track = None,
-        overwrite: bool = False, **run_args: Any) -> Result:
-    """Run a `kind` step with `checked` settings into `out` and open its folder (`overwrite`: replace
-    a finished run there, as --overwrite does; without it, a finished run in `out` is refused).
-    `track`: this run only (None: as the enclosing `motorlab.tracking` block, if any, says)."""
-    with trackers.tracking(track), run_folders("overwrite" if overwrite else "new"):
-        summary = kind.run(checked, Path(out) if out is not None else None, console=console(), progress=progress,
-                           **run_args)
+        overwrite: bool = False) -> Result:
+    """Run a `kind` step with `checked` settings into `out` through its door (`StepKind.perform`) and open
+    its folder (`overwrite`: replace a finished run there, as --overwrite does; without it, a finished run
+    in `out` is refused). `track`: this run only (None: as the enclosing `motorlab.tracking` block says)."""
+    summary = kind.perform(checked, Path(out) if out is not None else None, folders="overwrite" if overwrite else "new",
+                           track=track, console=console(), progress=progress)
     return load(summary.run_dir)
 
 

@@ -150,14 +150,15 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
         """Train as the settings say (`make(how, ...)` laid the flags over --config's config.toml);
         with --resume, continue the interrupted run in that folder, on its own settings."""
         if how.resume is None:
-            return self.run(settings, how.out, console=console, progress=progress)
+            return super().execute(settings, how, console, progress)
         run_dir = Path(how.resume)
         if how.config is not None or how.out is not None:
             raise self._resume_alone(run_dir)
         own = self.validate(self._own_fields(run_dir, settings.progress))
         if settings.model_dump() != own.model_dump():  # settings made without `how`: not the run's own
             raise self._resume_alone(run_dir)
-        summary = self.run(own, run_dir, console=console, progress=progress, resume=True)
+        summary = self.perform(own, run_dir, folders=how.mode(), track=how.track, resume=True, console=console,
+                               progress=progress)
         summary._resumed = True
         return summary
 

@@ -209,9 +209,9 @@ def _run_step(step: Step, study_dir: Path, outputs: _Outputs, console: Console, 
         for d, settings in todo:
             if d in resuming:
                 console.print("      continuing the interrupted run from its last checkpoint")
-                k.run(settings, d, console=console, resume=True)
+                k.perform(settings, d, resume=True, console=console)  # under the study's run-folder mode
             else:
-                k.run(settings, d, console=console)
+                k.perform(settings, d, console=console)
     if todo:
         outputs.ran.add(step.name)
     if not detached:  # matplotlib is not thread-safe: a background step's figures are drawn by the study's thread

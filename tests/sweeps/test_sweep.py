@@ -408,7 +408,8 @@ def test_values_that_slugify_alike_get_their_own_folders(tmp_path):
 # what each sweepable command needs on its command line, and a value a user could give each invocation option
 ARGS = {"train": ENV_ID, "evaluate": "pid", "video": "r", "synergies collect": "r", "synergies fit": "a.npz",
         "zeroshot": "r --envs E-v0", "robustness": "pid --vary delay=0,0.1", "dynamics collect": ENV_ID,
-        "dynamics fit": "t.npz", "dynamics check": "m", "mpc": f"{ENV_ID} --model m", "mbrl": ENV_ID}
+        "dynamics fit": "t.npz", "dynamics check": "m", "mpc": f"{ENV_ID} --model m", "mbrl": ENV_ID,
+        "synergies ablate": "r", "synergies compare": "a b"}
 OPTION_WORDS = {"out": ["--out", "elsewhere"], "overwrite": ["--overwrite"], "track": ["--track", "mlflow"],
                 "config": ["--config", "CONFIG"], "resume": ["--resume", "r"]}
 
