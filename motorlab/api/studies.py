@@ -9,6 +9,7 @@ from motorlab import trackers
 from motorlab.api.checks import api_function
 from motorlab.api.steps import Track, console, folders
 from motorlab.api.views import Study, Sweep, Tune
+from motorlab.errors import MotorlabError
 
 
 @api_function
@@ -48,11 +49,14 @@ def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: st
 
 
 @api_function
-def sweep(target: str | Path, seeds: int | list[int] = 5, grid: list[str] | dict[str, list[Any]] | None = None, *,
-          backend: str = "local", address: str | None = None, max_parallel: int | None = None,
+def sweep(target: str | Path, seeds: int | list[int] | None = None, grid: list[str] | dict[str, list[Any]] | None = None,
+          *, backend: str | None = None, address: str | None = None, max_parallel: int | None = None,
           out: str | Path | None = None, track: Track = None, resume: bool = False, overwrite: bool = False) -> Sweep:
     """Run a command or a study for several seeds and settings, then aggregate with rliable
     (`motorlab sweep`): IQMs with 95% CIs, probabilities of improvement, performance profiles.
+
+    The settings are `motorlab sweep`'s own (its settings model checks them and gives every default: None
+    here is that default, `motorlab sweep --help` lists them), and it runs as the command does.
 
     Args:
         target: a motorlab command line ("train InvertedPendulum-v5 --preset fast --until-solved")
@@ -66,23 +70,35 @@ def sweep(target: str | Path, seeds: int | list[int] = 5, grid: list[str] | dict
     Returns:
         The sweep: `.aggregate`, `.table`, `.summary`, `.report()`.
     """
-    from motorlab.sweeps.sweep import run_sweep
+    from motorlab.sweeps.command import SWEEP
 
-    with trackers.tracking(track), folders(resume, overwrite):
-        summary = run_sweep(str(target), seeds, _pairs(grid), backend, address, max_parallel,
-                            Path(out) if out is not None else None, console=console())
+    given = {"seeds": seeds} if not isinstance(seeds, list) else {}
+    how = SWEEP.how(out=out, track=track, resume=resume, overwrite=overwrite)
+    settings = SWEEP.make(how, target=str(target), grid=_pairs(grid), backend=backend, address=address,
+                          max_parallel=max_parallel, **given)
+    if isinstance(seeds, list):  # the seeds themselves (the command line counts them: 0..N-1)
+        if not seeds or any(isinstance(x, bool) or not isinstance(x, int) or x < 0 for x in seeds) \
+                or len(set(seeds)) != len(seeds):
+            raise MotorlabError(f"seeds {seeds!r}: give a count or a list of distinct non-negative integers.")
+        settings = settings.model_copy(update={"seeds": seeds})
+    summary = SWEEP.invoke(settings, how, console=console())
     return Sweep(summary["sweep_dir"])
 
 
 @api_function
-def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int = 20, seeds: int = 3,
-         objective: str = "steps_to_success", direction: str | None = None, out: str | Path | None = None,
-         storage: str | None = None, study_name: str | None = None, sampler: str = "tpe",
-         sampler_seed: int | None = None, pruner: str = "median", prune_startup: int = 5, report_every: int = 1000,
-         fresh_seeds: int | None = None, max_parallel: int | None = None, backend: str = "local",
-         address: str | None = None, track: Track = None, resume: bool = False, overwrite: bool = False) -> Tune:
+def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int | None = None,
+         seeds: int | None = None, objective: str | None = None, direction: str | None = None,
+         out: str | Path | None = None, storage: str | None = None, study_name: str | None = None,
+         sampler: str | None = None, sampler_seed: int | None = None, pruner: str | None = None,
+         prune_startup: int | None = None, report_every: int | None = None, fresh_seeds: int | None = None,
+         max_parallel: int | None = None, backend: str | None = None, address: str | None = None,
+         track: Track = None, resume: bool = False, overwrite: bool = False) -> Tune:
     """Search settings with Optuna, each trial judged by the IQM of `objective` over `seeds` seeds
     (`motorlab tune`); the best settings are re-run on fresh seeds.
+
+    The settings are `motorlab tune`'s own (its settings model checks them and gives every default: None
+    here is that default, e.g. 20 trials of 3 seeds judged by steps_to_success; `motorlab tune --help`
+    lists them all), and it runs as the command does.
 
     Args:
         target: a motorlab command line in quotes ("train InvertedPendulum-v5 --timesteps 50000
@@ -98,14 +114,15 @@ def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int =
     Returns:
         The search: `.best` (best.toml), `.trials`, `.summary` (with the fresh seeds' numbers).
     """
-    from motorlab.tuning.tune import make_spec, run_tune
+    from motorlab.tuning.command import TUNE
 
-    spec = make_spec(str(target), _pairs(space), trials, seeds, objective, direction,
-                     Path(out) if out is not None else None, storage, study_name, sampler, pruner, prune_startup,
-                     report_every, max_parallel, fresh_seeds, backend=backend, address=address,
-                     sampler_seed=sampler_seed)
-    with trackers.tracking(track), folders(resume, overwrite):  # run_tune is the parent run itself
-        summary = run_tune(spec, console=console())
+    how = TUNE.how(out=out, track=track, resume=resume, overwrite=overwrite)
+    settings = TUNE.make(how, target=str(target), space=_pairs(space), trials=trials, seeds=seeds,
+                         objective=objective, direction=direction, storage=storage, study_name=study_name,
+                         sampler=sampler, sampler_seed=sampler_seed, pruner=pruner, prune_startup=prune_startup,
+                         report_every=report_every, fresh_seeds=fresh_seeds, max_parallel=max_parallel,
+                         backend=backend, address=address)
+    summary = TUNE.invoke(settings, how, console=console())
     return Tune(summary["tune_dir"])
 
 

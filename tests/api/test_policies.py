@@ -164,3 +164,25 @@ def test_robustness_from_python_is_the_function_not_the_package(api_run, tmp_pat
     lengths = motorlab.evaluate("pid", ENV_ID, episodes=1, env_kwargs={"reset_noise_scale": 0.0},
                                 out=tmp_path / "e", progress=False)
     assert lengths.config["env"]["kwargs"] == {"reset_noise_scale": 0.0}
+
+
+def test_the_apis_sweep_and_tune_take_their_defaults_from_the_commands_settings():
+    """No default is typed twice: every setting the API's sweep and tune pass on defaults to None, and the
+    command's settings model gives the value (what `motorlab sweep/tune --help` shows)."""
+    import inspect
+
+    from motorlab.sweeps.command import SWEEP
+    from motorlab.tuning.command import TUNE
+
+    for function, command in ((motorlab.sweep, SWEEP), (motorlab.tune, TUNE)):
+        params = inspect.signature(function).parameters
+        shared = set(params) & set(command.settings.model_fields) - {"target", "space"}
+        assert shared and all(params[p].default is None for p in shared), function.__name__
+
+
+def test_a_sweep_takes_the_seeds_themselves_or_refuses_them_in_one_line(tmp_path):
+    swept = motorlab.sweep(f"evaluate pid --env {ENV_ID} --episodes 1", seeds=[3, 5], out=tmp_path / "sweep")
+    assert sorted(p.name for p in (swept.path / "default").iterdir() if p.name.startswith("seed")) == ["seed3", "seed5"]
+    for bad in ([], [1, 1], [-1]):
+        with pytest.raises(MotorlabError, match="distinct non-negative integers"):
+            motorlab.sweep(f"evaluate pid --env {ENV_ID} --episodes 1", seeds=bad, out=tmp_path / "bad")
