@@ -183,7 +183,13 @@ def toml_holds(path: Path, config: dict[str, Any]) -> bool:
 
 
 def write_toml(path: Path, config: dict[str, Any]) -> None:
-    atomic_write_text(Path(path), _config_toml(config))
+    """`config` as TOML at `path`, whole; a file that already says exactly this is left as it is (its
+    time stays when the run wrote it: a training writes config.toml as it starts, and `finish` again)."""
+    text = _config_toml(config)
+    with contextlib.suppress(OSError, UnicodeDecodeError):
+        if Path(path).is_file() and not Path(path).is_symlink() and Path(path).read_text() == text:
+            return
+    atomic_write_text(Path(path), text)
 
 
 def read_config(run_dir: Path) -> dict[str, Any]:

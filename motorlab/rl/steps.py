@@ -12,7 +12,7 @@ from rich.console import Console
 from motorlab.command import Tracked
 from motorlab.envs import describe_env, fold_env
 from motorlab.errors import MotorlabError
-from motorlab.report.results import Metric, Number, write_run_results
+from motorlab.report.results import Metric, Number
 from motorlab.rl.config import TrainConfig, resolve
 from motorlab.runs import FolderMode, is_complete, last_timesteps
 from motorlab.settings import Summary
@@ -45,6 +45,9 @@ class TrainSummary(Summary):
     steps_to_success: int | None
     solved: bool
     wall_seconds: float
+    stopped_by: str = "timesteps"  # timesteps, minutes (--minutes) or solved (--until-solved)
+    minutes: float | None = None  # the wall-clock budget given, if any
+    train_seconds: float | None = None  # wall seconds of training (evaluations, checkpoints not counted)
     evaluations: int
     train_episodes: int
     train_success_rate_last100: float | None
@@ -193,12 +196,14 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
 
     def run(self, settings: TrainConfig, out: Path | None = None, console: Console | None = None,
             progress: bool = True, resume: bool = False) -> TrainSummary:
-        from motorlab.rl.train import train
+        from motorlab.rl.train import finished, train
 
         if not progress:
             settings = settings.model_copy(update={"progress": False})
-        summary = TrainSummary.model_validate(done := train(settings, out, resume=resume, kind=self.name))
-        write_run_results(Path(done["run_dir"]), self.results(settings, summary))
+        done = train(settings, out, resume=resume, start=self.start)
+        run_dir = Path(done.pop("run_dir"))
+        summary = self.finish(run_dir, settings, TrainSummary.model_validate(done))  # config, results, summary.json
+        finished(run_dir)
         return summary
 
     def check(self, settings: TrainConfig) -> None:

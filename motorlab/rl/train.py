@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import shutil
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from motorlab import trackers
 from motorlab.envs import max_return
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import success_by, success_mode
@@ -27,21 +27,23 @@ from motorlab.rl import algos
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.envcheck import check_train_env
 from motorlab.rl.monitor import EVAL_SEED_OFFSET, TrainingMonitor, monitor_record
-from motorlab.runs import prepare_run_dir, run_path, write_config, write_summary
+from motorlab.runs import run_path, write_config
 
 
-def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False, *, kind: str) -> dict[str, Any]:
-    """Train one policy as `cfg` says and write its run folder.
+def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False, *,
+          start: Callable[[Path], Path]) -> dict[str, Any]:
+    """Train one policy as `cfg` says into its run folder; the train kind (`motorlab.rl.steps.TRAIN.run`)
+    ends the folder with the shared `finish` (config.toml, results.json, summary.json).
 
     Args:
-        kind: the kind its run folder is marked with (motorlab.claims): the train kind's name
-            (`motorlab.rl.steps.TRAIN.name`), so that `motorlab train --resume` continues it.
+        start: opens the run folder once the settings are known good (`StepKind.start`: made,
+            marked as the train kind's, so that `motorlab train --resume` continues it, locked, tracked).
         resume: continue the run in `out` from its last checkpoint (SB3 algorithms; an LQR
             run, or one killed before its first checkpoint, starts over).
 
     Returns:
-        The summary (also in `run_dir/summary.json`): `steps_to_success` (int, or None
-        when the budget ran out first), `wall_seconds`, `timesteps`, final evaluation.
+        The summary, with `run_dir`: `steps_to_success` (int, or None when the budget ran out
+        first), `wall_seconds`, `timesteps`, final evaluation.
 
     Raises:
         MotorlabError: bad env id, delay, reward, an algorithm that does not fit the env's spaces,
@@ -68,8 +70,7 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False, *, ki
         model = build_model(cfg, run_dir)  # SB3 checks its settings here, before the folder is touched
         if resume and has_checkpoint(run_dir):
             record = load_checkpoint(run_dir, model)
-    prepare_run_dir(run_dir, f"train-{cfg.algo}", kind=kind)
-    trackers.folder_ready(run_dir)  # a tracked run (--track) starts now, before the first scalar
+    start(run_dir)  # a tracked run (--track) starts now, before the first scalar
     if record is None:
         shutil.rmtree(run_dir / "checkpoint", ignore_errors=True)  # another run's, not to be resumed into this one
     write_config(run_dir, cfg.model_dump())
@@ -117,9 +118,12 @@ def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False, *, ki
         **{f"eval_{k}": v for k, v in final.items() if k != "episode_lengths"},
         "eval_episode_lengths": final["episode_lengths"],
     }
-    write_summary(run_dir, summary)
-    shutil.rmtree(run_dir / "checkpoint", ignore_errors=True)  # finished: nothing left to resume (replay buffers are big)
-
-    plot_learning_curve(run_dir)  # people would rather look at the curve than read metrics.csv
     summary["run_dir"] = str(run_dir)
     return summary
+
+
+def finished(run_dir: Path) -> None:
+    """After the run's summary.json: the checkpoint goes (nothing is left to resume; replay buffers are big)
+    and the learning curve is drawn (people would rather look at it than read metrics.csv)."""
+    shutil.rmtree(run_dir / "checkpoint", ignore_errors=True)
+    plot_learning_curve(run_dir)

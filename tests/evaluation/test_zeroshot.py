@@ -19,7 +19,6 @@ from motorlab.policies import load_run_policy
 from motorlab.report.compare import mean_and_band
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.steps import TRAIN
-from motorlab.rl.train import train
 from tests.helpers import (
     ENV_ID,
     assert_cli_error,
@@ -148,7 +147,7 @@ def pendulum_runs(ppo_run, tmp_path_factory) -> list[Path]:
     for seed in (1, 2):
         cfg = TrainConfig(env=EnvConfig(id=ENV_ID), algo="ppo", timesteps=256, seed=seed, progress=False,
                           solve_episodes=2, hyperparams={"n_steps": 128, "batch_size": 64})
-        train(cfg, root / f"ppo{seed}", kind=TRAIN.name)
+        TRAIN.perform(cfg, root / f"ppo{seed}")
         runs.append(root / f"ppo{seed}")
     return runs
 

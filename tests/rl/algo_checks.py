@@ -95,7 +95,6 @@ def check_resume(algo: str, out: Path, hyperparams: dict[str, Any], monkeypatch,
     import motorlab.rl.sb3 as sb3
     from motorlab.rl.config import resolve
     from motorlab.rl.steps import TRAIN
-    from motorlab.rl.train import train as train_run
     from motorlab.runs import read_config
 
     class Stopped(Exception):
@@ -110,7 +109,7 @@ def check_resume(algo: str, out: Path, hyperparams: dict[str, Any], monkeypatch,
             train(algo, out, hyperparams, checkpoint_every=checkpoint_every)
     latest = json.loads((out / "checkpoint" / "latest.json").read_text())
     assert 0 < latest["steps"] < STEPS
-    summary = train_run(resolve(read_config(out)), out, resume=True, kind=TRAIN.name)
+    summary = TRAIN.perform(resolve(read_config(out)), out, resume=True).keys()
     assert summary["resumed_from"] == latest["steps"]
     assert summary["timesteps"] >= STEPS and summary["budget"] == STEPS
     assert not (out / "checkpoint").exists() and (out / "policy.safetensors").is_file()

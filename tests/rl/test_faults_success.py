@@ -19,7 +19,6 @@ from motorlab.policies import ZeroPolicy
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.monitor import TrainingMonitor
 from motorlab.rl.steps import TRAIN
-from motorlab.rl.train import train
 from tests.helpers import (
     assert_one_line_error,
     episode_rows,
@@ -211,7 +210,7 @@ def faulty_run(tmp_path_factory):
     cfg = TrainConfig(env=EnvConfig(id=FAULTY_ID), algo="ppo", timesteps=256, seed=0, progress=False,
                       solve_episodes=2, hyperparams={"n_steps": 64, "batch_size": 32})
     run = tmp_path_factory.mktemp("faulty") / "run"
-    return run, train(cfg, run, kind=TRAIN.name)
+    return run, TRAIN.perform(cfg, run).keys()
 
 
 def test_synergy_collect_never_keeps_a_faulted_episode(faulty_run, tmp_path):

@@ -10,7 +10,6 @@ import pytest
 
 from motorlab.rl.config import resolve
 from motorlab.rl.steps import TRAIN
-from motorlab.rl.train import train
 
 TASK = "myoFingerPoseRandom-v0"
 STEPS, STARTS = 400, 200  # whole episodes of 100 steps: sar-sac-256 trains at episode ends
@@ -27,7 +26,7 @@ def n_updates(run_dir) -> int:
 def test_off_policy_contenders_train_at_their_ratio_and_evaluate(tmp_path, preset, every):
     cfg = resolve({"env": {"id": TASK}, "preset": preset, "timesteps": STEPS, "solve_episodes": 2, "progress": False,
                    "hyperparams": {"learning_starts": STARTS}})
-    s = train(cfg, tmp_path / preset, kind=TRAIN.name)
+    s = TRAIN.perform(cfg, tmp_path / preset).keys()
     assert s["timesteps"] == STEPS and s["eval_episodes"] == 2 and 0.0 <= s["eval_success_rate"] <= 1.0
     expected = (STEPS - STARTS) // every  # one gradient step per `every` env steps once learning starts
     assert abs(n_updates(tmp_path / preset) - expected) <= 1, preset
@@ -42,7 +41,7 @@ def test_sar_sac_256_has_smaller_networks_than_the_reference():
 def test_ppo_contender_trains_on_four_env_processes_and_evaluates(tmp_path):
     cfg = resolve({"env": {"id": TASK}, "preset": "sar-ppo", "timesteps": STEPS, "solve_episodes": 2,
                    "progress": False, "hyperparams": {"n_steps": 64, "batch_size": 64, "n_epochs": 2}})
-    s = train(cfg, tmp_path / "ppo", kind=TRAIN.name)
+    s = TRAIN.perform(cfg, tmp_path / "ppo").keys()
     assert cfg.n_envs == 4 and cfg.normalize
     assert s["timesteps"] == 4 * 64 * 2  # whole rollouts of 4 envs x n_steps, to the first past the budget
     assert n_updates(tmp_path / "ppo") == 2 * 2  # rollouts x epochs (SB3's PPO counts epochs)
