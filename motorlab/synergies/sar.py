@@ -374,7 +374,7 @@ def _fit_nmf(x: np.ndarray, n: int, seed: int):
     return model, coef, vaf
 
 
-def _check_nmf_input(x: np.ndarray) -> None:
+def check_nmf_input(x: np.ndarray) -> None:
     if x.min() < 0:
         raise MotorlabError(
             f"method 'nmf' needs non-negative activations; the smallest value is {x.min():.4g}. "
@@ -416,7 +416,7 @@ def vaf_curve(activations: Any, method: str = "pca", max_n: int | None = None, s
         raise MotorlabError(f"max_n must be an integer in [1, {m}] (the number of muscles); got {max_n!r}.")
     if method == "nmf":
         require_sklearn()
-        _check_nmf_input(x)
+        check_nmf_input(x)
         return np.array([_fit_nmf(x, n, seed)[2] for n in range(1, int(max_n) + 1)])
     return _pca_vaf(x)[: int(max_n)]
 
@@ -500,7 +500,7 @@ def fit_sar(
 
     limit = min(m, n_samples)
     if method == "nmf":
-        _check_nmf_input(x)
+        check_nmf_input(x)
     if n_synergies is not None:
         if isinstance(n_synergies, bool) or not isinstance(n_synergies, (int, np.integer)) \
                 or not 1 <= n_synergies <= m:

@@ -17,7 +17,7 @@ from motorlab.evaluation.activations import ACTIVATIONS, collect, load_activatio
 from motorlab.report.results import Metric, Number
 from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
-from motorlab.synergies.sar import fit_sar, require_sklearn, save_sar, vaf_curve
+from motorlab.synergies.sar import check_nmf_input, fit_sar, require_sklearn, save_sar
 
 SAR_FILE = "sar.npz"
 
@@ -204,7 +204,7 @@ class VafKind(StepKind[VafSettings, VafSummary]):
 
         acts, meta = load_activations(Path(settings.activations))
         if settings.method == "nmf":
-            vaf_curve(acts[:2], method="nmf", max_n=1)  # negative or all-zero activations: NMF's one-line refusal
+            check_nmf_input(acts)  # negative or all-zero activations: NMF's one-line refusal, before any fit
         self.refuse_finished_out(out)
         cv = cross_validated_vaf(acts, meta["episode"], settings.method, settings.max_n, settings.cv,
                                  workers=settings.workers)
@@ -385,7 +385,7 @@ def _choose_n(acts: np.ndarray, meta: dict[str, Any], settings: FitSettings):
     from motorlab.synergies.analysis import choices, cross_validated_vaf
 
     if settings.method == "nmf":
-        vaf_curve(acts[:2], method="nmf", max_n=1)  # negative or all-zero activations: NMF's one-line refusal
+        check_nmf_input(acts)  # negative or all-zero activations: NMF's one-line refusal, before any fit
     cv = cross_validated_vaf(acts, meta["episode"], settings.method, settings.max_n, settings.cv,
                              seed=settings.seed, workers=settings.workers)
     criterion = "muscle-vaf" if settings.muscle_vaf is not None else "elbow" if settings.elbow else "total-vaf"

@@ -84,3 +84,18 @@ def test_compare_matches_two_fits_above_chance_and_refuses_other_muscles(truth_f
     proc = run_cli("synergies", "compare", tmp_path / "fa", tmp_path / "fr", "--out", tmp_path / "bad")
     assert_one_line_error(proc, "only in A: m11", "only in B: biceps")
     assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.parametrize("command", ["vaf", "fit"])
+def test_nmf_refuses_a_negative_value_anywhere_before_any_fit(tmp_path, command):
+    g = ground_truth(seed=0, episodes=6)
+    x = g.activations.copy()
+    x[-1, 3] = -0.5  # the very last sample
+    n = x.shape[1]
+    path = tmp_path / "neg.npz"
+    atomic_write_npz(path, activations=x, names=np.array(g.names), episode=g.episode, signal=np.array("act"),
+                     low=np.zeros(n), high=np.ones(n), metadata=np.array("{}"))
+    extra = ["--muscle-vaf", "0.75"] if command == "fit" else []
+    proc = run_cli("synergies", command, path, "--method", "nmf", "--cv", "3", *extra, "--out", tmp_path / "out")
+    assert_one_line_error(proc, "non-negative activations", "-0.5")
+    assert not (tmp_path / "out").exists()
