@@ -167,9 +167,9 @@ def kinds() -> dict[str, Any]:
 def resolved_settings(seed: int, budgets: Budgets) -> dict[str, Any]:
     """Every setting a body's run uses: each motorlab step's settings as motorlab resolves them (its
     defaults, and a catalogue entry if the env had one), the oracle's and random actions'."""
-    from motorlab.api import steps
+    from motorlab.api import running
 
-    step = {name: steps.settings(kinds()[name], **fields).model_dump(mode="json")  # type: ignore[arg-type]
+    step = {name: running.settings(kinds()[name], **fields).model_dump(mode="json")  # type: ignore[arg-type]
             for name, fields in step_fields(seed, budgets).items()}
     resets = eval_resets(seed, budgets.eval_episodes)
     return {**step, "oracle": {**dict(budgets.oracle), "seed": seed, "reset_seeds": resets},
@@ -281,7 +281,7 @@ def run_body(seed: int, budgets: Budgets, folder: Path, baselines: dict[str, lis
     import numpy as np
     import torch
 
-    from motorlab.api import steps
+    from motorlab.api import running
 
     torch.set_num_threads(1)
     env_id, resets = body_env(seed), eval_resets(seed, budgets.eval_episodes)
@@ -297,8 +297,8 @@ def run_body(seed: int, budgets: Budgets, folder: Path, baselines: dict[str, lis
 
     def step(name: str, previous: Path | None = None):
         given = {k: (str(previous) if v == FROM_PREVIOUS else v) for k, v in fields[name].items()}
-        checked = steps.settings(kinds()[name], **given)
-        return timed(name, steps.run, kinds()[name], checked, folder / name.replace("_", "-"), False)
+        checked = running.settings(kinds()[name], **given)
+        return timed(name, running.run, kinds()[name], checked, folder / name.replace("_", "-"), False)
 
     if baselines is not None:  # random's and the oracle's returns of an earlier run of these episodes
         returns["random"], returns["oracle"], plan_ms = baselines["random"], baselines["oracle"], baselines["plan_ms"]

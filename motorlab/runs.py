@@ -43,8 +43,8 @@ from motorlab.claims import (  # noqa: F401 - re-exported: run folders are writt
     current_umask,
     is_complete,
 )
-from motorlab.environment import describe
 from motorlab.errors import MotorlabError, StorageError, mask_secrets
+from motorlab.provenance import describe
 from motorlab.user_modules import imported_names, remember
 
 CONFIG = "config.toml"

@@ -20,7 +20,7 @@ PACKAGE = Path(motorlab.__file__).parent
 # The layers of the import contract (pyproject.toml), top first: a higher number is a higher layer.
 (API, WORKER, CLI, COMMANDS, STUDIES, KIND_REGISTRY, STEP_KINDS, STEPKIND, FEATURES, DOMAIN, ROLLOUTS_AND_MODELS,
  POLICIES, ALGORITHMS, CONTROLLERS, REPORT, ENVS, SYNERGY_SPACE, GROUND) = range(17, -1, -1)
-GROUND_FLOOR = {"motorlab.runs", "motorlab.claims", "motorlab.processes", "motorlab.errors", "motorlab.faults", "motorlab.environment", "motorlab.extras",
+GROUND_FLOOR = {"motorlab.runs", "motorlab.claims", "motorlab.processes", "motorlab.errors", "motorlab.faults", "motorlab.provenance", "motorlab.extras",
                 "motorlab.settings", "motorlab.user_modules", "motorlab", "motorlab.command", "motorlab.jobs",
                 "motorlab.intervals"}
 # Packages by prefix, below the step kinds (a step-kind module in one of them is a step kind)

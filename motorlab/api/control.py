@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from motorlab.api import steps
+from motorlab.api import running
 from motorlab.api.checks import api_function
-from motorlab.api.steps import Track
+from motorlab.api.running import Track
 from motorlab.api.views import Result
 from motorlab.control.steps import MBRL, MPC
 
@@ -28,7 +28,7 @@ def mpc(env: str, model: str | Path | Result, *, episodes: int | None = None, ou
     Returns:
         Its numbers (`["return_mean"]`, `["success_rate"]`, `["plan_ms_median"]`) and plots.
     """
-    return steps.run_kind(MPC, out, progress, track, env=env, model=model, episodes=episodes, **settings)
+    return running.run_kind(MPC, out, progress, track, env=env, model=model, episodes=episodes, **settings)
 
 
 @api_function
@@ -46,4 +46,4 @@ def mbrl(env: str, rounds: int | None = None, *, out: str | Path | None = None, 
     Returns:
         Its folder: curve.csv, plots/learning_curve.png, the final model in model/.
     """
-    return steps.run_kind(MBRL, out, progress, track, env=env, rounds=rounds, **settings)
+    return running.run_kind(MBRL, out, progress, track, env=env, rounds=rounds, **settings)

@@ -13,9 +13,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from motorlab.api import steps
+from motorlab.api import running
 from motorlab.api.checks import api_function
-from motorlab.api.steps import Track
+from motorlab.api.running import Track
 from motorlab.api.views import Result
 from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
 
@@ -34,7 +34,7 @@ def collect(env: str, episodes: int | None = None, *, out: str | Path | None = N
             state, workers, seed; and the env's settings, as every env-building command takes them:
             delay, history, obs_noise, latency, push_body, sar, env_kwargs={...}, reward, ...
     """
-    return steps.run_kind(DYNAMICS_COLLECT, out, progress, env=env, episodes=episodes, **settings)
+    return running.run_kind(DYNAMICS_COLLECT, out, progress, env=env, episodes=episodes, **settings)
 
 
 @api_function
@@ -48,7 +48,7 @@ def fit(transitions: str | Path | Result, *, epochs: int | None = None, out: str
         **settings: hidden (default [200, 200]), lr, batch_size, ensemble, probabilistic, learn_reward,
             learn_termination, patience, valid_fraction, seed.
     """
-    return steps.run_kind(DYNAMICS_FIT, out, progress, track, transitions=transitions, epochs=epochs, **settings)
+    return running.run_kind(DYNAMICS_FIT, out, progress, track, transitions=transitions, epochs=epochs, **settings)
 
 
 @api_function
@@ -56,4 +56,4 @@ def check(model: str | Path | Result, *, episodes: int | None = None, out: str |
           progress: bool = True, **settings: Any) -> Result:
     """The model against the simulator under the same actions, open loop: error vs horizon,
     traces, and the summary numbers (`motorlab dynamics check`)."""
-    return steps.run_kind(DYNAMICS_CHECK, out, progress, model=model, episodes=episodes, **settings)
+    return running.run_kind(DYNAMICS_CHECK, out, progress, model=model, episodes=episodes, **settings)

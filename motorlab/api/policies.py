@@ -10,9 +10,9 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from motorlab.api import steps
+from motorlab.api import running
 from motorlab.api.checks import api_function
-from motorlab.api.steps import Track
+from motorlab.api.running import Track
 from motorlab.api.views import FOLDER_TYPES, PolicyFunction, Result
 from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
 from motorlab.report.steps import COMPARE, VIDEO
@@ -57,8 +57,8 @@ def train(env: str, algo: str | None = None, timesteps: int | None = None, *, pr
     """
     fields = {"env": env, "algo": algo, "timesteps": timesteps, "preset": preset, "seed": seed,
               "progress": progress, **settings}
-    checked = steps.settings(TRAIN, **fields)
-    return steps.run(TRAIN, checked, out, progress, track, overwrite)  # type: ignore[return-value]
+    checked = running.settings(TRAIN, **fields)
+    return running.run(TRAIN, checked, out, progress, track, overwrite)  # type: ignore[return-value]
 
 
 @api_function
@@ -81,10 +81,10 @@ def evaluate(policy: PolicyLike, env: str | None = None, *, episodes: int | None
     Returns:
         Its numbers: `result["return_mean"]`, `["success_rate"]`, `["episode_lengths"]`, ...
     """
-    env_fields = {"id": env, **{_env_field(k): steps.path_of(v) for k, v in env_settings.items()}}
-    checked = EVALUATE.make(policy=steps.path_of(policy), env={k: v for k, v in env_fields.items() if v is not None},
+    env_fields = {"id": env, **{_env_field(k): running.path_of(v) for k, v in env_settings.items()}}
+    checked = EVALUATE.make(policy=running.path_of(policy), env={k: v for k, v in env_fields.items() if v is not None},
                             episodes=episodes, seed=seed, workers=workers)
-    return steps.run(EVALUATE, checked, out, progress, overwrite=overwrite)
+    return running.run(EVALUATE, checked, out, progress, overwrite=overwrite)
 
 
 @api_function
@@ -101,14 +101,14 @@ def video(run: PolicyLike, episodes: int | None = None, *, out: str | Path | Non
     Returns:
         The videos folder: `.videos` lists the files, `["returns"]` each episode's return.
     """
-    return steps.run_kind(VIDEO, out, run=run, episodes=episodes, **settings)
+    return running.run_kind(VIDEO, out, run=run, episodes=episodes, **settings)
 
 
 @api_function
 def zeroshot(runs: list[PolicyLike], envs: list[str], *, episodes: int | None = None, seed: int | None = None,
              workers: int | None = None, out: str | Path | None = None, progress: bool = True) -> Result:
     """Zero-shot success of trained policies on envs they never saw (`motorlab zeroshot`)."""
-    return steps.run_kind(ZEROSHOT, out, progress, runs=list(runs), envs=list(envs), episodes=episodes, seed=seed,
+    return running.run_kind(ZEROSHOT, out, progress, runs=list(runs), envs=list(envs), episodes=episodes, seed=seed,
                           workers=workers)
 
 
@@ -131,7 +131,7 @@ def robustness(policies: list[PolicyLike], vary: str | list[str] | dict[str, Any
     grids = vary if isinstance(vary, list) else [vary] if isinstance(vary, str) else [
         f"{key}={value if isinstance(value, str) else ','.join(map(str, value))}" for key, value in vary.items()]
     fixed = {_env_field(k): v for k, v in {"id": env, **env_settings}.items() if v is not None}
-    return steps.run_kind(ROBUSTNESS, out, progress, policies=list(policies), vary=grids, episodes=episodes,
+    return running.run_kind(ROBUSTNESS, out, progress, policies=list(policies), vary=grids, episodes=episodes,
                           seed=seed, workers=workers, env=fixed or None)
 
 
@@ -142,7 +142,7 @@ def compare(groups: dict[str, list[PolicyLike]], *, title: str | None = None, ou
     Args:
         groups: label -> that setting's training runs, one per seed.
     """
-    return steps.run_kind(COMPARE, out, groups={k: list(v) for k, v in groups.items()}, title=title)
+    return running.run_kind(COMPARE, out, groups={k: list(v) for k, v in groups.items()}, title=title)
 
 
 def _env_field(name: str) -> str:

@@ -7,7 +7,7 @@ from typing import Any
 
 from motorlab import trackers
 from motorlab.api.checks import api_function
-from motorlab.api.steps import Track, console, folders
+from motorlab.api.running import Track, console, folders
 from motorlab.api.views import Study, Sweep, Tune
 from motorlab.errors import MotorlabError
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from motorlab.api import steps
+from motorlab.api import running
 from motorlab.api.checks import api_function
 from motorlab.api.views import Result
 from motorlab.synergies.steps import COLLECT, FIT, VAF
@@ -37,7 +37,7 @@ def collect(run: str | Path | Result, episodes: int | None = None, *, out: str |
     Returns:
         Its folder, with activations.npz (steps x muscles).
     """
-    return steps.run_kind(COLLECT, out, progress, run=run, episodes=episodes, **settings)
+    return running.run_kind(COLLECT, out, progress, run=run, episodes=episodes, **settings)
 
 
 @api_function
@@ -50,7 +50,7 @@ def vaf(activations: str | Path | Result, *, threshold: float | None = None, out
         activations: a `collect` result, its folder or activations.npz.
         **settings: method ("pca", "nmf"), max_n.
     """
-    return steps.run_kind(VAF, out, activations=activations, threshold=threshold, **settings)
+    return running.run_kind(VAF, out, activations=activations, threshold=threshold, **settings)
 
 
 @api_function
@@ -66,7 +66,7 @@ def fit(activations: str | Path | Result, n_synergies: int | None = None, *, out
     Returns:
         Its folder; `load_sar(result)` gives the SAR, and `train(..., sar=result)` trains in its space.
     """
-    return steps.run_kind(FIT, out, activations=activations, n_synergies=n_synergies, **settings)
+    return running.run_kind(FIT, out, activations=activations, n_synergies=n_synergies, **settings)
 
 
 @api_function
@@ -94,7 +94,7 @@ def export_sklearn(sar: str | Path | Result, out: str | Path) -> Path:
     """Write a SAR as a MyoSuite 3.0 SynergyModel folder (`motorlab synergies export-sklearn`)."""
     from motorlab.synergies.sklearn_export import export_sklearn as write
 
-    write(Path(steps.path_of(sar)), Path(out))
+    write(Path(running.path_of(sar)), Path(out))
     return Path(out)
 
 
@@ -103,4 +103,4 @@ def load_sar(sar: str | Path | Result):
     """The SAR of a sar.npz or a `fit` result: `.decode(z)` maps synergies to muscle activations."""
     from motorlab.synergies.sar import load_sar as read
 
-    return read(Path(steps.path_of(sar)))
+    return read(Path(running.path_of(sar)))

@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from motorlab.environment import describe
 from motorlab.errors import MotorlabError, mask_secrets
 from motorlab.intervals import across_seeds
+from motorlab.provenance import describe
 from motorlab.report.plots import figure_caption
 from motorlab.report.results import DEMO_LABEL, Finding, Number, StepResults, read_run_results, read_study_results
 from motorlab.runs import CONFIG, ENVIRONMENT, SUMMARY, atomic_write_text, is_complete, read_json, wrote_into

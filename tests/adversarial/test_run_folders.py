@@ -67,7 +67,7 @@ def test_a_finished_out_is_refused_before_the_work(finished, collected, tmp_path
     """The steps whose work comes before their folder (episodes, a fit) refuse a finished --out once
     their inputs are checked, before that work starts: each one's work here fails the test if run."""
     from motorlab import claims
-    from motorlab.api.steps import run_kind
+    from motorlab.api.running import run_kind
     from motorlab.dynamics import open_loop
     from motorlab.errors import MotorlabError
     from motorlab.evaluation import activations, steps, zeroshot

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 import motorlab
 import motorlab.api.dynamics
-import motorlab.api.steps
+import motorlab.api.running
 import motorlab.api.synergies
 from motorlab.errors import ArgumentError, MotorlabError, SettingsError, StorageError
 from tests.helpers import ENV_ID
@@ -44,7 +44,7 @@ def no_work(monkeypatch):
     import motorlab.sweeps.sweep
     import motorlab.tuning.tune
 
-    monkeypatch.setattr(motorlab.api.steps, "run", _accepted)
+    monkeypatch.setattr(motorlab.api.running, "run", _accepted)
     monkeypatch.setattr(motorlab.studies, "run_study", _accepted)
     monkeypatch.setattr(motorlab.sweeps.sweep, "run_sweep", _accepted)
     monkeypatch.setattr(motorlab.tuning.tune, "run_tune", _accepted)

@@ -1,4 +1,4 @@
-"""What a run ran on: Python, the machine, and the versions of the libraries that shape results.
+"""Provenance: what a run ran on (Python, the machine, the versions of the libraries that shape results).
 
 Written beside every run's config.toml as environment.json, and shown in reports.
 """

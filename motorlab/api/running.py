@@ -1,4 +1,4 @@
-"""Running one step kind from Python: settings from keyword arguments, the run folder, a `Result`.
+"""Running one step kind from Python: settings from keyword arguments, the door (`StepKind.perform`), a `Result`.
 
 Every function of the API ends here, so that a script runs exactly what the CLI runs: the kind's
 settings model checks the arguments (a `MotorlabError` with the CLI's message), its `run` writes
