@@ -256,6 +256,32 @@ class StepKind(Command[S], Generic[S, R]):
             merged["env"] = {**fold_env(base, own).get("env", {}), **given.get("env", {})}
         return merged
 
+    # ---- what orchestration (studies, sweeps, searches) asks of a kind, never by a field's name ----------
+
+    SEED: ClassVar[str] = "seed"  # the settings field a kind's runs take their seed from, where they have one
+
+    @classmethod
+    def takes_seed(cls) -> bool:
+        """Its runs take a seed (a sweep repeats them over seeds, a study's `seeds = N` fans them out)."""
+        return cls.SEED in cls.settings.model_fields
+
+    def seeded(self, settings: S, seed: int) -> S:
+        """`settings` for the run of seed `seed`."""
+        return settings.model_copy(update={self.SEED: seed})
+
+    def with_seed(self, fields: dict[str, Any], seed: int) -> dict[str, Any]:
+        """Settings fields (before validation) for the run of seed `seed`."""
+        return {**fields, self.SEED: seed}
+
+    def stops_early(self, settings: S) -> bool:
+        """A run may end before its budget once it has solved its task (a study charts its steps to success)."""
+        return False
+
+    def budget(self, headline: dict[str, Any]) -> int | None:
+        """The env steps a finished run was allowed, from its headline (a seed that never solved is censored
+        there); None for a kind with no such budget."""
+        return None
+
     def can_resume(self, run_dir: Path) -> bool:
         """An interrupted run in `run_dir` can be continued (`run(..., resume=True)`), not redone."""
         return False

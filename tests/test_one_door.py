@@ -88,3 +88,20 @@ def test_a_sweeps_trials_are_worker_jobs(tmp_path):
     for path in jobs:
         job = json.loads(path.read_text())
         assert job["command"] == "evaluate" and (tmp_path / job["how"]["out"] / "summary.json").is_file()
+
+
+def test_orchestration_asks_the_kind_not_a_field():
+    """What studies and sweeps need of a kind comes through its interface: its seed field, whether a run may
+    stop early, the budget a censored seed is counted at."""
+    from motorlab.kinds import KINDS
+    from motorlab.rl.config import resolve
+    from motorlab.rl.steps import TRAIN
+
+    for k in KINDS.values():
+        assert k.takes_seed() == (k.SEED in k.settings.model_fields)
+        assert k.budget({"timesteps": 500}) is None or k is TRAIN
+    cfg = resolve({"env": {"id": ENV_ID}, "until_solved": True})
+    assert TRAIN.stops_early(cfg) and not TRAIN.stops_early(cfg.model_copy(update={"until_solved": False}))
+    assert TRAIN.seeded(cfg, 7).seed == 7 and TRAIN.with_seed({"algo": "ppo"}, 3) == {"algo": "ppo", "seed": 3}
+    assert TRAIN.budget({"timesteps": 500}) == 500 and TRAIN.budget({"timesteps": True}) is None
+    assert TRAIN.budget({}) is None

@@ -216,6 +216,13 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
         if settings.algo in ALGORITHMS:  # SB3's take keyword arguments; the LQR learner takes none
             check_hyperparams(settings.algo, settings.hyperparams)  # unknown names, wrong types
 
+    def stops_early(self, settings: TrainConfig) -> bool:
+        return settings.until_solved
+
+    def budget(self, headline: dict[str, Any]) -> int | None:
+        steps = headline.get("timesteps")
+        return steps if isinstance(steps, int) and not isinstance(steps, bool) and steps > 0 else None
+
     def describe(self, settings: TrainConfig, copies: int = 1) -> str:
         what = (settings.preset or settings.algo) + (" + HER" if settings.her else "") + (
             " until solved" if settings.until_solved else f" {settings.timesteps:,} steps")

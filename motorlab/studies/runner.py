@@ -150,7 +150,7 @@ def _runs(step: Step, study_dir: Path, outputs: _Outputs) -> list[tuple[Path, Se
     fields = {f: outputs.resolve(v) if f in is_ref else v for f, v in step.fields.items()}
     if step.seeds:
         settings = k.validate(fields)
-        return [(d, settings.model_copy(update={"seed": s})) for d, s in zip(_run_dirs(step, study_dir), step.seeds)]
+        return [(d, step.kind.seeded(settings, s)) for d, s in zip(_run_dirs(step, study_dir), step.seeds)]
     fan = _fan_out(step, outputs)
     if fan is None:
         return [(_run_dirs(step, study_dir)[0], k.validate(fields))]
@@ -241,7 +241,7 @@ def _run_processes(step: Step, todo: list[tuple[Path, Settings]], execution: Exe
     for run_dir, settings in todo:
         logs = run_dir.parent / "logs"
         job = jobs.tracked(jobs.job(k.name, settings.config(), {"out": run_dir.resolve()}))
-        trials.append(trial(f"{step.name}/{run_dir.name}", step.name, getattr(settings, "seed", 0), job, run_dir,
+        trials.append(trial(f"{step.name}/{run_dir.name}", step.name, getattr(settings, step.kind.SEED, 0), job, run_dir,
                             logs / f"{run_dir.name}.log", threads))
     where = execution.backend + (f" at {execution.address}" if execution.address else "")
     if len(trials) == 1:
@@ -431,9 +431,10 @@ def _censored_steps(step: Step, outcome: _Outcome) -> dict[str, Any]:
     solved censored at the steps it was allowed (its run's timesteps), never counted as a value."""
     heads = [step.kind.headline(s) for _, s in outcome.runs]
     steps = [h.get("steps_to_success") for h in heads]
-    if not all(isinstance(h.get("timesteps"), int) and h["timesteps"] > 0 for h in heads):
+    budgets = [step.kind.budget(h) for h in heads]
+    if any(b is None for b in budgets):
         return {}
-    reached = steps_to_success(steps, [h["timesteps"] for h in heads])
+    reached = steps_to_success(steps, budgets)
     return {"aggregate": reached.text, "ci": None, "ci_method": "unsolved seeds censored at their budgets"}
 
 
@@ -459,7 +460,7 @@ def _figures(recipe: Recipe, results: dict[str, dict[str, Any]], study_dir: Path
                     study_dir / "plots" / "returns.png", f"{recipe.name}: return of each step",
                     caption="Mean evaluation return of each step that trains or evaluates a policy "
                             "(several seeds: the mean over seeds).")
-    solving = [s.name for s in recipe.steps if s.kind.trains and getattr(s.settings, "until_solved", False)]
+    solving = [s.name for s in recipe.steps if s.kind.trains and s.kind.stops_early(s.settings)]
     # several seeds: the bar is their Kaplan-Meier median (unsolved seeds censored at their budgets),
     # labelled with how many solved; no bar where fewer than half did (the median is above the budget)
     notes = [f"{results[n]['steps_to_success_solved']} of {results[n]['seeds']} seeds solved"

@@ -34,7 +34,7 @@ from motorlab.stepkind import StepKind
 from motorlab.sweeps.grid import labels
 
 # Commands of step kinds that take a seed (and --out): the ones a sweep can repeat.
-SWEEPABLE = tuple(k.command for k in KINDS.values() if k.command and "seed" in k.settings.model_fields)
+SWEEPABLE = tuple(k.command for k in KINDS.values() if k.command and k.takes_seed())
 HYPERPARAMETERS = "hyperparams"  # the field of SB3 keyword arguments (train's --set KEY=VALUE)
 ALGORITHM_FIELDS = ("algo", "preset", "preset_file")  # the fields that decide which algorithm trains
 SWITCH = {"1": True, "true": True, "yes": True, "on": True, "0": False, "false": False, "no": False, "off": False}
@@ -65,7 +65,7 @@ class Target:
 
     def options(self) -> set[str]:
         """The names a --grid or --space key may give: the settings' fields and flat env settings."""
-        return self.kind.settings.fields() - {"seed"}
+        return self.kind.settings.fields() - {self.kind.SEED}
 
     def takes_hyperparameters(self) -> bool:
         return HYPERPARAMETERS in self.kind.settings.model_fields
@@ -169,8 +169,9 @@ def parse_target(command: str, owner: str = "sweep") -> Target:
                             f"{', '.join(SWEEPABLE)}, quoted, e.g. motorlab {owner} \"train InvertedPendulum-v5 "
                             f"--preset fast\" --seeds 5{did_you_mean(given, SWEEPABLE)}")
     given = parse(kind, words[n:], f"motorlab {name}")
-    if "seed" in given.fields:
-        raise MotorlabError(f"the {owner} sets --seed of every trial itself; drop --seed from the command.")
+    if kind.SEED in given.fields:
+        raise MotorlabError(f"the {owner} sets --{kind.SEED} of every trial itself; drop --{kind.SEED} from the "
+                            "command.")
     for option, value in given.how.items():
         if option not in APPLIED and value not in (None, False):
             raise MotorlabError(_refusal(option, owner))
@@ -212,10 +213,10 @@ def command_trials(target: Target, settings: list[dict[str, str]], seeds: list[i
     for setting, name in zip(settings, labels(settings)):
         where = f"setting {name}" if flag == "--grid" else f"{flag} {name}"  # a sweep's, named as its folder
         fields = target.fields(setting, flag, hyperparams)
-        target.settings({**fields, "seed": 0}, where)
+        target.settings(target.kind.with_seed(fields, 0), where)
         for s in seeds:
             run_dir = sweep_dir / name / f"seed{s}"
-            checked = target.settings({**fields, "seed": s}, where)
+            checked = target.settings(target.kind.with_seed(fields, s), where)
             job = jobs.job(target.kind.name, checked.config(), {"out": run_dir.resolve()})
             out.append(trial(f"{name}/seed{s}", name, s, job, run_dir, sweep_dir / "logs" / f"{name}-seed{s}.log",
                              threads))
@@ -235,8 +236,8 @@ def recipe_variant(data: dict[str, Any], setting: dict[str, str], seed: int, sou
     data["defaults"] = {k: v for k, v in data.get("defaults", {}).items() if k != SEEDS}
     for s in data["steps"]:
         s.pop(SEEDS, None)
-        if "seed" in step_fields(s):
-            s["seed"] = seed
+        if StepKind.SEED in step_fields(s):  # every kind names its seed field alike (StepKind.SEED)
+            s[StepKind.SEED] = seed
     return data
 
 

@@ -87,7 +87,7 @@ class Planner:
         searched = {d.name for d in self.space.values() if not self.passes_on(d)}
         if searched & set(ALGORITHM_FIELDS):
             return
-        algo = getattr(target.settings({**target.given.fields, "seed": 0}, f"motorlab tune {self.target!r}"),
+        algo = getattr(target.settings(target.kind.with_seed(target.given.fields, 0), f"motorlab tune {self.target!r}"),
                        "algo", None)
         for d in passed:
             flag = "--" + d.name.replace("_", "-")
