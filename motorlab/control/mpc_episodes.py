@@ -17,7 +17,8 @@ import numpy as np
 import torch
 from rich.progress import Progress
 
-from motorlab.control.mpc import FaultCounts, MPCPolicy, PlannerFaults, make_planner, model_scorer
+from motorlab.control.mpc import FaultCounts, MPCPolicy, PlannerFaults, model_scorer
+from motorlab.control.planners import make_planner
 from motorlab.dynamics.model import ForwardModel, device_for, load_model
 from motorlab.dynamics.rewards import resolve_task
 from motorlab.dynamics.state import env_layout, xy_columns

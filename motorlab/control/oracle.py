@@ -45,8 +45,8 @@ import torch
 from gymnasium.wrappers import FlattenObservation, FrameStackObservation, OrderEnforcing, PassiveEnvChecker, TimeLimit
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from motorlab.control.mpc import CEMPlanner
 from motorlab.control.mpc_episodes import env_config, require_plannable
+from motorlab.control.planners.cem import CEMPlanner
 from motorlab.envs import EnvConfig, make_env
 from motorlab.envs.disturbances import mujoco_model_data
 from motorlab.envs.wrappers import NumericalGuard
@@ -204,7 +204,7 @@ def oracle_episodes(env: EnvConfig | str, episodes: int, seeds: list[int], *, ho
                     seed: int = 0, progress: bool = False) -> OracleResult:
     """Episodes of MPC that plans on the true simulator: the limit a learned model's MPC can reach.
 
-    Every control step, CEM (motorlab.control.mpc.CEMPlanner, warm-started from the last plan, reset
+    Every control step, CEM (motorlab.control.planners.cem.CEMPlanner, warm-started from the last plan, reset
     at each episode) plans from the env's physics state, scoring candidates with `SimulatorScorer`.
 
     Args:

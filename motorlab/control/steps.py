@@ -8,14 +8,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 from rich.console import Console
 from rich.markup import escape
 
 from motorlab import trackers
+from motorlab.control import planners
 from motorlab.dynamics.steps import ModelSettings, with_env
 from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, check_env_id, env_record, facts, make_env
-from motorlab.errors import MotorlabError
+from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.report.results import Metric
 from motorlab.runs import MetricsWriter, atomic_write_npz
 from motorlab.settings import MAX_SEED, Settings, Summary, UserCode
@@ -57,9 +58,7 @@ class PlannerSettings(Settings):
     population: int = Field(100, gt=0, description="Action sequences per iteration")
     iterations: int = Field(5, gt=0, description="Optimizer iterations per control step")
     elites: int = Field(10, gt=0, description="Best sequences CEM refits its Gaussian to")
-    optimizer: Literal["cem", "mppi", "evotorch"] = Field(
-        "cem", description="cem (batched CEM with iCEM's kept elites), mppi (return-weighted average of all "
-        "samples), evotorch (EvoTorch's CEM, one env at a time)")
+    optimizer: str = Field("cem", description=planners.about())
     temperature: float = Field(0.5, gt=0, description="MPPI: weights exp(standardized return / temperature); "
                                "smaller is greedier")
     # white by default: on Pusher-v5's true simulator (motorlab.control.oracle, horizon 25, 3 iterations, seed 0's
@@ -86,6 +85,15 @@ class PlannerSettings(Settings):
                                       "data's std) times sqrt(steps ahead), so plans keep a margin from the end "
                                       "even where the model is sure (0: the model's measured error alone)")
 
+
+    @field_validator("optimizer")
+    @classmethod
+    def _known_planner(cls, v: str) -> str:
+        if v not in planners.names():  # one line with close matches (motorlab.control.planners)
+            raise MotorlabError(f"--optimizer {v!r}: choose {', '.join(planners.names())}"
+                                f"{did_you_mean(v, planners.names())}.")
+        return v
+
     @model_validator(mode="before")
     @classmethod
     def _env_defaults(cls, data: Any) -> Any:
@@ -102,11 +110,7 @@ class PlannerSettings(Settings):
 
     def plan(self) -> dict[str, Any]:
         """The optimizer's settings."""
-        keys = ("horizon", "population", "iterations") + (("temperature",) if self.optimizer == "mppi" else
-                                                          ("elites",))
-        if self.optimizer != "evotorch":
-            keys += ("noise_beta",)
-        return {k: getattr(self, k) for k in keys}
+        return {k: getattr(self, k) for k in planners.settings_of(self.optimizer)}
 
     def scoring(self) -> dict[str, Any]:
         """How candidates are scored (build_policy's keyword arguments besides the optimizer's)."""

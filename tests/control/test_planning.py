@@ -12,8 +12,9 @@ import pytest
 import torch
 
 from motorlab.control.mbrl import RoundRecord, reached
-from motorlab.control.mpc import EndProbability, colored_noise, end_spread
+from motorlab.control.mpc import EndProbability, end_spread
 from motorlab.control.mpc_episodes import build_policy
+from motorlab.control.planners.base import colored_noise
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.open_loop import rollout_error
 from motorlab.dynamics.rewards import inverted_pendulum_termination

@@ -10,7 +10,10 @@ import pytest
 import torch
 from torch.nn import functional as F
 
-from motorlab.control.mpc import CEMPlanner, EvoTorchCEM, MPPIPlanner, model_scorer
+from motorlab.control.mpc import model_scorer
+from motorlab.control.planners.cem import CEMPlanner
+from motorlab.control.planners.evotorch import EvoTorchCEM
+from motorlab.control.planners.mppi import MPPIPlanner
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import DEFAULT_NONLINEARITY, ForwardModel, Normalizer, load_model
 from motorlab.dynamics.rewards import reacher_v5

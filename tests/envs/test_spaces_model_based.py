@@ -16,8 +16,10 @@ import numpy as np
 import pytest
 import torch
 
-from motorlab.control.mpc import CEMPlanner, MPPIPlanner, PlannerFaults, model_scorer
+from motorlab.control.mpc import PlannerFaults, model_scorer
 from motorlab.control.mpc_episodes import build_policy, run_episodes
+from motorlab.control.planners.cem import CEMPlanner
+from motorlab.control.planners.mppi import MPPIPlanner
 from motorlab.control.steps import MPC
 from motorlab.controllers.lqr import LQRSettings, learn_lqr
 from motorlab.controllers.pid import pid_for_env

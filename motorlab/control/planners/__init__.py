@@ -1,0 +1,58 @@
+"""The planners `--optimizer` names: one module each in this package (`PLANNER`, its class; the module's
+docstring, `--optimizer NAME`: what it does, is its line in --help), found here by name as `rl/algos` finds
+algorithms. A new planner is one file.
+
+A planner class takes (score, low, high, **settings) and says which of the plan's settings it takes
+(`SETTINGS`); `plan(states, goals)` returns each env's first action."""
+
+from __future__ import annotations
+
+import ast
+import functools
+import importlib
+import importlib.util
+import pkgutil
+from pathlib import Path
+from typing import Any
+
+from motorlab.errors import MotorlabError, did_you_mean
+
+PLANNERS = __name__
+
+
+@functools.cache
+def names() -> tuple[str, ...]:
+    """Every planner's name (its module's), in a fixed order: cem first, the default."""
+    found = sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name != "base")
+    return tuple(sorted(found, key=lambda n: (n != "cem", n)))
+
+
+def _module(name: str) -> Any:
+    if name not in names():
+        raise MotorlabError(f"--optimizer {name!r}: choose {', '.join(names())}{did_you_mean(name, names())}.")
+    return importlib.import_module(f"{PLANNERS}.{name}")
+
+
+def planner_class(name: str) -> type:
+    return _module(name).PLANNER
+
+
+def about() -> str:
+    """Each planner in a line, for --help: its module docstring's first line, read without importing the
+    module (a planner imports torch; --help does not need it)."""
+    lines = []
+    for name in names():
+        spec = importlib.util.find_spec(f"{PLANNERS}.{name}")  # finds its file; runs nothing of it
+        doc = ast.get_docstring(ast.parse(Path(spec.origin).read_text())) if spec and spec.origin else None
+        doc = doc or name
+        lines.append(doc.splitlines()[0].replace(f"`--optimizer {name}`: ", f"{name}: ").rstrip("."))
+    return "; ".join(lines)
+
+
+def settings_of(name: str) -> tuple[str, ...]:
+    """The plan settings (horizon, population, ...) the planner `name` takes."""
+    return _module(name).SETTINGS
+
+
+def make_planner(optimizer: str, score: Any, low: Any, high: Any, **settings: Any) -> Any:
+    return planner_class(optimizer)(score, low, high, **settings)
