@@ -14,7 +14,7 @@ from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric
 from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Ref, StepKind
-from motorlab.synergies.steps import SAR_FILE, _import_sklearn
+from motorlab.synergies.steps import _import_sklearn
 
 NULL_PERCENTILE = 95
 
@@ -56,25 +56,6 @@ class CompareSummary(Summary):
     names_from: str  # "saved" or the env id they were read from
 
 
-def _sar_path(given: str) -> Path:
-    path = Path(given)
-    return path / SAR_FILE if path.is_dir() else path
-
-
-def _activations_of(b: str) -> Path | None:
-    """The activations a fit run folder was fitted to (its config.toml), where it still exists."""
-    from motorlab.runs import read_config
-
-    folder = Path(b)
-    if not folder.is_dir():
-        return None
-    try:
-        given = read_config(folder).get("activations")
-    except (MotorlabError, OSError):
-        return None
-    return Path(given) if given and Path(given).exists() else None
-
-
 class CompareKind(StepKind[CompareSettings, CompareSummary]):
     """Match two synergy sets one to one and test each pair against a shuffled-data chance level.
 
@@ -104,16 +85,16 @@ class CompareKind(StepKind[CompareSettings, CompareSummary]):
     def run(self, settings: CompareSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> CompareSummary:
         from motorlab.evaluation.activations import load_activations
-        from motorlab.synergies.naming import names_for
+        from motorlab.synergies.naming import fitted_activations, names_for, sar_file
         from motorlab.synergies.sar import load_sar
         from motorlab.synergies.similarity import aligned, chance, match
         from motorlab.synergies.vectors import vectors_of
 
-        a, b = load_sar(_sar_path(settings.a)), load_sar(_sar_path(settings.b))
+        a, b = load_sar(sar_file(settings.a)), load_sar(sar_file(settings.b))
         names_a, from_a = names_for(a, settings.names_from, "A")
         names_b, from_b = names_for(b, settings.names_from, "B")
         order = aligned(names_a, names_b)  # B's columns in A's muscle order; refuses other muscles
-        source = Path(settings.activations) if settings.activations else _activations_of(settings.b)
+        source = Path(settings.activations) if settings.activations else fitted_activations(settings.b)
         if source is None:
             raise MotorlabError("the chance level needs the activations B was fitted to: give --activations "
                                 "(an activations.npz or its folder).")

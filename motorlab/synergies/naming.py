@@ -1,11 +1,36 @@
-"""The muscle names of a synergy set: saved in it (motorlab's fits), or read from the model of the env it
-was fitted on (a SAR saved without names: MyoSuite's published ones, older files)."""
+"""A synergy set as `compare` and `plot` are given it: a sar.npz or a `synergies fit` run folder (its
+sar.npz, and the activations it was fitted to), and its muscle names: saved in it (motorlab's fits), or
+read from the model of the env it was fitted on (a SAR saved without names: MyoSuite's published ones)."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from motorlab.errors import MotorlabError
+
+SAR_FILE = "sar.npz"  # what a fit run folder holds (the fit kind's artifact)
+
+
+def sar_file(given: str | Path) -> Path:
+    """The sar.npz a path names: the file itself, or a fit run folder's."""
+    path = Path(given)
+    return path / SAR_FILE if path.is_dir() else path
+
+
+def fitted_activations(given: str | Path) -> Path | None:
+    """The activations a fit run folder was fitted to (its config.toml), where they are still there; None for a
+    file, a folder with no readable config.toml, or activations since moved."""
+    from motorlab.runs import read_config
+
+    folder = Path(given)
+    if not folder.is_dir():
+        return None
+    try:
+        source = read_config(folder).get("activations")
+    except (MotorlabError, OSError):
+        return None
+    return Path(source) if source and Path(source).exists() else None
 
 
 def names_for(sar: Any, names_from: str | None, which: str) -> tuple[list[str], str]:

@@ -17,18 +17,17 @@ def plot_synergies(sar_path: Path, out: Path, activations: Path | None = None, v
     from motorlab.runs import read_json
     from motorlab.synergies import figures
     from motorlab.synergies.analysis import Choice, CrossValidatedVaf, choices
-    from motorlab.synergies.naming import names_for
+    from motorlab.synergies.naming import fitted_activations, names_for, sar_file
     from motorlab.synergies.sar import load_sar
     from motorlab.synergies.vectors import SynergyVectors, vectors_of
 
-    folder = Path(sar_path) if Path(sar_path).is_dir() else None
-    sar = load_sar(folder / "sar.npz" if folder else Path(sar_path))
+    sar = load_sar(sar_file(sar_path))
     names, _ = names_for(sar, names_from, "the SAR")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written = [figures.heatmap(SynergyVectors(vectors_of(sar).weights, names, sar.method), out / "heatmap.png",
                                f"{sar.n_synergies} synergies ({sar.method}), {Path(sar_path).name}")]
-    source = Path(activations) if activations else _fitted_on(folder)
+    source = Path(activations) if activations else fitted_activations(sar_path)
     if source is not None:
         acts, meta = load_activations(source)
         if acts.shape[1] != sar.n_muscles:
@@ -49,13 +48,3 @@ def plot_synergies(sar_path: Path, out: Path, activations: Path | None = None, v
         chosen: list[Choice] = choices(cv, s["threshold"], s["muscle_threshold"])
         written.append(figures.vaf_with_band(cv, chosen, out / "vaf.png", f"VAF ({s['method']})"))
     return [p for p in written if p is not None]
-
-
-def _fitted_on(folder: Path | None) -> Path | None:
-    """The activations a fit run folder was fitted to, if they are still there."""
-    if folder is None:
-        return None
-    from motorlab.runs import read_config
-
-    given = read_config(folder).get("activations")
-    return Path(given) if given and Path(given).exists() else None
