@@ -106,9 +106,10 @@ def muscle_vaf(x: np.ndarray, reconstruction: np.ndarray, definition: Definition
     return np.where(energy > 0, out, np.where(resid > 0, -np.inf, 1.0))
 
 
-def _fit_and_score(method: str, n: int, train: np.ndarray, test: np.ndarray, seed: int
+def _fit_and_score(method: str, n: int, train: np.ndarray, test: np.ndarray | None, seed: int
                    ) -> tuple[float, np.ndarray, float]:
-    """(held-out total VAF, held-out per-muscle VAF, training VAF) of N synergies fitted on `train`."""
+    """(held-out total VAF, held-out per-muscle VAF, training VAF) of N synergies fitted on `train`; `test`
+    None: in-sample (scored on `train`, its fit's own reconstruction, not a second solve)."""
     definition = definition_of(method)
     if method == "nmf":
         import warnings
@@ -124,7 +125,8 @@ def _fit_and_score(method: str, n: int, train: np.ndarray, test: np.ndarray, see
             # float32: sklearn's NMF keeps the input's precision, and single precision fits in about 2/3 of the
             # time (a folds x N grid is ~100 fits); the VAF is scored in double precision below
             coef = model.fit_transform(train.astype(np.float32))
-            held = model.transform(test.astype(np.float32))  # non-negative coefficients with the synergies fixed
+            # non-negative coefficients of the held-out samples with the synergies fixed
+            held = coef if test is None else model.transform(test.astype(np.float32))
         w = model.components_.astype(np.float64)
         fitted, predicted, centre = coef.astype(np.float64) @ w, held.astype(np.float64) @ w, None
     else:
@@ -132,9 +134,10 @@ def _fit_and_score(method: str, n: int, train: np.ndarray, test: np.ndarray, see
 
         pca = PCA(n_components=n, svd_solver="full").fit(train)
         fitted = pca.inverse_transform(pca.transform(train))
-        predicted = pca.inverse_transform(pca.transform(test))
+        predicted = fitted if test is None else pca.inverse_transform(pca.transform(test))
         centre = pca.mean_  # held-out data centred on what the fit knew
-    return (vaf(test, predicted, definition, centre), muscle_vaf(test, predicted, definition, centre),
+    scored = train if test is None else test
+    return (vaf(scored, predicted, definition, centre), muscle_vaf(scored, predicted, definition, centre),
             vaf(train, fitted, definition))
 
 
@@ -170,7 +173,8 @@ def cross_validated_vaf(x: np.ndarray, episodes: np.ndarray, method: str = "nmf"
     jobs = [(f, n) for f in range(len(splits)) for n in ns]
     # processes: NMF's and PCA's numpy work holds the GIL in parts; one job per core
     scored = Parallel(n_jobs=workers or -1, backend="loky")(
-        delayed(_fit_and_score)(method, n, x[splits[f][0]], x[splits[f][1]], seed) for f, n in jobs)
+        delayed(_fit_and_score)(method, n, *((x[splits[f][0]], x[splits[f][1]]) if folds else (x, None)), seed)
+        for f, n in jobs)
     k = len(splits)
     total, muscle, train = np.zeros((k, max_n)), np.zeros((k, max_n, m)), np.zeros((k, max_n))
     for (f, n), (held, per_muscle, fitted) in zip(jobs, scored):
