@@ -149,3 +149,16 @@ def _alive(pid: int) -> bool:
     except PermissionError:  # it exists, owned by another user
         return True
     return True
+
+
+def in_processes(calls: Iterable, workers: int | None = None) -> list:
+    """joblib's `Parallel(backend="loky")` over `calls` (each a `delayed(f)(...)`), with its worker
+    processes shut down before returning: loky keeps a pool alive for reuse, which would outlive
+    the call (and a later evaluation pool would find someone else's children)."""
+    from joblib import Parallel
+    from joblib.externals.loky import get_reusable_executor
+
+    try:
+        return Parallel(n_jobs=workers or -1, backend="loky")(calls)
+    finally:
+        get_reusable_executor().shutdown(wait=True)

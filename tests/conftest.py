@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -11,6 +13,19 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 pytest.register_assert_rewrite("tests.helpers")
 
 from tests.helpers import ENV_ID, TINY_PPO, assert_ok, run_cli, scaled_recipe  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def no_process_outlives_its_test():
+    """Whatever a test calls must not leave a child process behind (a library's pool kept for
+    reuse, a worker not joined): the next test in this process would find it, and a user's
+    command would end with it still running. A child gets 5 s to finish exiting."""
+    yield
+    deadline = time.monotonic() + 5
+    while mp.active_children() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    left = mp.active_children()
+    assert not left, f"the test left child processes running: {left}"
 
 # ---- `make test`: pytest -n 2 --dist loadfile, with two changes (pytest_xdist_make_scheduler) ----
 # Each test file is one unit of work for one worker, its tests sharing their module fixtures and

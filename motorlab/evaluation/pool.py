@@ -503,16 +503,16 @@ def auto_workers(env_cfg: EnvConfig, episodes: int, size: int) -> int:
         horizon = (spec.max_episode_steps if spec is not None else None) or DEFAULT_HORIZON
         probe.action_space.seed(0)
         probe.reset(seed=0)
-        elapsed, steps = 0.0, 0
+        seconds = []
         for _ in range(PROBE_STEPS):
             action = probe.action_space.sample()
             start = time.perf_counter()
             _, _, terminated, truncated, _ = probe.step(action)
-            elapsed += time.perf_counter() - start
-            steps += 1
+            seconds.append(time.perf_counter() - start)
             if terminated or truncated:
                 probe.reset()
     finally:
         probe.close()
-    estimate = episodes * horizon * elapsed / steps
+    # the median step: one step preempted by a busy machine would make a mean of 30 steps many times too long
+    estimate = episodes * horizon * float(np.median(seconds))
     return min(cores, size) if estimate > CROSSOVER_S else 1

@@ -28,6 +28,7 @@ from typing import Literal
 import numpy as np
 
 from motorlab.errors import MotorlabError
+from motorlab.processes import in_processes
 
 ELBOW_MSE = 1e-4  # d'Avella et al. 2003
 Definition = Literal["uncentred", "centred"]
@@ -164,7 +165,7 @@ def cross_validated_vaf(x: np.ndarray, episodes: np.ndarray, method: str = "nmf"
                             f"have {distinct}; collect more episodes or give a smaller --cv (at least 2).")
     if method == "nmf" and x.min() < 0:
         raise MotorlabError(f"NMF needs non-negative activations (the smallest is {x.min():.4g}); use --method pca.")
-    from joblib import Parallel, delayed
+    from joblib import delayed
     from sklearn.model_selection import GroupKFold
 
     everything = np.arange(x.shape[0])
@@ -172,9 +173,9 @@ def cross_validated_vaf(x: np.ndarray, episodes: np.ndarray, method: str = "nmf"
     ns = list(range(1, max_n + 1))
     jobs = [(f, n) for f in range(len(splits)) for n in ns]
     # processes: NMF's and PCA's numpy work holds the GIL in parts; one job per core
-    scored = Parallel(n_jobs=workers or -1, backend="loky")(
+    scored = in_processes((
         delayed(_fit_and_score)(method, n, *((x[splits[f][0]], x[splits[f][1]]) if folds else (x, None)), seed)
-        for f, n in jobs)
+        for f, n in jobs), workers)
     k = len(splits)
     total, muscle, train = np.zeros((k, max_n)), np.zeros((k, max_n, m)), np.zeros((k, max_n))
     for (f, n), (held, per_muscle, fitted) in zip(jobs, scored):

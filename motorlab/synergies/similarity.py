@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from motorlab.errors import MotorlabError
+from motorlab.processes import in_processes
 
 
 @dataclass(frozen=True)
@@ -93,7 +94,7 @@ def chance(reference: np.ndarray, x: np.ndarray, method: str, n: int, surrogates
     `max_samples`: each surrogate is fitted to at most this many samples, drawn once at random (the null
     depends on the muscles' marginals, which a random draw of 20k samples keeps; fitting 100 surrogates
     of a 100k-sample hand recording in full would take minutes). Surrogates run in parallel (joblib)."""
-    from joblib import Parallel, delayed
+    from joblib import delayed
 
     x = np.asarray(x, dtype=np.float64)
     rng = np.random.default_rng(seed)
@@ -101,8 +102,7 @@ def chance(reference: np.ndarray, x: np.ndarray, method: str, n: int, surrogates
         x = x[np.sort(rng.choice(x.shape[0], max_samples, replace=False))]
     absolute = method != "nmf"
     seeds = rng.integers(0, 2**31 - 1, size=surrogates)
-    sims = Parallel(n_jobs=workers or -1, backend="loky")(
-        delayed(_surrogate)(reference, x, method, n, int(s), absolute) for s in seeds)
+    sims = in_processes((delayed(_surrogate)(reference, x, method, n, int(s), absolute) for s in seeds), workers)
     return Null(surrogates, x.shape[0], np.concatenate([np.asarray(s) for s in sims]),
                 np.array([float(np.mean(s)) for s in sims]))
 

@@ -13,6 +13,8 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from motorlab.controllers import save_controller
 from motorlab.controllers.pid import make_pid
@@ -193,9 +195,9 @@ def test_evaluate_step_takes_workers(pid_run, tmp_path):
     one = run_kind(EVALUATE, tmp_path / "one", workers=1, **fields)
     two = run_kind(EVALUATE, tmp_path / "two", workers=2, **fields)
     assert one.pop("run_dir") != two.pop("run_dir") and one == two
-    for kind, given in ((EVALUATE, fields), (ZEROSHOT, dict(runs=[str(pid_run)], envs=[ENV_ID]))):
+    for kind, passed in ((EVALUATE, fields), (ZEROSHOT, dict(runs=[str(pid_run)], envs=[ENV_ID]))):
         with pytest.raises(MotorlabError, match="workers"):
-            kind.make(workers=0, **given)
+            kind.make(workers=0, **passed)
         assert kind.make(**given).workers is None  # auto
 
 
@@ -262,6 +264,28 @@ def test_auto_stays_serial_for_small_work(monkeypatch):
     assert pool.auto_workers(cfg, episodes=2000, size=1) == 1
     monkeypatch.setattr(pool, "available_cores", lambda: 1)
     assert pool.auto_workers(cfg, episodes=2000, size=50) == 1
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(slow=st.sets(st.integers(0, pool.PROBE_STEPS - 1), max_size=pool.PROBE_STEPS // 2 - 1),
+       stall=st.floats(0.01, 1.0))
+def test_auto_is_not_fooled_by_a_few_preempted_probe_steps(monkeypatch, slow, stall):
+    """Fewer than half the probe steps stalled (a busy machine preempting this process) leave the
+    choice as an idle machine makes it: the estimate is the probe's median step."""
+    clock, calls = [0.0], [0]
+
+    def perf_counter():  # each step's start then end; a step in `slow` takes `stall` s, the others 35 us
+        calls[0] += 1
+        step, is_end = divmod(calls[0] - 1, 2)
+        if is_end:
+            clock[0] += stall if step in slow else 35e-6
+        return clock[0]
+
+    monkeypatch.setattr(pool, "available_cores", lambda: 2)
+    monkeypatch.setattr(pool.time, "perf_counter", perf_counter)
+    assert pool.auto_workers(EnvConfig(id=ENV_ID), episodes=10, size=10) == 1
+    calls[0] = 0
+    assert pool.auto_workers(EnvConfig(id=ENV_ID), episodes=2000, size=50) == 2
 
 
 class LocalEnv(gym.Env):
