@@ -198,7 +198,7 @@ def test_evaluate_step_takes_workers(pid_run, tmp_path):
     for kind, passed in ((EVALUATE, fields), (ZEROSHOT, dict(runs=[str(pid_run)], envs=[ENV_ID]))):
         with pytest.raises(MotorlabError, match="workers"):
             kind.make(workers=0, **passed)
-        assert kind.make(**given).workers is None  # auto
+        assert kind.make(**passed).workers is None  # auto
 
 
 def test_collect_does_not_depend_on_workers(pid_run, tmp_path):
