@@ -273,6 +273,16 @@ class StepKind(Command[S], Generic[S, R]):
         """Settings fields (before validation) for the run of seed `seed`."""
         return {**fields, self.SEED: seed}
 
+    BUDGET: ClassVar[str | None] = None  # the settings field holding the env steps a run may take, where it has one
+
+    def planned_steps(self, settings: S) -> int | None:
+        """The env steps a run of these settings may take (its budget); None for a kind without one."""
+        return _positive_int(getattr(settings, self.BUDGET)) if self.BUDGET else None
+
+    def planned_steps_of(self, config: dict[str, Any]) -> int | None:
+        """The same, read from a run folder's config.toml (the settings it was started with)."""
+        return _positive_int(config.get(self.BUDGET)) if self.BUDGET else None
+
     def stops_early(self, settings: S) -> bool:
         """A run may end before its budget once it has solved its task (a study charts its steps to success)."""
         return False
@@ -435,3 +445,7 @@ def scored_numbers(metrics: tuple[Metric, ...], h: dict[str, Any], env_id: str) 
         return m.label
 
     return [n for m in metrics if (n := dataclasses.replace(m, label=label(m)).number(h)) is not None]
+
+
+def _positive_int(value: Any) -> int | None:
+    return value if isinstance(value, int) and not isinstance(value, bool) and value > 0 else None

@@ -105,3 +105,44 @@ def test_orchestration_asks_the_kind_not_a_field():
     assert TRAIN.seeded(cfg, 7).seed == 7 and TRAIN.with_seed({"algo": "ppo"}, 3) == {"algo": "ppo", "seed": 3}
     assert TRAIN.budget({"timesteps": 500}) == 500 and TRAIN.budget({"timesteps": True}) is None
     assert TRAIN.budget({}) is None
+    assert TRAIN.planned_steps(cfg.model_copy(update={"timesteps": 700})) == 700
+    for k in KINDS.values():  # a kind's budget field is one of its settings; without one, none is planned
+        assert k.BUDGET is None or k.BUDGET in k.settings.model_fields
+        assert k.BUDGET is not None or k.planned_steps_of({"timesteps": 500}) is None
+
+
+def test_a_tune_trial_budget_is_what_its_kind_reads_from_the_run_folder(tmp_path):
+    """The tune objective asks the run folder's kind (its claim) for the budget: a train folder's
+    config.toml timesteps; a folder of a kind without a budget, or unclaimed, has none."""
+    from motorlab import claims
+    from motorlab.runs import write_toml
+    from motorlab.tuning.objective import budget_of
+
+    for kind, expected in (("train", 1234), ("evaluate", None)):
+        folder = tmp_path / kind
+        folder.mkdir()
+        write_toml(folder / "config.toml", {"timesteps": 1234, "seed": 0})
+        assert budget_of(folder) is None  # not claimed yet
+        claims.mark(folder, kind)
+        assert budget_of(folder) == expected
+
+
+@pytest.mark.parametrize(("target", "space", "expected"), [
+    ("train InvertedPendulum-v5 --algo ppo --timesteps 3000", ["lr=loguniform:1e-4,1e-3"], 3000),
+    ("train InvertedPendulum-v5 --algo ppo", ["lr=loguniform:1e-4,1e-3"], "default"),  # the kind's default budget
+    ("train InvertedPendulum-v5 --algo ppo --timesteps 3000", ["timesteps=int:1000,5000"], None),  # searched over
+    ("evaluate runs/x --episodes 3", ["episodes=int:1,5"], None),  # a kind without a budget
+])
+def test_ray_asha_budget_comes_from_the_targets_kind(tmp_path, target, space, expected):
+    """ASHA's max_t is the budget the target's kind plans (its settings, defaults included), not a
+    --timesteps read from the command text; unknown when the search varies it or the kind has none."""
+    from motorlab.rl.steps import TRAIN
+    from motorlab.tuning.ray_search import budget
+    from motorlab.tuning.trials import Planner
+    from motorlab.tuning.tune import make_spec
+
+    spec = make_spec(target, space, 1, 1, "return", None, tmp_path, None, None, "tpe", "median", 0, 100, 1, 0)
+    planner = Planner(spec.target, spec.space, {})
+    if expected == "default":
+        expected = TRAIN.settings.model_fields["timesteps"].default
+    assert budget(spec, planner) == expected

@@ -94,6 +94,7 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
     """
 
     name = "train"
+    BUDGET = "timesteps"
     arguments = ("env",)
     flags = {"hyperparams": ("--set",)}
     invocation = TrainInvocation
@@ -220,8 +221,7 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
         return settings.until_solved
 
     def budget(self, headline: dict[str, Any]) -> int | None:
-        steps = headline.get("timesteps")
-        return steps if isinstance(steps, int) and not isinstance(steps, bool) and steps > 0 else None
+        return self.planned_steps_of(headline)  # a train summary records the run's budget as its config does
 
     def describe(self, settings: TrainConfig, copies: int = 1) -> str:
         what = (settings.preset or settings.algo) + (" + HER" if settings.her else "") + (

@@ -158,12 +158,19 @@ class Objective:
 
 
 def budget_of(run_dir: Path) -> int | None:
-    """The env-step budget a run was started with (its config.toml, written when it starts)."""
+    """The env-step budget a run was started with, as its kind reads it from the folder's config.toml
+    (written when it starts); None for a kind without one, or a folder not yet claimed."""
+    from motorlab.claims import read_claim
+    from motorlab.kinds import KINDS  # here, not above: a Ray worker imports this module for every trial
+
+    claim = read_claim(run_dir)
+    kind = KINDS.get(claim.kind) if claim is not None else None
+    if kind is None:
+        return None
     try:
-        value = read_config(run_dir).get("timesteps")
+        return kind.planned_steps_of(read_config(run_dir))
     except (MotorlabError, OSError):
         return None
-    return int(value) if isinstance(value, (int, float)) else None
 
 
 def steps_run(run_dir: Path) -> int:

@@ -35,7 +35,6 @@ The best settings' fresh seeds (tune.write_results) run on this machine's proces
 
 from __future__ import annotations
 
-import shlex
 from typing import TYPE_CHECKING, Any
 
 import optuna
@@ -55,23 +54,17 @@ HYPERBAND_BRACKETS = 3
 UNBOUNDED = 10**15  # ASHA's max_t when the budget is not known here (each trial ends at its own budget)
 
 
-def budget(spec: TuneSpec) -> int | None:
-    """The env-step budget of every trial, when the target command line gives --timesteps and the
-    search does not vary it."""
-    if any(d.name == "timesteps" for d in spec.space.values()):
+def budget(spec: TuneSpec, planner: Planner) -> int | None:
+    """The env-step budget of every trial, when the target's kind has one and the search does not vary
+    it (a recipe target: None, each step has its own)."""
+    target = planner.command
+    if target is None or target.kind.BUDGET is None or any(d.name == target.kind.BUDGET for d in spec.space.values()):
         return None
-    try:
-        words = shlex.split(spec.target)
-    except ValueError:
-        return None
-    for word, following in zip(words, [*words[1:], ""]):
-        value = following if word == "--timesteps" else word.removeprefix("--timesteps=") if "=" in word else ""
-        if word.startswith("--timesteps") and value.isdigit():
-            return int(value)
-    return None
+    settings = target.settings(target.kind.with_seed(target.given.fields, 0), f"motorlab tune {spec.target!r}")
+    return target.kind.planned_steps(settings)  # the kind's default when the target does not give it
 
 
-def make_scheduler(spec: TuneSpec, past: list[optuna.trial.FrozenTrial]) -> tuple[Any, str]:
+def make_scheduler(spec: TuneSpec, planner: Planner, past: list[optuna.trial.FrozenTrial]) -> tuple[Any, str]:
     """Tune's scheduler for --pruner, and its name as messages show it."""
     from ray.tune.schedulers import FIFOScheduler
 
@@ -83,7 +76,7 @@ def make_scheduler(spec: TuneSpec, past: list[optuna.trial.FrozenTrial]) -> tupl
     grace = GRACE_REPORTS * spec.report_every
     brackets = HYPERBAND_BRACKETS if spec.pruner == "hyperband" else 1
     scheduler = StudyASHA(past, time_attr=STEPS, metric=spec.objective.key,
-                          mode="max" if spec.objective.maximize else "min", max_t=max(grace, budget(spec) or UNBOUNDED),
+                          mode="max" if spec.objective.maximize else "min", max_t=max(grace, budget(spec, planner) or UNBOUNDED),
                           grace_period=grace, reduction_factor=REDUCTION_FACTOR, brackets=brackets,
                           stop_last_trials=False)  # a trial at its budget ends by itself, with its final numbers
     return scheduler, "ASHA" if brackets == 1 else "ASHA (async Hyperband)"
@@ -118,7 +111,7 @@ def run_ray_search(spec: TuneSpec, planner: Planner, console: Console) -> optuna
         cpus = _cpus_per_trial(ray, spec.seeds)
         total = spec.cluster_parallel or int(ray.cluster_resources().get("CPU", cpus))
         at_once = max(1, total // cpus)
-        scheduler, name = make_scheduler(spec, study.get_trials(deepcopy=False, states=COUNTED))
+        scheduler, name = make_scheduler(spec, planner, study.get_trials(deepcopy=False, states=COUNTED))
         # the study's sampler: --sampler, seeded by --sampler-seed (and where a resumed search left it)
         search = StudySearch(spec, open_storage(spec), study.sampler, planner, console, parallel=cpus, scheduler=name)
         where = mask_url(spec.address) if spec.address else "a Ray instance started here"
