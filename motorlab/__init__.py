@@ -11,7 +11,6 @@ and the worker processes start fast:
     run.evaluate(episodes=10)
 """
 
-import importlib
 import os
 
 # OpenMP threads that spin after each torch op steal the cores that env processes need
@@ -28,9 +27,19 @@ __all__ = ["train", "evaluate", "video", "zeroshot", "robustness", "compare", "m
            "ArgumentError", "StorageError", "dynamics", "tracking", "register_env"]
 
 
+# This module is a façade at the top of the layers, beside motorlab.api (tests/test_layers.py): its
+# imports are plain statements run when a name is first used, so the import graph sees them.
 def __getattr__(name: str):
-    if name in ("dynamics", "synergies"):
-        return importlib.import_module(f"motorlab.{name}")
+    if name == "dynamics":
+        import motorlab.dynamics
+
+        return motorlab.dynamics
+    if name == "synergies":
+        import motorlab.synergies
+
+        return motorlab.synergies
     if name in __all__:
-        return getattr(importlib.import_module("motorlab.api"), name)
+        import motorlab.api
+
+        return getattr(motorlab.api, name)
     raise AttributeError(f"module 'motorlab' has no attribute {name!r}")

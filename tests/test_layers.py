@@ -20,8 +20,11 @@ PACKAGE = Path(motorlab.__file__).parent
 # The layers of the import contract (pyproject.toml), top first: a higher number is a higher layer.
 (API, WORKER, CLI, COMMANDS, STUDIES, KIND_REGISTRY, STEP_KINDS, STEPKIND, FEATURES, DOMAIN, ROLLOUTS_AND_MODELS,
  POLICIES, ALGORITHMS, CONTROLLERS, REPORT, ENVS, SYNERGY_SPACE, GROUND) = range(17, -1, -1)
+# The package façades: `motorlab.train(...)`, `motorlab.synergies.fit(...)`, `motorlab.dynamics.fit(...)` are
+# the API's functions, imported when first used; their imports point into motorlab.api, so they sit beside it
+FACADES = {"motorlab", "motorlab.synergies", "motorlab.dynamics"}
 GROUND_FLOOR = {"motorlab.runs", "motorlab.claims", "motorlab.processes", "motorlab.errors", "motorlab.faults", "motorlab.provenance", "motorlab.extras",
-                "motorlab.settings", "motorlab.user_modules", "motorlab", "motorlab.command", "motorlab.jobs",
+                "motorlab.settings", "motorlab.user_modules", "motorlab.command", "motorlab.jobs",
                 "motorlab.intervals"}
 # Packages by prefix, below the step kinds (a step-kind module in one of them is a step kind)
 PACKAGES = {"motorlab.evaluation.figures": FEATURES, "motorlab.evaluation.videos": FEATURES,
@@ -36,7 +39,7 @@ PACKAGES = {"motorlab.evaluation.figures": FEATURES, "motorlab.evaluation.videos
 
 
 def layer(module: str) -> int:
-    if module.startswith("motorlab.api"):
+    if module.startswith("motorlab.api") or module in FACADES:
         return API
     if module == "motorlab.worker":
         return WORKER
@@ -187,3 +190,43 @@ def test_kind_settings_are_the_one_source_of_defaults():
             default = info.get_default(call_default_factory=True)
             if isinstance(default, (int, float, str)) and not isinstance(default, bool):
                 assert f"(default {default})" in help_text(kind.settings, name), (kind.name, name)
+
+
+def _module_names_imported_by_text(path: Path) -> list[tuple[int, str]]:
+    """Calls that import a motorlab module named in the code's own text (importlib.import_module("motorlab.x"),
+    __import__(f"motorlab.{name}")), with their lines: imports the import graph above cannot see."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not (isinstance(node, ast.Call) and node.args):
+            continue
+        func = node.func
+        name = func.attr if isinstance(func, ast.Attribute) else func.id if isinstance(func, ast.Name) else ""
+        if name not in ("import_module", "__import__"):
+            continue
+        first = node.args[0]
+        text = first.value if isinstance(first, ast.Constant) else (
+            first.values[0].value if isinstance(first, ast.JoinedStr) and first.values
+            and isinstance(first.values[0], ast.Constant) else "")
+        if isinstance(text, str) and text.startswith("motorlab"):
+            found.append((node.lineno, text.rstrip(".")))
+    return found
+
+
+def test_no_import_by_name_reaches_up_the_layers():
+    """An import the graph cannot see (a module named in text: a registry finding its plugins, a lazy
+    façade) stays in its own layer or goes down, by the same layers as above: none reaches upward."""
+    upward = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        importer = ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts).removesuffix(".__init__")
+        upward += [f"{importer}:{line} ({layer(importer)}) imports {named} ({layer(named)}) by name"
+                   for line, named in _module_names_imported_by_text(path) if layer(named) > layer(importer)]
+    assert not upward, "\n".join(upward)
+
+
+def test_the_by_name_check_finds_an_import_by_name(tmp_path):
+    module = tmp_path / "hidden.py"
+    module.write_text('import importlib\n\ndef f(name):\n    return importlib.import_module(f"motorlab.api.{name}")\n')
+    (tmp_path / "plain.py").write_text("import importlib\nimportlib.import_module(user_module)\n")
+    assert _module_names_imported_by_text(module) == [(4, "motorlab.api")]
+    assert layer("motorlab.api") > layer("motorlab.synergies.sar")  # what the test above would refuse
+    assert _module_names_imported_by_text(tmp_path / "plain.py") == []

@@ -8,22 +8,25 @@ code is in the modules: `sar` (SAR, fit_sar, vaf_curve), `wrapper` (SynergyActio
 the wrapper; the activations a fit starts from are rollouts of a policy (motorlab.evaluation.activations).
 """
 
-import importlib
-
-# Looked up when first used, by name: the API sits above this package and imports it, so a plain
-# import here would point up the layers (and start a cycle). Lazy also because collection workers
-# need not import scikit-learn.
-_DOMAIN = {"SAR": "motorlab.synergies.sar", "fit_sar": "motorlab.synergies.sar",
-           "save_sar": "motorlab.synergies.sar", "vaf_curve": "motorlab.synergies.sar",
-           "SynergyActionWrapper": "motorlab.synergies.wrapper"}
+# Looked up when first used, by name, with plain imports the import graph sees: this module is a
+# façade at the top of the layers, beside motorlab.api (tests/test_layers.py), while the modules of
+# the package sit in lower layers. Lazy also because collection workers need not import scikit-learn.
+_DOMAIN = ("SAR", "fit_sar", "save_sar", "vaf_curve", "SynergyActionWrapper")
 
 
 def __getattr__(name: str):
+    if name == "SynergyActionWrapper":
+        from motorlab.synergies.wrapper import SynergyActionWrapper
+
+        return SynergyActionWrapper
     if name in _DOMAIN:
-        return getattr(importlib.import_module(_DOMAIN[name]), name)
+        from motorlab.synergies import sar
+
+        return getattr(sar, name)
     if name.startswith("_"):  # a probe (copy, inspect, pickle) for a private name: no API import for it
         raise AttributeError(f"module 'motorlab.synergies' has no attribute {name!r}")
-    api = importlib.import_module("motorlab.api.synergies")
+    from motorlab.api import synergies as api
+
     if name in api.__all__:
         return getattr(api, name)
     raise AttributeError(f"module 'motorlab.synergies' has no attribute {name!r}")

@@ -329,7 +329,7 @@ def require_sklearn():
 
 
 def library_versions() -> dict[str, str | None]:
-    import motorlab
+    from importlib import metadata  # the installed version, as provenance reads it (not motorlab, the façade above)
 
     try:
         import sklearn
@@ -337,7 +337,7 @@ def library_versions() -> dict[str, str | None]:
         skl = sklearn.__version__
     except ImportError:
         skl = None
-    return {"numpy": np.__version__, "sklearn": skl, "motorlab": motorlab.__version__}
+    return {"numpy": np.__version__, "sklearn": skl, "motorlab": metadata.version("motorlab")}
 
 
 def utc_now() -> str:
