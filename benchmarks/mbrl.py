@@ -34,7 +34,7 @@ Development and headline (benchmarks/provenance.py, Harness)
   (scripts/devlog_from_history.py).
 
 What runs
-  The loop: motorlab.control.steps.MBRL (collect with MPC on the last model -> refit the ensemble ->
+  The loop: motorlab.kinds.control.MBRL (collect with MPC on the last model -> refit the ensemble ->
   evaluate; round 1 random), 5 seeds, each in its own process, 2 at a time (--loop-jobs; the
   loop plans on one torch thread, so each run has a core to itself; --loop-jobs 1: one at a time, alone
   on the machine). Its settings are the loop's DEFAULTS (motorlab's, and the env
@@ -385,7 +385,7 @@ def run_loop(settings: dict, out_dir: Path) -> dict:
     too: the same numbers at any --loop-jobs); its learning curve from out_dir/curve.csv."""
     import torch
 
-    from motorlab.control.steps import MBRL, MbrlSettings
+    from motorlab.kinds.control import MBRL, MbrlSettings
 
     torch.set_num_threads(1)
 
@@ -666,7 +666,7 @@ def eval_interval(name: str, budget: int, overrides: dict) -> int:
     episodes that end early (the pendulum) is shorter: capped at the loop's STEPS_PER_ROUND."""
     import gymnasium as gym
 
-    from motorlab.control.steps import STEPS_PER_ROUND, MbrlSettings
+    from motorlab.kinds.control import STEPS_PER_ROUND, MbrlSettings
     from motorlab.user_modules import split_env_id
 
     resolved = MbrlSettings(**loop_settings(name, 0, budget, None, None, overrides))
@@ -714,7 +714,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parse(argv)
     name, env = args.env, ENVS[args.env]
     from motorlab.control import mbrl as loop_module
-    from motorlab.control.steps import MbrlSettings
+    from motorlab.kinds.control import MbrlSettings
 
     if (loop_module.SEED_STRIDE, loop_module.EVAL_OFFSET) != (SEED_STRIDE, EVAL_OFFSET):
         raise SystemExit("the loop's evaluation reset seeds changed: update SEED_STRIDE, EVAL_OFFSET here")

@@ -158,8 +158,8 @@ def step_fields(seed: int, budgets: Budgets) -> dict[str, dict[str, Any]]:
 
 
 def kinds() -> dict[str, Any]:
-    from motorlab.control.steps import MBRL, MPC
-    from motorlab.dynamics.steps import DYNAMICS_COLLECT, DYNAMICS_FIT
+    from motorlab.kinds.control import MBRL, MPC
+    from motorlab.kinds.dynamics import DYNAMICS_COLLECT, DYNAMICS_FIT
 
     return {"collect": DYNAMICS_COLLECT, "fit": DYNAMICS_FIT, "mpc_user": MPC, "mpc_learned": MPC, "mbrl": MBRL}
 

@@ -28,12 +28,12 @@ import torch
 from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 from motorlab.control.mpc_episodes import build_policy, run_episodes
-from motorlab.control.steps import MpcSettings
 from motorlab.dynamics.model import load_model
 from motorlab.dynamics.rewards import reacher_distance
 from motorlab.dynamics.state import REACHER
-from motorlab.dynamics.steps import DYNAMICS_COLLECT, DYNAMICS_FIT
 from motorlab.envs import EnvConfig, make_env
+from motorlab.kinds.control import MpcSettings
+from motorlab.kinds.dynamics import DYNAMICS_COLLECT, DYNAMICS_FIT
 
 TARGETS = {"plan_ms_median": 5.0, "return_mean": -4.0, "final_distance_mean": 0.010, "pipeline_seconds": 180.0}
 # The time targets were set on a machine where the reference planner took 29.7 ms a step

@@ -25,8 +25,8 @@ from pathlib import Path
 
 from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
+from motorlab.kinds.train import TRAIN
 from motorlab.rl.config import resolve
-from motorlab.rl.steps import TRAIN
 from motorlab.rl.train import train
 from motorlab.stats import steps_ratio, steps_to_threshold
 

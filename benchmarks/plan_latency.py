@@ -40,10 +40,10 @@ def latency(name: str, steps: int, overrides: dict[str, str]) -> dict:
 
     from motorlab.control.mbrl import env_config
     from motorlab.control.mpc_episodes import build_policy
-    from motorlab.control.steps import MbrlSettings
     from motorlab.dynamics.collection import collect_transitions
     from motorlab.dynamics.train import fit_model
     from motorlab.envs import make_env
+    from motorlab.kinds.control import MbrlSettings
 
     torch.set_num_threads(1)
     spec = ENVS[name]

@@ -102,8 +102,8 @@ def machine_speed() -> dict:
 
 
 def _train(settings: dict, out: str) -> None:
+    from motorlab.kinds.train import TRAIN
     from motorlab.rl.config import resolve
-    from motorlab.rl.steps import TRAIN
     from motorlab.rl.train import train
 
     train(resolve(settings), Path(out), kind=TRAIN.name)

@@ -66,8 +66,8 @@ def steady_rate(run_dir: Path, warm_up: int) -> float:
 
 
 def main() -> None:
+    from motorlab.kinds.train import TRAIN
     from motorlab.rl.config import resolve
-    from motorlab.rl.steps import TRAIN
     from motorlab.rl.train import train
     from motorlab.synergies import import_sklearn
 

@@ -5,13 +5,13 @@ The CLI makes one sub-command of each; the worker finds a job's command here by 
 from __future__ import annotations
 
 from motorlab.command import Command
-from motorlab.export_command import EXPORT
 from motorlab.kinds import KINDS
+from motorlab.kinds.export import EXPORT
+from motorlab.kinds.report import PLOT, REPORT
+from motorlab.kinds.synergy_files import EXPORT_SKLEARN, IMPORT_SKLEARN, PLOT_SYNERGIES
 from motorlab.recipe_list import RECIPES
-from motorlab.report.commands import PLOT, REPORT
 from motorlab.studies.command import RUN
 from motorlab.sweeps.command import SWEEP
-from motorlab.synergies.commands import EXPORT_SKLEARN, IMPORT_SKLEARN, PLOT_SYNERGIES
 from motorlab.tuning.command import TUNE
 
 OTHERS: tuple[Command, ...] = (EXPORT, REPORT, PLOT, IMPORT_SKLEARN, EXPORT_SKLEARN, PLOT_SYNERGIES, RUN, SWEEP, TUNE, RECIPES)

@@ -1,7 +1,7 @@
 """What a step kind is made of: settings, references, a run, and its row in a study's table.
 
-A step kind (train, evaluate, collect, fit, mpc, ...) is one object beside its domain code,
-e.g. `motorlab/dynamics/steps.py`. It holds:
+A step kind (train, evaluate, collect, fit, mpc, ...) is one object in one file of `motorlab/kinds/`,
+above the domain code it calls, e.g. `motorlab/kinds/dynamics.py`. It holds:
 
 - `Settings`: a pydantic model, the one source of defaults, validation and help text;
 - `refs`: which of its fields may name an earlier step of a recipe ("@step"), and what that

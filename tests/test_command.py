@@ -14,8 +14,10 @@ import pytest
 from rich.console import Console
 
 from motorlab.command import Command, NoFolder
-from motorlab.control.steps import MBRL, MPC, MbrlSummary, MpcSummary
-from motorlab.dynamics.steps import (
+from motorlab.errors import MotorlabError
+from motorlab.kinds import KINDS
+from motorlab.kinds.control import MBRL, MPC, MbrlSummary, MpcSummary
+from motorlab.kinds.dynamics import (
     DYNAMICS_CHECK,
     DYNAMICS_COLLECT,
     DYNAMICS_FIT,
@@ -23,19 +25,17 @@ from motorlab.dynamics.steps import (
     DynamicsCollectSummary,
     DynamicsFitSummary,
 )
-from motorlab.errors import MotorlabError
-from motorlab.evaluation.steps import EVALUATE, ZEROSHOT, EvaluateSummary, ZeroshotSummary
-from motorlab.export_command import EXPORT, Exported
-from motorlab.kinds import KINDS
+from motorlab.kinds.evaluate import EVALUATE, ZEROSHOT, EvaluateSummary, ZeroshotSummary
+from motorlab.kinds.export import EXPORT, Exported
+from motorlab.kinds.media import COMPARE, VIDEO, VideoSummary
+from motorlab.kinds.report import PLOT, REPORT
+from motorlab.kinds.robustness import ROBUSTNESS, RobustnessSummary
+from motorlab.kinds.synergies import COLLECT, FIT, VAF, CollectSummary, FitSummary, VafSummary
+from motorlab.kinds.synergy_files import EXPORT_SKLEARN, IMPORT_SKLEARN
+from motorlab.kinds.train import TRAIN, TrainInvocation, TrainSummary
 from motorlab.recipe_list import RECIPES
 from motorlab.recipes import bundled
-from motorlab.report.commands import PLOT, REPORT
-from motorlab.report.steps import COMPARE, VIDEO, VideoSummary
-from motorlab.rl.steps import TRAIN, TrainInvocation, TrainSummary
-from motorlab.robustness_curves.steps import ROBUSTNESS, RobustnessSummary
 from motorlab.settings import Summary
-from motorlab.synergies.commands import EXPORT_SKLEARN, IMPORT_SKLEARN
-from motorlab.synergies.steps import COLLECT, FIT, VAF, CollectSummary, FitSummary, VafSummary
 
 pytestmark = pytest.mark.fast
 

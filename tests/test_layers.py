@@ -26,13 +26,12 @@ FACADES = {"motorlab", "motorlab.synergies", "motorlab.dynamics"}
 GROUND_FLOOR = {"motorlab.runs", "motorlab.claims", "motorlab.processes", "motorlab.errors", "motorlab.faults", "motorlab.provenance", "motorlab.extras",
                 "motorlab.settings", "motorlab.user_modules", "motorlab.command", "motorlab.jobs",
                 "motorlab.intervals"}
-# Packages by prefix, below the step kinds (a step-kind module in one of them is a step kind)
+# Packages by prefix, below the step kinds (motorlab/kinds/)
 PACKAGES = {"motorlab.evaluation.figures": FEATURES, "motorlab.evaluation.videos": FEATURES,
             "motorlab.evaluation.activations": DOMAIN, "motorlab.evaluation": ROLLOUTS_AND_MODELS,
             "motorlab.dynamics": ROLLOUTS_AND_MODELS, "motorlab.rl.algos": ALGORITHMS,
             "motorlab.controllers": CONTROLLERS, "motorlab.report": REPORT, "motorlab.envs": ENVS,
-            "motorlab.synergies.ablation_steps": STEP_KINDS, "motorlab.synergies.ablation": DOMAIN,
-            "motorlab.synergies.emg_steps": STEP_KINDS, "motorlab.synergies.compare_steps": STEP_KINDS,
+            "motorlab.synergies.ablation": DOMAIN,
             "motorlab.synergies.figures": DOMAIN, "motorlab.synergies.plotting": DOMAIN,
             "motorlab.synergies.naming": DOMAIN,
             "motorlab.synergies": SYNERGY_SPACE, "motorlab.trackers": GROUND}
@@ -52,7 +51,7 @@ def layer(module: str) -> int:
         return STUDIES
     if module in ("motorlab.kinds", "motorlab.commandline"):
         return KIND_REGISTRY
-    if module == "motorlab.export_command" or module.endswith((".steps", ".commands")):
+    if module.startswith("motorlab.kinds."):  # one file per step kind (and the other commands beside them)
         return STEP_KINDS
     if module == "motorlab.stepkind":
         return STEPKIND
@@ -230,3 +229,38 @@ def test_the_by_name_check_finds_an_import_by_name(tmp_path):
     assert _module_names_imported_by_text(module) == [(4, "motorlab.api")]
     assert layer("motorlab.api") > layer("motorlab.synergies.sar")  # what the test above would refuse
     assert _module_names_imported_by_text(tmp_path / "plain.py") == []
+
+
+def test_the_design_docs_example_kind_passes_the_checks(tmp_path):
+    """docs/design.md's example step kind, written where it says into a copy of the package and registered
+    as it says, passes the layer contract (lint-imports), this file's checks, and is a command."""
+    import re
+    import shutil
+    import subprocess
+    import sys
+
+    design = (PACKAGE.parent / "docs" / "design.md").read_text()
+    (where, code), = re.findall(r"```python\n# (motorlab/kinds/\w+\.py)\n(.*?)```", design, flags=re.S)
+    shutil.copytree(PACKAGE, tmp_path / "motorlab", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(PACKAGE.parent / "pyproject.toml", tmp_path)
+    (tmp_path / where).write_text(code)
+    module = where.removesuffix(".py").replace("/", ".")
+    registry = tmp_path / "motorlab" / "kinds" / "__init__.py"
+    text = registry.read_text()
+    text = text.replace("\nKINDS: dict", f"\nfrom {module} import NOISE  # noqa: E402\n\nKINDS: dict", 1)
+    registry.write_text(text.replace("    MBRL,\n)}", "    MBRL,\n    NOISE,\n)}", 1))
+    env = {**__import__("os").environ, "PYTHONPATH": str(tmp_path)}
+    here = str(PACKAGE.parent)
+
+    def run(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(args, capture_output=True, text=True, cwd=tmp_path, env=env, timeout=300)
+
+    shown = run(sys.executable, "-c", "import motorlab, sys; print(motorlab.__file__)")
+    assert shown.stdout.strip() == str(tmp_path / "motorlab" / "__init__.py"), shown.stderr  # the copy runs
+    lint = run(str(Path(sys.executable).parent / "lint-imports"))
+    assert lint.returncode == 0, lint.stdout[-2000:]
+    checks = run(sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--rootdir", here,
+                 f"{here}/tests/test_layers.py", "-k", "not design_docs_example")
+    assert checks.returncode == 0, checks.stdout[-3000:]
+    command = run(sys.executable, "-m", "motorlab", "noise", "--help")
+    assert command.returncode == 0 and "--std" in command.stdout and "POLICY" in command.stdout, command.stdout

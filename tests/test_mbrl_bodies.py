@@ -51,7 +51,7 @@ def test_bodies_get_motorlabs_defaults_and_nothing_of_their_own():
     for name in a:
         differ = {k for k in a[name] if a[name][k] != b[name][k]}
         assert differ <= {"env", "seed"}, (name, differ)
-    from motorlab.control.steps import MbrlSettings
+    from motorlab.kinds.control import MbrlSettings
 
     resolved = {s: mb.resolved_settings(s, mb.FULL) for s in (0, 1, 2, 105)}
     common = mb.common_settings(list(resolved), resolved)  # motor and muscle arms alike, once the body is named

@@ -94,8 +94,8 @@ def test_orchestration_asks_the_kind_not_a_field():
     """What studies and sweeps need of a kind comes through its interface: its seed field, whether a run may
     stop early, the budget a censored seed is counted at."""
     from motorlab.kinds import KINDS
+    from motorlab.kinds.train import TRAIN
     from motorlab.rl.config import resolve
-    from motorlab.rl.steps import TRAIN
 
     for k in KINDS.values():
         assert k.takes_seed() == (k.SEED in k.settings.model_fields)
@@ -136,7 +136,7 @@ def test_a_tune_trial_budget_is_what_its_kind_reads_from_the_run_folder(tmp_path
 def test_ray_asha_budget_comes_from_the_targets_kind(tmp_path, target, space, expected):
     """ASHA's max_t is the budget the target's kind plans (its settings, defaults included), not a
     --timesteps read from the command text; unknown when the search varies it or the kind has none."""
-    from motorlab.rl.steps import TRAIN
+    from motorlab.kinds.train import TRAIN
     from motorlab.tuning.ray_search import budget
     from motorlab.tuning.trials import Planner
     from motorlab.tuning.tune import make_spec

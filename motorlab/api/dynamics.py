@@ -17,7 +17,7 @@ from motorlab.api import running
 from motorlab.api.checks import api_function
 from motorlab.api.running import Track
 from motorlab.api.views import Result
-from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
+from motorlab.kinds.dynamics import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
 
 __all__ = ["collect", "fit", "check"]
 

@@ -14,10 +14,10 @@ from motorlab.api import running
 from motorlab.api.checks import api_function
 from motorlab.api.running import Track
 from motorlab.api.views import FOLDER_TYPES, PolicyFunction, Result
-from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
-from motorlab.report.steps import COMPARE, VIDEO
-from motorlab.rl.steps import TRAIN
-from motorlab.robustness_curves.steps import ROBUSTNESS
+from motorlab.kinds.evaluate import EVALUATE, ZEROSHOT
+from motorlab.kinds.media import COMPARE, VIDEO
+from motorlab.kinds.robustness import ROBUSTNESS
+from motorlab.kinds.train import TRAIN
 
 if TYPE_CHECKING:
     import gymnasium as gym
@@ -177,7 +177,7 @@ class Run(Result):
         ...) change it."""
         from motorlab.envs import EnvConfig, make_env
         from motorlab.evaluation import trained_env_settings
-        from motorlab.evaluation.steps import merge_env
+        from motorlab.kinds.evaluate import merge_env
 
         return make_env(EnvConfig.model_validate(merge_env(trained_env_settings(self.path), env_settings)))
 

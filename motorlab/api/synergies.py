@@ -17,7 +17,7 @@ from typing import Any
 from motorlab.api import running
 from motorlab.api.checks import api_function
 from motorlab.api.views import Result
-from motorlab.synergies.steps import COLLECT, FIT, VAF
+from motorlab.kinds.synergies import COLLECT, FIT, VAF
 
 __all__ = ["collect", "vaf", "fit", "import_sklearn", "export_sklearn", "load_sar"]
 

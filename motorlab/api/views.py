@@ -25,8 +25,8 @@ import numpy as np
 
 from motorlab.api.checks import api_function
 from motorlab.errors import MotorlabError
+from motorlab.kinds.train import TRAIN
 from motorlab.report.results import DEMO_LABEL, Number, read_run_results, read_study_results
-from motorlab.rl.steps import TRAIN
 from motorlab.runs import CONFIG, SUMMARY, is_complete, read_json
 
 if TYPE_CHECKING:

@@ -49,7 +49,7 @@ MODEL_JSON = "model.json"
 MODEL_WEIGHTS = "model.safetensors"
 FORMAT = "motorlab.forward_model/1"
 NONLINEARITIES = ("silu", "tanh")  # tanh: Linear -> Tanh -> LayerNorm; silu: Linear -> SiLU (see the module's docstring)
-DEFAULT_NONLINEARITY = "silu"  # the Python API's default, as the CLI's (dynamics.steps.ModelSettings)
+DEFAULT_NONLINEARITY = "silu"  # the Python API's default, as the CLI's (motorlab.kinds.dynamics.ModelSettings)
 
 
 class Normalizer(nn.Module):

@@ -32,7 +32,7 @@ from motorlab.runs import run_path, write_config
 
 def train(cfg: TrainConfig, out: Path | None = None, resume: bool = False, *,
           start: Callable[[Path], Path]) -> dict[str, Any]:
-    """Train one policy as `cfg` says into its run folder; the train kind (`motorlab.rl.steps.TRAIN.run`)
+    """Train one policy as `cfg` says into its run folder; the train kind (`motorlab.kinds.train.TRAIN.run`)
     ends the folder with the shared `finish` (config.toml, results.json, summary.json).
 
     Args:

@@ -291,7 +291,7 @@ def mutated_npz(path: Path, base: dict[str, np.ndarray], data) -> None:
 @pytest.fixture(scope="module")
 def reacher_files(tmp_path_factory):
     """A small real transitions.npz and a model fit on it (one epoch)."""
-    from motorlab.dynamics.steps import DYNAMICS_COLLECT, DYNAMICS_FIT
+    from motorlab.kinds.dynamics import DYNAMICS_COLLECT, DYNAMICS_FIT
 
     root = tmp_path_factory.mktemp("reacher")
     run_kind(DYNAMICS_COLLECT, root / "data", env=REACHER, episodes=4, workers=1)

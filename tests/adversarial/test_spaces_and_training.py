@@ -197,7 +197,7 @@ HER_MISUSE = [
 
 @pytest.mark.parametrize("fields, fragments", HER_MISUSE, ids=[json.dumps(f) for f, _ in HER_MISUSE])
 def test_her_misuse_is_one_line_before_anything_is_written(maze_run, tmp_path, fields, fragments):
-    from motorlab.rl.steps import TRAIN
+    from motorlab.kinds.train import TRAIN
 
     before = snapshot(maze_run, tmp_path)
     out = tmp_path / "out"

@@ -19,13 +19,13 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from motorlab.control.steps import MPC
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import ForwardModel, device_for
-from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_FIT
 from motorlab.dynamics.train import fit_model
 from motorlab.dynamics.transitions import Transitions
 from motorlab.errors import MotorlabError
+from motorlab.kinds.control import MPC
+from motorlab.kinds.dynamics import DYNAMICS_CHECK, DYNAMICS_FIT
 from tests.helpers import USER_PACKAGES, assert_ok, assert_one_line_error, read_summary, run_cli, run_here, run_kind
 
 IP = "InvertedPendulum-v5"
@@ -363,7 +363,7 @@ def test_the_builtin_reward_reads_the_newest_of_stacked_observations():
 
 
 def test_planning_refuses_env_settings_it_cannot_honour_in_one_line(tmp_path):
-    from motorlab.control.steps import MBRL
+    from motorlab.kinds.control import MBRL
 
     # reward shaping and a success rule: mpc and mbrl report the env's own return, and --reward is the planner's
     with pytest.raises(MotorlabError, match=r"^env\.reward 'alive': mbrl reports the env's own return"):
@@ -386,8 +386,8 @@ def test_config_toml_and_loop_json_written_before_still_load(tmp_path):
     from dataclasses import asdict
 
     from motorlab.control.mbrl import LOOP_JSON, _comparable, check_resumable
-    from motorlab.control.steps import MBRL
     from motorlab.envs import EnvConfig
+    from motorlab.kinds.control import MBRL
 
     old = f'env = "{IP}"\nmodel = "runs/m"\nreward = "builtin"\nepisodes = 5\nhorizon = 15\n'
     mpc = MPC.validate(tomllib.loads(old))
@@ -407,8 +407,8 @@ def test_collect_steps_cuts_collected_episodes_and_the_catalogue_sets_it_for_the
     """--collect-steps ends each collected episode (truncated, not terminated) after that many steps, so
     the model is refit that often; evaluation episodes still run to the time limit. The pendulum's
     catalogue entry cuts at 200, and the user's setting wins."""
-    from motorlab.control.steps import MBRL
     from motorlab.dynamics.transitions import load_transitions
+    from motorlab.kinds.control import MBRL
 
     assert MBRL.make(env=IP).collect_steps == 200 and MBRL.make(env=IP, collect_steps=50).collect_steps == 50
     assert MBRL.make(env="Reacher-v5").collect_steps is None
@@ -441,8 +441,8 @@ def test_exploration_noise_widens_the_collected_actions_and_leaves_the_plan_and_
 
     from motorlab.control.mbrl import _comparable
     from motorlab.control.mpc import MPCPolicy
-    from motorlab.control.steps import MBRL
     from motorlab.dynamics.transitions import load_transitions
+    from motorlab.kinds.control import MBRL
 
     planned = torch.tensor([[0.5, -1.9]]).repeat(4000, 1)
     planner = SimpleNamespace(plan=lambda s, g: planned.clone(), low=torch.tensor([-1.0, -2.0]),
@@ -489,7 +489,7 @@ def test_eval_every_always_evaluates_the_round_that_ends_the_loop(rounds, every,
     """Whatever the cap, the budget and --eval-every, the loop's last round is evaluated (its return is
     the loop's) and the others exactly on multiples of eval_every: walked as run_loop walks them."""
     from motorlab.control.mbrl import evaluates, is_last_round
-    from motorlab.control.steps import MBRL
+    from motorlab.kinds.control import MBRL
 
     plan = replace(MBRL.make(env=IP).loop_plan(), rounds=rounds, eval_every=every, max_env_steps=budget)
     walked = []
@@ -507,7 +507,7 @@ def test_eval_every_leaves_the_models_alone_and_a_resume_may_change_it(tmp_path)
     """Evaluating every 2nd round (and the last) skips round 1's evaluation and changes nothing the
     rounds learn: the same collected returns, held-out errors and evaluated returns as every round's."""
     from motorlab.control.mbrl import _comparable
-    from motorlab.control.steps import MBRL
+    from motorlab.kinds.control import MBRL
 
     kept = {}
     for every in (1, 2):

@@ -46,7 +46,7 @@ def test_the_bundled_planners_are_their_modules():
 
 
 def test_a_new_planner_is_one_file(shooting):
-    from motorlab.control.steps import PlannerSettings
+    from motorlab.kinds.control import PlannerSettings
 
     assert "shooting" in planners.names() and "shooting: random shooting" in planners.about()
     settings = PlannerSettings.model_validate({"optimizer": "shooting", "horizon": 7, "population": 9})

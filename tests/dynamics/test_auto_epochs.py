@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from motorlab.dynamics.steps import DYNAMICS_FIT
 from motorlab.dynamics.train import DEFAULT_EPOCHS, MAX_AUTO_EPOCHS, MIN_GRADIENT_STEPS, auto_epochs
+from motorlab.kinds.dynamics import DYNAMICS_FIT
 
 pytestmark = pytest.mark.fast
 

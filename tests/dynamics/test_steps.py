@@ -139,8 +139,8 @@ def test_collect_refuses_env_settings_it_cannot_honour_in_one_line(args, fragmen
 
 
 def test_collect_refuses_a_success_rule_and_keeps_its_own_fields():
-    from motorlab.dynamics.steps import DYNAMICS_COLLECT
     from motorlab.errors import MotorlabError
+    from motorlab.kinds.dynamics import DYNAMICS_COLLECT
 
     with pytest.raises(MotorlabError, match=r"^env\.success 'final': dynamics collect counts no successes"):
         DYNAMICS_COLLECT.make(env="Reacher-v5", success="final")
@@ -152,8 +152,8 @@ def test_a_config_toml_with_the_env_as_a_string_still_loads(tmp_path):
     """Run folders written before the env was an EnvConfig recorded `env = "Reacher-v5"`."""
     import tomllib
 
-    from motorlab.dynamics.steps import DYNAMICS_COLLECT
     from motorlab.envs import EnvConfig
+    from motorlab.kinds.dynamics import DYNAMICS_COLLECT
 
     old = ('env = "Reacher-v5"\nepisodes = 300\npolicy = "random"\nstate = "auto"\nsimulator = "auto"\n'
            'seed = 0\n')

@@ -17,10 +17,10 @@ from motorlab.control.planners.mppi import MPPIPlanner
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import DEFAULT_NONLINEARITY, ForwardModel, Normalizer, load_model
 from motorlab.dynamics.rewards import reacher_v5
-from motorlab.dynamics.steps import ModelSettings
 from motorlab.dynamics.train import fit_model, normalized_mse, split_episodes
 from motorlab.dynamics.transitions import load_transitions
 from motorlab.errors import MotorlabError
+from motorlab.kinds.dynamics import ModelSettings
 
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
 
@@ -148,8 +148,8 @@ def test_a_fit_keeps_the_best_epochs_weights_or_the_last():
 
 
 def test_dynamics_fit_keeps_the_best_epoch_and_the_loop_the_last():
-    from motorlab.control.steps import MbrlSettings
-    from motorlab.dynamics.steps import DynamicsFitSettings
+    from motorlab.kinds.control import MbrlSettings
+    from motorlab.kinds.dynamics import DynamicsFitSettings
 
     assert DynamicsFitSettings.model_fields["keep_weights"].default == "best"
     assert MbrlSettings.model_fields["keep_weights"].default == "last"

@@ -95,7 +95,7 @@ def test_register_env_exact_and_pattern():
 
 
 def test_the_loop_takes_an_envs_model_and_planner_defaults_and_the_user_overrides_them():
-    from motorlab.control.steps import MbrlSettings
+    from motorlab.kinds.control import MbrlSettings
 
     register_env("Pendulum-v1", model={"hidden": [32, 32, 32], "epochs": 7}, planner={"horizon": 9},
                  loop={"collect_steps": 50})

@@ -20,18 +20,18 @@ from motorlab.control.mpc import PlannerFaults, model_scorer
 from motorlab.control.mpc_episodes import build_policy, run_episodes
 from motorlab.control.planners.cem import CEMPlanner
 from motorlab.control.planners.mppi import MPPIPlanner
-from motorlab.control.steps import MPC
 from motorlab.controllers.lqr import LQRSettings, learn_lqr
 from motorlab.controllers.pid import pid_for_env
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import ForwardModel, load_model
 from motorlab.dynamics.rewards import Task, resolve_task
-from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
 from motorlab.dynamics.transitions import load_transitions
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.rl.steps import TRAIN
-from motorlab.synergies.steps import COLLECT
+from motorlab.kinds.control import MPC
+from motorlab.kinds.dynamics import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
+from motorlab.kinds.synergies import COLLECT
+from motorlab.kinds.train import TRAIN
 from tests.helpers import assert_ok, read_summary, run_cli, run_kind
 
 with contextlib.redirect_stderr(io.StringIO()):  # its import prints a notice about other envs, once

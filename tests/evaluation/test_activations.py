@@ -14,8 +14,8 @@ import torch
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.activations import Episode
+from motorlab.kinds.synergies import COLLECT
 from motorlab.policies import load_run_policy
-from motorlab.synergies.steps import COLLECT
 from tests.helpers import (
     COLLECT_EPISODES,
     COLLECT_PERCENTILE,

@@ -21,8 +21,8 @@ from motorlab.controllers.pid import make_pid
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import Evaluator, evaluate, pool
-from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
 from motorlab.evaluation.zeroshot import transfer
+from motorlab.kinds.evaluate import EVALUATE, ZEROSHOT
 from motorlab.policies import RandomPolicy, load_policy
 from motorlab.runs import write_json
 from motorlab.user_modules import import_modules

@@ -14,11 +14,11 @@ from scipy import stats
 from motorlab.envs import EnvConfig
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import evaluate
-from motorlab.evaluation.steps import ZEROSHOT
+from motorlab.kinds.evaluate import ZEROSHOT
+from motorlab.kinds.train import TRAIN
 from motorlab.policies import load_run_policy
 from motorlab.report.compare import mean_and_band
 from motorlab.rl.config import TrainConfig
-from motorlab.rl.steps import TRAIN
 from tests.helpers import (
     ENV_ID,
     assert_cli_error,

@@ -93,8 +93,8 @@ def check_resume(algo: str, out: Path, hyperparams: dict[str, Any], monkeypatch,
     """A run stopped after its checkpoints (before it saved its policy) resumes from the last one:
     the step count goes on from the checkpoint's, to the same budget."""
     import motorlab.rl.sb3 as sb3
+    from motorlab.kinds.train import TRAIN
     from motorlab.rl.config import resolve
-    from motorlab.rl.steps import TRAIN
     from motorlab.runs import read_config
 
     class Stopped(Exception):

@@ -12,13 +12,13 @@ import pytest
 from click.testing import CliRunner
 
 from motorlab.cli import app
-from motorlab.dynamics.steps import DYNAMICS_COLLECT
 from motorlab.envs import EnvConfig, make_env
 from motorlab.evaluation import EpisodeSuccess, Evaluator, evaluate, success_mode
+from motorlab.kinds.dynamics import DYNAMICS_COLLECT
+from motorlab.kinds.train import TRAIN
 from motorlab.policies import ZeroPolicy
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.monitor import TrainingMonitor
-from motorlab.rl.steps import TRAIN
 from tests.helpers import (
     assert_one_line_error,
     episode_rows,
@@ -214,7 +214,7 @@ def faulty_run(tmp_path_factory):
 
 
 def test_synergy_collect_never_keeps_a_faulted_episode(faulty_run, tmp_path):
-    from motorlab.synergies.steps import COLLECT
+    from motorlab.kinds.synergies import COLLECT
 
     run, _ = faulty_run
     summary = run_kind(COLLECT, tmp_path / "c", run=str(run), episodes=4, percentile=0.0, preview=6, workers=1)

@@ -8,8 +8,8 @@ import zipfile
 
 import pytest
 
+from motorlab.kinds.train import TRAIN
 from motorlab.rl.config import resolve
-from motorlab.rl.steps import TRAIN
 
 TASK = "myoFingerPoseRandom-v0"
 STEPS, STARTS = 400, 200  # whole episodes of 100 steps: sar-sac-256 trains at episode ends

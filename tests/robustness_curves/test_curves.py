@@ -89,7 +89,7 @@ def test_the_env_is_an_env_config_recorded_as_given(ppo_seeds):
     import tomllib
 
     from motorlab.envs import EnvConfig
-    from motorlab.robustness_curves.steps import ROBUSTNESS
+    from motorlab.kinds.robustness import ROBUSTNESS
 
     settings = ROBUSTNESS.make(policies=[str(ppo_seeds / "seed0")], vary=["delay=0:0.1:2"], push_body="pole")
     assert isinstance(settings.env, EnvConfig) and settings.env.push_body == "pole"
@@ -107,7 +107,7 @@ def test_the_env_is_an_env_config_recorded_as_given(ppo_seeds):
 
 
 def test_reward_shaping_is_refused_in_one_line(tmp_path):
-    from motorlab.robustness_curves.steps import ROBUSTNESS
+    from motorlab.kinds.robustness import ROBUSTNESS
 
     with pytest.raises(MotorlabError, match=r"^env\.reward 'alive': robustness reports the env's own return"):
         ROBUSTNESS.make(policies=["pid"], vary=["delay=0:0.1:2"], env={"id": ENV_ID, "reward": "alive"})

@@ -136,7 +136,7 @@ def test_kinds_that_fit_synergies_import_sklearn_before_a_study_starts_threads()
     import subprocess
     import sys
 
-    code = ("import sys; from motorlab.synergies.steps import FIT, VAF\n"
+    code = ("import sys; from motorlab.kinds.synergies import FIT, VAF\n"
             "assert 'sklearn' not in sys.modules\n"
             "FIT.warm_up(); VAF.warm_up()\n"
             "assert {'sklearn.decomposition', 'sklearn.preprocessing', 'narwhals'} <= set(sys.modules)")

@@ -16,6 +16,7 @@ from safetensors.numpy import load_file, save_file
 
 from motorlab.errors import MotorlabError
 from motorlab.evaluation.rollouts import Rollouts
+from motorlab.kinds.ablate import ABLATE
 from motorlab.synergies import fit_sar, save_sar
 from motorlab.synergies.ablation import (
     MIN_EPISODES,
@@ -27,7 +28,6 @@ from motorlab.synergies.ablation import (
     mean_interval,
     paired_difference,
 )
-from motorlab.synergies.ablation_steps import ABLATE
 from tests.helpers import (
     TINY_PPO,
     assert_ok,

@@ -231,7 +231,7 @@ def tracked_as_a_child(value: str):
 
 
 def train_here(run_dir: Path):
-    from motorlab.rl.steps import TRAIN
+    from motorlab.kinds.train import TRAIN
 
     settings = TRAIN.make(env={"id": ENV_ID}, algo="ppo", timesteps=256, hyperparams={"n_steps": 128, "batch_size": 64})
     return TRAIN.run(settings, run_dir, progress=False)

@@ -14,9 +14,9 @@ from rich.markup import escape
 
 from motorlab import trackers
 from motorlab.control import planners
-from motorlab.dynamics.steps import ModelSettings, with_env
 from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, check_env_id, env_record, facts, make_env
 from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.kinds.dynamics import ModelSettings, with_env
 from motorlab.report.results import Metric
 from motorlab.runs import MetricsWriter, atomic_write_npz
 from motorlab.settings import MAX_SEED, Settings, Summary, UserCode

@@ -3,18 +3,18 @@ line here; the CLI's sweeps, recipes and studies find it through this registry."
 
 from __future__ import annotations
 
-from motorlab.control.steps import MBRL, MPC
-from motorlab.dynamics.steps import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
 from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.evaluation.steps import EVALUATE, ZEROSHOT
-from motorlab.report.steps import COMPARE, VIDEO
-from motorlab.rl.steps import TRAIN
-from motorlab.robustness_curves.steps import ROBUSTNESS
+from motorlab.kinds.ablate import ABLATE
+from motorlab.kinds.control import MBRL, MPC
+from motorlab.kinds.dynamics import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
+from motorlab.kinds.evaluate import EVALUATE, ZEROSHOT
+from motorlab.kinds.import_emg import IMPORT_EMG
+from motorlab.kinds.media import COMPARE, VIDEO
+from motorlab.kinds.robustness import ROBUSTNESS
+from motorlab.kinds.similarity import SIMILARITY
+from motorlab.kinds.synergies import COLLECT, FIT, VAF
+from motorlab.kinds.train import TRAIN
 from motorlab.stepkind import StepKind
-from motorlab.synergies.ablation_steps import ABLATE
-from motorlab.synergies.compare_steps import SIMILARITY
-from motorlab.synergies.emg_steps import IMPORT_EMG
-from motorlab.synergies.steps import COLLECT, FIT, VAF
 
 KINDS: dict[str, StepKind] = {k.name: k for k in (
     TRAIN,

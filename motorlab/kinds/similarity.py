@@ -11,10 +11,10 @@ from rich.console import Console
 from rich.table import Table
 
 from motorlab.errors import MotorlabError
+from motorlab.kinds.synergies import _import_sklearn
 from motorlab.report.results import Metric
 from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Ref, StepKind
-from motorlab.synergies.steps import _import_sklearn
 
 NULL_PERCENTILE = 95
 
