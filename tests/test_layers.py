@@ -5,6 +5,7 @@ graph (grimp, import-linter's graph library) and the source, not by running anyt
 from __future__ import annotations
 
 import ast
+import functools
 import tomllib
 from pathlib import Path
 
@@ -17,59 +18,45 @@ from motorlab.kinds import KINDS
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
 
 PACKAGE = Path(motorlab.__file__).parent
-# The layers of the import contract (pyproject.toml), top first: a higher number is a higher layer.
-(API, WORKER, CLI, COMMANDS, STUDIES, KIND_REGISTRY, STEP_KINDS, STEPKIND, FEATURES, DOMAIN, ROLLOUTS_AND_MODELS,
- POLICIES, ALGORITHMS, CONTROLLERS, REPORT, ENVS, SYNERGY_SPACE, GROUND) = range(17, -1, -1)
-# The package façades: `motorlab.train(...)`, `motorlab.synergies.fit(...)`, `motorlab.dynamics.fit(...)` are
-# the API's functions, imported when first used; their imports point into motorlab.api, so they sit beside it
-FACADES = {"motorlab", "motorlab.synergies", "motorlab.dynamics"}
-GROUND_FLOOR = {"motorlab.runs", "motorlab.claims", "motorlab.processes", "motorlab.errors", "motorlab.faults", "motorlab.provenance", "motorlab.extras",
-                "motorlab.settings", "motorlab.user_modules", "motorlab.command", "motorlab.jobs",
-                "motorlab.intervals"}
-# Packages by prefix, below the step kinds (motorlab/kinds/)
-PACKAGES = {"motorlab.evaluation.figures": FEATURES, "motorlab.evaluation.videos": FEATURES,
-            "motorlab.evaluation.activations": DOMAIN, "motorlab.evaluation": ROLLOUTS_AND_MODELS,
-            "motorlab.dynamics": ROLLOUTS_AND_MODELS, "motorlab.rl.algos": ALGORITHMS,
-            "motorlab.controllers": CONTROLLERS, "motorlab.report": REPORT, "motorlab.envs": ENVS,
-            "motorlab.synergies.ablation": DOMAIN,
-            "motorlab.synergies.figures": DOMAIN, "motorlab.synergies.plotting": DOMAIN,
-            "motorlab.synergies.naming": DOMAIN,
-            "motorlab.synergies": SYNERGY_SPACE, "motorlab.trackers": GROUND}
 
 
-def layer(module: str) -> int:
-    if module.startswith("motorlab.api") or module in FACADES:
-        return API
-    if module == "motorlab.worker":
-        return WORKER
-    if module in ("motorlab.cli", "motorlab.__main__"):
-        return CLI
-    if module == "motorlab.commands":
-        return COMMANDS
-    if module.startswith(("motorlab.studies", "motorlab.sweeps", "motorlab.tuning")) or module in (
-            "motorlab.recipes", "motorlab.recipe_list", "motorlab.launcher"):
-        return STUDIES
-    if module in ("motorlab.kinds", "motorlab.commandline"):
-        return KIND_REGISTRY
-    if module.startswith("motorlab.kinds."):  # one file per step kind (and the other commands beside them)
-        return STEP_KINDS
-    if module == "motorlab.stepkind":
-        return STEPKIND
-    if module in GROUND_FLOOR:
-        return GROUND
-    if module == "motorlab.policies":
-        return POLICIES
-    if module == "motorlab.stats":
-        return REPORT
-    for prefix, level in PACKAGES.items():  # the first that fits: modules before their packages
-        if module == prefix or module.startswith(prefix + "."):
-            return level
-    return DOMAIN  # rl's training, control's planners, robustness curves, export
+@functools.cache
+def contract_layers() -> list[list[str]]:
+    """The layers of the import contract in pyproject.toml, top first, each a list of module names."""
+    pyproject = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())
+    (contract,) = pyproject["tool"]["importlinter"]["contracts"]
+    return [[name.strip() for name in entry.replace("|", ":").split(":")] for entry in contract["layers"]]
+
+
+def in_contract(module: str, layers: list[list[str]]) -> int | None:
+    """The index of the contract's layer that holds `module` (None: no layer names it)."""
+    return next((i for i, names in enumerate(layers)
+                 if any(module == name or module.startswith(name + ".") for name in names)), None)
 
 
 @pytest.fixture(scope="module")
 def graph():
     return grimp.build_graph("motorlab", cache_dir=None)
+
+
+_GRAPH: list[grimp.ImportGraph] = []
+
+
+@functools.cache
+def layer(module: str) -> int:
+    """The module's layer, from the one contract (pyproject.toml): a higher number is a higher layer.
+    A module no layer names is a package's __init__ (a domain package whose modules sit in several
+    layers, or a façade such as motorlab.synergies, whose fit() is the API's): it sits at the highest
+    layer of what it imports (an empty one at the bottom), so whatever imports it must sit there too."""
+    layers = contract_layers()
+    found = in_contract(module, layers)
+    if found is not None:
+        return len(layers) - 1 - found
+    if not _GRAPH:
+        _GRAPH.append(grimp.build_graph("motorlab", cache_dir=None))
+    graph = _GRAPH[0]
+    imported = graph.find_modules_directly_imported_by(module) if module in graph.modules else set()
+    return max((layer(m) for m in imported), default=0)
 
 
 def test_every_module_is_in_the_graph(graph):
@@ -81,6 +68,8 @@ def test_every_module_is_in_the_graph(graph):
 
 
 def test_imports_point_down_the_layers(graph):
+    """lint-imports checks the contract's modules; this checks every module's direct imports by the same
+    contract, the package __init__s it does not name (façades, re-exports) included."""
     upward = [f"{a} ({layer(a)}) imports {b} ({layer(b)})" for a in graph.modules
               for b in graph.find_modules_directly_imported_by(a) if layer(b) > layer(a)]
     assert not upward, "\n".join(upward)
@@ -96,33 +85,16 @@ def test_no_module_imports_another_in_a_circle(graph):
     assert not cycles, "\n".join(sorted(cycles))
 
 
-def contract_layers() -> list[list[str]]:
-    """The layers of the import contract in pyproject.toml, top first, each a list of module names."""
-    pyproject = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())
-    (contract,) = pyproject["tool"]["importlinter"]["contracts"]
-    return [[name.strip() for name in entry.replace("|", ":").split(":")] for entry in contract["layers"]]
-
-
-def in_contract(module: str, layers: list[list[str]]) -> int | None:
-    """The index of the contract's layer that holds `module` (None: no layer names it)."""
-    return next((i for i, names in enumerate(layers)
-                 if any(module == name or module.startswith(name + ".") for name in names)), None)
-
-
-def test_the_contract_names_every_module_and_agrees_with_this_file(graph):
-    """Every module is in a layer of the contract, a package whose modules sit in several layers
-    (rl/, evaluation/, report/, ...) excepted: a new module cannot slip past lint-imports. And the
-    contract's layers are in the order of layer() above: lint-imports and this file check the same
-    layers."""
+def test_the_contract_names_every_module_but_package_inits(graph):
+    """Every module but a package's __init__ is in a layer of the contract: a new module cannot slip
+    past lint-imports. And the façades sit at the top, beside the API whose functions they give."""
     layers = contract_layers()
     unnamed = sorted(m for m in graph.modules if in_contract(m, layers) is None
                      and not (PACKAGE.parent / m.replace(".", "/") / "__init__.py").is_file())
     assert not unnamed, f"modules no layer of the import contract (pyproject.toml) names: {unnamed}"
-    here = [{layer(m) for m in graph.modules if in_contract(m, layers) == i} for i in range(len(layers))]
-    assert all(here), [layers[i] for i, found in enumerate(here) if not found]  # each names a module
-    for i in range(len(layers) - 1):
-        below = set().union(*here[i + 1:])
-        assert min(here[i]) >= max(below), f"{layers[i]} is in a lower layer here than a layer below it there"
+    top = layer("motorlab.api")
+    assert all(layer(f) == top for f in ("motorlab", "motorlab.synergies", "motorlab.dynamics"))
+    assert layer("motorlab.kinds.train") > layer("motorlab.stepkind") > layer("motorlab.rl.train") > layer("motorlab.runs")
 
 
 def test_the_layer_check_catches_an_upward_import(tmp_path):
