@@ -12,7 +12,7 @@ import shutil
 import numpy as np
 import pytest
 
-import motorlab.envs
+import motorlab.envs.making
 from motorlab.envs import EnvConfig
 from motorlab.evaluation.rollouts import evaluate
 from motorlab.policies import RandomPolicy, ZeroPolicy
@@ -131,7 +131,7 @@ def test_a_reward_function_that_raises_is_one_line_naming_it(tmp_path):
 # ---- no time limit --------------------------------------------------------------------------------
 
 def test_an_env_without_a_time_limit_stops_in_one_line_instead_of_hanging(tmp_path, monkeypatch):
-    monkeypatch.setattr(motorlab.envs, "UNLIMITED_EPISODE_CAP", 200)  # 100,000 in real runs
+    monkeypatch.setattr(motorlab.envs.making, "UNLIMITED_EPISODE_CAP", 200)  # 100,000 in real runs
     proc = run_here("evaluate", "zero", "--env", env("Endless-v0"), "--episodes", "2", "--workers", "1",
                     "--out", tmp_path / "e")
     assert_one_line_error(proc, env("Endless-v0"), "no time limit", "--env-arg max_episode_steps=N")

@@ -7,7 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import motorlab.envs
+import motorlab.envs.ids
 from motorlab.envs import EnvConfig, check_env_id, make_env
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import step_success
@@ -50,7 +50,7 @@ def test_unknown_myo_id_with_myosuite_installed_is_an_unknown_id():
 
 
 def test_missing_myosuite_says_how_to_install(monkeypatch):
-    monkeypatch.setattr(motorlab.envs, "register_myosuite", lambda: False)
+    monkeypatch.setattr(motorlab.envs.ids, "register_myosuite", lambda: False)
     assert "myoNotThere-v0" not in gym.registry
     with pytest.raises(MotorlabError, match="pip install myosuite") as e:
         check_env_id("myoNotThere-v0")
