@@ -21,6 +21,7 @@ Loc = tuple[str | int, ...]
 # The largest seed a setting takes: numpy's legacy seeds and SB3's stop at 2**32 - 1, and episode seeds
 # (seed + i) must stay far from int64's end, where numpy's arithmetic overflows
 MAX_SEED = 2**32 - 1
+MAX_SEEDS = 10_000  # seeds in one sweep or search: far beyond any study; a typo such as --seeds 1000000 should fail, not plan for hours
 # Integers past int64 fit no array, tensor or C library motorlab hands them to
 MAX_INT = 2**63 - 1
 

@@ -42,11 +42,10 @@ from motorlab.runs import (
     write_json,
     write_summary,
 )
+from motorlab.settings import MAX_SEEDS
 from motorlab.stats import aggregate, trial_scores
 from motorlab.sweeps.grid import parse_grid, settings
 from motorlab.sweeps.trials import command_trials, parse_target, recipe_path, recipe_trials
-
-MAX_SEEDS = 10_000  # far beyond any study; a typo such as --seeds 1000000 should fail, not plan for hours
 
 
 def _seeds(seeds: int | list[int]) -> list[int]:

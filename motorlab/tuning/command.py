@@ -11,8 +11,7 @@ from rich.console import Console
 from motorlab.command import Command, Resumable
 from motorlab.errors import mask_url
 from motorlab.launcher import ExecutionSettings
-from motorlab.settings import MAX_SEED
-from motorlab.sweeps.sweep import MAX_SEEDS
+from motorlab.settings import MAX_SEED, MAX_SEEDS
 
 
 class TuneSettings(ExecutionSettings):

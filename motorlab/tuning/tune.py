@@ -38,7 +38,7 @@ from motorlab.runs import (
     run_path,
     write_config,
 )
-from motorlab.sweeps.sweep import MAX_SEEDS
+from motorlab.settings import MAX_SEEDS
 from motorlab.tuning import outputs
 from motorlab.tuning.objective import Objective, steps_run
 from motorlab.tuning.search import TuneSpec, default_parallel, run_search, study_name
