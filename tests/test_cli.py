@@ -268,11 +268,11 @@ def test_successful_command_prints_no_error(tmp_path):
 
 def test_the_command_line_starts_without_the_plotting_and_learning_libraries():
     """Every `motorlab` process (a command, a worker, each sweep trial) reads every command's settings when
-    it starts: matplotlib, torch, SB3 and scikit-learn are imported where a command runs, not there."""
+    it starts: matplotlib, torch, SB3, scikit-learn and MuJoCo are imported where a command runs, not there."""
     import subprocess
     import sys
 
-    heavy = ("matplotlib", "torch", "stable_baselines3", "sklearn", "ray", "optuna")
+    heavy = ("matplotlib", "torch", "stable_baselines3", "sklearn", "ray", "optuna", "mujoco")
     proc = subprocess.run([sys.executable, "-c", "import sys, motorlab.cli, motorlab.worker; "
                            f"print(sorted(m for m in {heavy!r} if m in sys.modules))"],
                           capture_output=True, text=True, timeout=120)

@@ -3,6 +3,7 @@ use, and an id checked (with close matches) before anything is made."""
 
 from __future__ import annotations
 
+import functools
 import logging
 import warnings
 
@@ -20,17 +21,18 @@ from motorlab.user_modules import (
 )
 
 
-def _route_mujoco_warnings() -> None:
+@functools.cache
+def route_mujoco_warnings() -> None:
     """Send MuJoCo's C-level warnings to Python logging instead of stderr and a
     MUJOCO_LOG.TXT in the working directory. MyoSuite models warn on every load;
-    instabilities are still counted from mjData.warning by NumericalGuard."""
+    instabilities are still counted from mjData.warning by NumericalGuard. Once per process,
+    from make_env (every model motorlab loads is an env's, or read from one): not when motorlab.envs
+    is imported, which every motorlab process does at its start (MuJoCo takes ~0.25 s to import)."""
     import mujoco
 
     log = logging.getLogger("motorlab.mujoco")
     mujoco.set_mju_user_warning(lambda message: log.debug("MuJoCo: %s", message.strip()))
 
-
-_route_mujoco_warnings()
 
 # Envs motorlab ships (motorlab/envs/<module>.py and its MuJoCo model): id -> (entry point, time
 # limit, the return that counts as solved). Registered when motorlab.envs is imported, which every process that makes an env does;
@@ -58,6 +60,7 @@ def register_myosuite() -> bool:
     Returns:
         False when MyoSuite is not installed (the `myosuite` extra).
     """
+    route_mujoco_warnings()  # before MyoSuite, whose import may already load a model
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

@@ -18,7 +18,7 @@ from motorlab.envs.disturbances import (
     RandomPush,
     muscle_fatigue,
 )
-from motorlab.envs.ids import check_env_id
+from motorlab.envs.ids import check_env_id, route_mujoco_warnings
 from motorlab.envs.rewards import resolve_reward
 from motorlab.envs.spaces import check_spaces, is_dict, obs_layout, require_actions
 from motorlab.envs.upkie import make_upkie
@@ -92,6 +92,7 @@ def make_env(cfg: EnvConfig, shaped: bool = True, render_mode: str | None = None
             render_mode), a setting that acts on Box actions on an env whose actions are not,
             observations no motorlab policy reads or actions none acts in (`spaces.check_spaces`).
     """
+    route_mujoco_warnings()
     check_env_id(cfg.id)
     name = split_env_id(cfg.id)[1]
     if facts(cfg.id).extra == "upkie":
