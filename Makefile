@@ -42,9 +42,11 @@ lint: $(STAMP)  ## ruff (pyflakes, isort, bugbear) and the import layers (lint-i
 # most tests wait on `motorlab` subprocesses, so two files at a time keep both cores busy.
 # tests/conftest.py adjusts loadfile: files sharing an expensive session fixture go to one worker
 # together (SHARED), and files are handed out longest first (SECONDS), not most tests first.
+# The tests marked `long` (tests/conftest.py LONG: end-to-end runs whose parts are tested here, benchmark
+# rehearsals, learning comparisons, Ray clusters) run in make test-long; CI runs both.
 # The 25 slowest tests are listed at the end: where to look when the suite grows.
-test: lint docs $(VENV)/.browser  ## the whole test suite, as CI runs it (under 15 min on 2 cores)
-	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile --durations=25
+test: lint docs $(VENV)/.browser  ## the test suite but the long end-to-end runs (under 12 min on 2 cores); CI adds test-long
+	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile --durations=25 -m "not long"
 
 # The documentation site (mkdocs.yml, docs/): strict, so a warning (a broken link, a docstring griffe
 # cannot read) fails it; docs/reference/cli.md is generated from every command's --help as it builds
@@ -54,9 +56,10 @@ docs: $(STAMP)  ## the documentation site in site/ (open site/index.html, offlin
 test-fast: lint  ## the edit loop: unit tests and one end-to-end test per workflow (under 3 min; no browser needed)
 	$(VENV)/bin/python -m pytest -q -m fast
 
-# The generated tests (Hypothesis) with many more examples than make test runs: the run-folder lifecycle and
-# every kind's settings (about 10 min on 2 cores)
-test-long: $(STAMP)  ## the generated tests at length: more run-folder lifecycles and settings values per field
+# The tests marked `long` (tests/conftest.py LONG), then the generated tests (Hypothesis) with many more examples
+# than make test runs: the run-folder lifecycle and every kind's settings (about 15 min in all on 2 cores)
+test-long: $(STAMP) $(VENV)/.browser  ## the long end-to-end tests, then the generated tests at length (CI runs it after make test)
+	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile --durations=10 -m long
 	MOTORLAB_LIFECYCLE_EXAMPLES=400 MOTORLAB_SETTINGS_EXAMPLES=100 $(VENV)/bin/python -m pytest -q \
 	  tests/adversarial/test_run_folder_lifecycle.py tests/adversarial/test_settings_generated.py
 

@@ -99,7 +99,56 @@ def seconds(nodeid: str) -> float:
     return SECONDS.get(unit(nodeid), SECONDS.get(nodeid.split("::", 1)[0], float("inf")))
 
 
+# ---- `make test` and `make test-long` --------------------------------------------------------------
+# make test (under 12 min on 2 cores) runs every test but these, marked `long`; make test-long runs them (and the
+# generated tests at length), and CI runs both. Each is an end-to-end run whose parts make test covers on their
+# own, a benchmark's rehearsal, a learning comparison that needs a real budget, or a second backend's equality.
+LONG = {
+    "tests/sweeps/test_sweep.py::test_ray_backend_gives_the_same_folders_and_aggregate": "Ray: the same sweep on a cluster",
+    "tests/tuning/test_ray_search.py::test_ray_backend_searches_on_a_cluster_and_asha_stops_a_hopeless_trial": "Ray: "
+                                                                                     "the search on a cluster (ASHA)",
+    "tests/tuning/test_ray_search.py::test_ray_backend_asha_starts_from_the_studys_earlier_trials": "Ray: ASHA resumed",
+    "tests/test_gpu_check.py::test_a_cpu_rehearsal_runs_every_part_and_records_its_rates": "a benchmark's rehearsal",
+    "tests/envs/test_upkie.py::test_upkie_recipe_runs_end_to_end_on_tiny_budgets": "a recipe end to end (Upkie's env, "
+                                                                                     "PID and video are tested alone)",
+    "tests/envs/test_upkie.py::test_video_of_a_pid_episode": "a video of Upkie (videos are tested on MuJoCo)",
+    "tests/envs/test_spaces.py::test_her_beats_plain_sac_on_the_sparse_maze": "a learning comparison",
+    "tests/envs/test_spaces.py::test_a_her_run_killed_resumes_with_its_replay_buffer": "HER's resume (SAC's is tested)",
+    "tests/studies/test_schedule.py::test_parallel_study_equals_the_sequential_one": "a study run twice (an interrupted "
+                                                                                      "parallel study is tested)",
+    "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[sar_synergies]": "a notebook end to end",
+    "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[your_own_body]": "a notebook end to end",
+    "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[robust_pendulum]": "a notebook end to end",
+    "tests/synergies/test_signals.py::test_robot_quick_recipe_end_to_end": "a recipe end to end",
+    "tests/studies/test_sar_legs_recipe.py::test_sar_legs_quick_end_to_end": "a recipe end to end",
+    "tests/studies/test_sar_legs_recipe.py::test_published_locomotion_sar_recipe_runs": "a recipe end to end",
+    "tests/sweeps/test_sweep.py::test_recipe_sweep_runs_whole_studies_with_the_setting_applied": "whole studies per trial",
+    "tests/adversarial/test_signals.py::test_sighup_stops_a_study_that_resume_then_finishes": "a whole study stopped "
+                                                                                               "(SIGHUP of a train is tested)",
+    "tests/adversarial/test_signals.py::test_sigterm_stops_a_sweep_that_resume_then_finishes": "a whole sweep stopped",
+    "tests/envs/test_user_env.py::test_synergies_of_the_arms_motor_commands_and_sar_training": "a workflow end to end",
+    "tests/envs/test_user_env.py::test_recipe_with_imports": "a recipe end to end",
+    "tests/envs/test_user_env.py::test_sweep_of_a_users_env": "a sweep end to end",
+    "tests/tuning/test_tune.py::test_a_recipe_is_tuned_by_its_step_fields_and_the_best_runs_as_a_recipe": "whole studies "
+                                                                                                          "per trial",
+    "tests/rl/test_sar_presets.py::test_off_policy_contenders_train_at_their_ratio_and_evaluate[sar-crossq-1]": "the "
+                                                                                                  "slowest contender",
+}
+
+
+def is_long(nodeid: str) -> bool:
+    return any(nodeid == key or nodeid.startswith(key + "::") or nodeid.startswith(key + "[") for key in LONG)
+
+
 def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if is_long(item.nodeid):
+            item.add_marker(pytest.mark.long)
+    files = {item.nodeid.split("::", 1)[0] for item in items}
+    stale = [key for key in LONG if key.split("::", 1)[0] in files and not any(is_long(i.nodeid) for i in items
+                                                                                  if i.nodeid.startswith(key))]
+    if stale and not config.getoption("keyword") and not config.getoption("markexpr"):
+        raise pytest.UsageError(f"tests/conftest.py LONG names tests that do not exist: {stale}")
     if hasattr(config, "workerinput"):  # an xdist worker: the units of work in the order they are handed out
         items.sort(key=lambda item: -seconds(item.nodeid))  # stable: tests keep their order
 
