@@ -156,9 +156,11 @@ def in_processes(calls: Iterable, workers: int | None = None) -> list:
     processes shut down before returning: loky keeps a pool alive for reuse, which would outlive
     the call (and a later evaluation pool would find someone else's children)."""
     from joblib import Parallel
-    from joblib.externals.loky import get_reusable_executor
+    from joblib.externals.loky import reusable_executor
 
     try:
         return Parallel(n_jobs=workers or -1, backend="loky")(calls)
     finally:
-        get_reusable_executor().shutdown(wait=True)
+        pool = reusable_executor._executor  # the one loky kept, if this call started one (1 worker starts none)
+        if pool is not None:
+            pool.shutdown(wait=True)

@@ -4,12 +4,19 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import signal
 import time
 from pathlib import Path
 
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# A test that sends Ctrl-C to a motorlab it started plays a user at a terminal. Started in the background
+# of a non-interactive shell (`make test &`, nohup), this process has SIGINT ignored, which its children
+# inherit, and motorlab rightly keeps an ignored signal ignored: those tests would then test the
+# background's rules. Restore the terminal's (a test that wants SIGINT ignored sets it in its child).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 pytest.register_assert_rewrite("tests.helpers")
 
 from tests.helpers import ENV_ID, TINY_PPO, assert_ok, run_cli, scaled_recipe  # noqa: E402
