@@ -140,6 +140,19 @@ LONG = {
                                                                                                           "per trial",
     "tests/rl/test_sar_presets.py::test_off_policy_contenders_train_at_their_ratio_and_evaluate[sar-crossq-1]": "the "
                                                                                                   "slowest contender",
+    "tests/rl/test_tqc.py::test_tunes": "a search per algorithm (tune is tested on its own)",
+    "tests/rl/test_crossq.py::test_tunes": "a search per algorithm (tune is tested on its own)",
+    "tests/rl/test_recurrent_ppo.py::test_tunes": "a search per algorithm (tune is tested on its own)",
+    "tests/trackers/test_trackers.py::test_a_sweep_targets_own_track_tracks_its_trials": "a whole sweep, tracked "
+                                                                                          "(applying --track is tested)",
+    "tests/trackers/test_trackers.py::test_a_tune_targets_own_track_tracks_its_trials": "a whole search, tracked "
+                                                                                         "(applying --track is tested)",
+    "tests/sweeps/test_sweep.py::test_interrupted_training_trial_resumes_from_its_checkpoint": "a sweep's trial resumed "
+                                                                                "(a recipe's and a run's are tested)",
+    "tests/adversarial/test_spaces_and_training.py::test_resume_of_a_discrete_run_after_ctrl_c": "a discrete run "
+                                                                                   "resumed (killed and resumed: tested)",
+    "tests/synergies/test_names_and_plot.py::test_plot_draws_a_vaf_runs_band[None]": "the band in-sample (with "
+                                                                                       "--cv: tested)",
 }
 
 
