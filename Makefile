@@ -45,7 +45,8 @@ lint: $(STAMP)  ## ruff (pyflakes, isort, bugbear) and the import layers (lint-i
 # The tests marked `long` (tests/conftest.py LONG: end-to-end runs whose parts are tested here, benchmark
 # rehearsals, learning comparisons, Ray clusters) run in make test-long; CI runs both.
 # The 25 slowest tests are listed at the end: where to look when the suite grows.
-test: lint docs $(VENV)/.browser  ## the test suite but the long end-to-end runs (under 12 min on 2 cores); CI adds test-long
+# The site's strict build is a test (tests/test_docs.py), so make test does not build it a second time first.
+test: lint $(VENV)/.browser  ## the test suite but the long end-to-end runs (under 12 min on 2 cores); CI adds test-long
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile --durations=25 -m "not long"
 
 # The documentation site (mkdocs.yml, docs/): strict, so a warning (a broken link, a docstring griffe
@@ -60,8 +61,8 @@ test-fast: lint  ## the edit loop: unit tests and one end-to-end test per workfl
 # than make test runs: the run-folder lifecycle and every kind's settings (about 15 min in all on 2 cores)
 test-long: $(STAMP) $(VENV)/.browser  ## the long end-to-end tests, then the generated tests at length (CI runs it after make test)
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile --durations=10 -m long
-	MOTORLAB_LIFECYCLE_EXAMPLES=400 MOTORLAB_SETTINGS_EXAMPLES=100 $(VENV)/bin/python -m pytest -q \
-	  tests/adversarial/test_run_folder_lifecycle.py tests/adversarial/test_settings_generated.py
+	MOTORLAB_LIFECYCLE_EXAMPLES=400 MOTORLAB_SETTINGS_EXAMPLES=100 MOTORLAB_FUZZ_EXAMPLES=200 $(VENV)/bin/python -m pytest -q \
+	  tests/adversarial/test_run_folder_lifecycle.py tests/adversarial/test_settings_generated.py tests/adversarial/test_fuzz.py
 
 bench: $(STAMP)  ## benchmarks against their peers; each prints one JSON object
 	$(VENV)/bin/python benchmarks/pendulum_steps_to_success.py
