@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from motorlab.errors import MotorlabError, mask_url, redact
-from motorlab.trackers import RunInfo, Target, flat, numbers
+from motorlab.trackers.targets import RunInfo, Target, flat, numbers
 
 LABEL = "MLflow"
 EXPERIMENT = "motorlab"

@@ -20,7 +20,7 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from motorlab.errors import MotorlabError
-from motorlab.trackers import CLOSE_SECONDS, RunInfo, Target
+from motorlab.trackers.targets import CLOSE_SECONDS, RunInfo, Target
 
 LABEL = "W&B"
 PROJECT = "motorlab"

@@ -313,10 +313,10 @@ def test_tracked_run_sends_mlflow_credentials_but_shows_and_records_none(health_
     """The password reaches the server (HTTP basic auth on the check, as MLflow's client sends it);
     the run completes though the tracker fails (one warning), and neither its output nor its folder
     holds the password."""
-    from motorlab import trackers
+    from motorlab.trackers import tracked
 
-    monkeypatch.setattr(trackers, "_broken", set())
-    monkeypatch.setattr(trackers, "_warned", set())
+    monkeypatch.setattr(tracked, "_broken", set())
+    monkeypatch.setattr(tracked, "_warned", set())
     out = tmp_path / "e"
     proc = run_here("train", ENV_ID, *LQR, "--track", f"mlflow=http://user:{SECRET}@127.0.0.1:{health_only_server}",
                     "--out", out)
@@ -332,11 +332,12 @@ def test_tracker_messages_quoting_the_uri_are_masked(monkeypatch, capsys):
     run went and the refusal of a misspelt --track quote it too."""
     from motorlab import trackers
     from motorlab.trackers import mlflow as mlflow_tracker
+    from motorlab.trackers import tracked
 
     uri = f"http://user:{SECRET}@tracking.example:5000"
-    monkeypatch.setattr(trackers, "_warned", set())
-    monkeypatch.setattr(trackers, "_uris", {uri})
-    trackers._warn_once("mlflow", f"tracking to MLflow failed (ConnectionError: {uri}/api/2.0 refused)")
+    monkeypatch.setattr(tracked, "_warned", set())
+    monkeypatch.setattr(tracked, "_uris", {uri})
+    tracked._warn_once("mlflow", f"tracking to MLflow failed (ConnectionError: {uri}/api/2.0 refused)")
     assert capsys.readouterr().err == ("warning: tracking to MLflow failed (ConnectionError: "
                                        "http://user:***@tracking.example:5000/api/2.0 refused)\n")
     sink = mlflow_tracker.Sink(trackers.Target("mlflow", uri))

@@ -24,6 +24,7 @@ import pytest
 from motorlab import trackers
 from motorlab.errors import MotorlabError
 from motorlab.trackers import mlflow as mlflow_tracker
+from motorlab.trackers import tracked as tracked_runs
 from tests.helpers import ENV_ID, TINY_PPO, assert_ok, assert_one_line_error, read_summary, run_cli
 
 NEVER = ("model.zip", "policy.safetensors", "policy.json", "checkpoint", "tensorboard")
@@ -221,8 +222,8 @@ def test_unreachable_server_or_unknown_tracker_is_one_line_before_anything_is_wr
 @pytest.fixture
 def fresh_failures(monkeypatch):
     """The failures and warnings the trackers remember in this process are this test's own."""
-    monkeypatch.setattr(trackers, "_broken", set())
-    monkeypatch.setattr(trackers, "_warned", set())
+    monkeypatch.setattr(tracked_runs, "_broken", set())
+    monkeypatch.setattr(tracked_runs, "_warned", set())
 
 
 def tracked_as_a_child(value: str):
@@ -333,16 +334,16 @@ def test_tracking_checks_before_the_block_and_none_changes_nothing(tmp_path):
 def test_steps_in_two_threads_are_each_their_own_tracked_run(monkeypatch, tmp_path):
     """A study runs train steps in threads, each in a copy of the context: each is a tracked step
     (with one step per process, the second would have been taken for part of the first)."""
-    monkeypatch.setattr(trackers, "_load", lambda found: found)  # no run is started: nothing to load
+    monkeypatch.setattr(tracked_runs, "_load", lambda found: found)  # no run is started: nothing to load
     both = threading.Barrier(2, timeout=30)
     seen = {}
 
     def one(kind: str) -> None:
         with trackers.step(kind, {"seed": 0}) as tracked:
             both.wait()  # both steps are open now
-            seen[kind] = bool(tracked) and trackers._current.get() is tracked and tracked.kind == kind
+            seen[kind] = bool(tracked) and tracked_runs._current.get() is tracked and tracked.kind == kind
             both.wait()
-        seen[kind] &= trackers._current.get() is None
+        seen[kind] &= tracked_runs._current.get() is None
 
     with tracked_as_a_child(f"mlflow=sqlite:///{tmp_path / 'mlflow.db'}"):
         threads = [threading.Thread(target=contextvars.copy_context().run, args=(one, k)) for k in ("a", "b")]
@@ -426,6 +427,6 @@ def test_a_targets_track_joins_the_outer_trackers_or_is_refused_when_they_disagr
 def test_what_a_tracker_records_holds_no_credential():
     """Params, tags and names of a tracked run pass through mask_secrets: a sweep's target quoting a password."""
     target = "train X --track mlflow=http://me:s3cretpw@host:5000"
-    info = trackers._info("sweep", None, {"sweep": target, "grid": [f"note={target}"], target: 1})
+    info = tracked_runs._info("sweep", None, {"sweep": target, "grid": [f"note={target}"], target: 1})
     assert "s3cretpw" not in json.dumps([info.name, info.config, info.tags])
     assert info.config["sweep"] == "train X --track mlflow=http://me:***@host:5000"
