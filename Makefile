@@ -54,6 +54,7 @@ test: lint $(VENV)/.browser  ## the test suite but the long end-to-end runs (und
 docs: $(STAMP)  ## the documentation site in site/ (open site/index.html, offline); any warning fails it
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
+# (test-fast runs the cart-pole recipe end to end as the model-based workflow's test; make test leaves it to test-long)
 test-fast: lint  ## the edit loop: unit tests and one end-to-end test per workflow (under 3 min; no browser needed)
 	$(VENV)/bin/python -m pytest -q -m fast
 

@@ -141,6 +141,8 @@ LONG = {
                                                                                                           "per trial",
     "tests/rl/test_sar_presets.py::test_off_policy_contenders_train_at_their_ratio_and_evaluate[sar-crossq-1]": "the "
                                                                                                   "slowest contender",
+    "tests/studies/test_mbrl_cartpole_recipe.py::test_scaled_study_compares_evaluation_curves": "a recipe end to end "
+                                    "(the loop and the Reacher recipe are tested; test-fast runs it as its workflow's)",
     "tests/rl/test_tqc.py::test_tunes": "a search per algorithm (tune is tested on its own)",
     "tests/rl/test_crossq.py::test_tunes": "a search per algorithm (tune is tested on its own)",
     "tests/rl/test_recurrent_ppo.py::test_tunes": "a search per algorithm (tune is tested on its own)",
