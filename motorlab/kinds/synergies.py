@@ -328,7 +328,7 @@ class FitKind(StepKind[FitSettings, FitSummary]):
 
     def run(self, settings: FitSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> FitSummary:
-        from motorlab.synergies import figures
+        import motorlab.synergies.figures as figures
         from motorlab.synergies.vectors import vectors_of
 
         if (settings.n_synergies, settings.vaf, settings.muscle_vaf, settings.elbow) == (None, None, None, False):
