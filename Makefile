@@ -4,7 +4,7 @@ STAMP  := $(VENV)/.installed
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: demo test test-fast test-long lint docs bench setup clean screenshots
+.PHONY: demo test test-fast test-long test-generated lint docs bench setup clean screenshots
 
 $(STAMP): pyproject.toml requirements.lock scripts/setup.sh
 	@VENV=$(VENV) bash scripts/setup.sh
@@ -58,10 +58,13 @@ docs: $(STAMP)  ## the documentation site in site/ (open site/index.html, offlin
 test-fast: lint  ## the edit loop: unit tests and one end-to-end test per workflow (under 3 min; no browser needed)
 	$(VENV)/bin/python -m pytest -q -m fast
 
-# The tests marked `long` (tests/conftest.py LONG), then the generated tests (Hypothesis) with many more examples
-# than make test runs: the run-folder lifecycle and every kind's settings (about 15 min in all on 2 cores)
-test-long: $(STAMP) $(VENV)/.browser  ## the long end-to-end tests, then the generated tests at length (CI runs it after make test)
+# The tests marked `long` (tests/conftest.py LONG): end-to-end runs, rehearsals, Ray clusters (CI runs them after make test)
+test-long: $(STAMP) $(VENV)/.browser  ## the long end-to-end tests make test leaves out (CI runs them after make test)
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile --durations=10 -m long
+
+# The generated tests (Hypothesis) with many more examples than make test runs: the run-folder lifecycle, every
+# kind's settings, the fuzzed inputs (about 10 min on 2 cores)
+test-generated: $(STAMP)  ## the generated tests at length: more run-folder lifecycles, settings values and fuzzed files
 	MOTORLAB_LIFECYCLE_EXAMPLES=400 MOTORLAB_SETTINGS_EXAMPLES=100 MOTORLAB_FUZZ_EXAMPLES=200 $(VENV)/bin/python -m pytest -q \
 	  tests/adversarial/test_run_folder_lifecycle.py tests/adversarial/test_settings_generated.py tests/adversarial/test_fuzz.py
 

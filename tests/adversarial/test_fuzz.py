@@ -28,7 +28,7 @@ from motorlab.cli import main
 from motorlab.kinds import KINDS as REGISTRY
 from tests.helpers import run_kind
 
-# each fuzz test's examples: 30 in make test; make test-long runs 200 (MOTORLAB_FUZZ_EXAMPLES)
+# each fuzz test's examples: 30 in make test; make test-generated runs 200 (MOTORLAB_FUZZ_EXAMPLES)
 FUZZ = settings(max_examples=int(os.environ.get("MOTORLAB_FUZZ_EXAMPLES", 30)), deadline=None, derandomize=True,
                 database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow,
