@@ -10,6 +10,7 @@ from pydantic import Field
 from rich.console import Console
 from rich.table import Table
 
+from motorlab.kinds.evaluate import EnvWorkers
 from motorlab.report.results import Metric, Number, fixed
 from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Ref, StepKind, warn_faults
@@ -25,9 +26,7 @@ class AblateSettings(Settings):
     episodes: int = Field(50, gt=0, description="Episodes per condition (intact, and each synergy zeroed), from the "
                           "same reset seeds in each; at least 5 for an interval")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (env resets: episode i starts from seed + i)")
-    workers: int | None = Field(None, ge=1, description="Processes stepping the envs, this one included (default: "
-                                "every core when the evaluation is large enough to pay for starting the others; 1: "
-                                "this process only); results are the same for any number")
+    workers: EnvWorkers = None
 
 
 class AblateSummary(Summary):

@@ -42,6 +42,12 @@ from motorlab.stepkind import (
 # ---- evaluate ---------------------------------------------------------------------------------
 
 
+# The env worker processes of an evaluation (motorlab.evaluation.pool), as every evaluating kind takes them
+EnvWorkers = Annotated[int | None, Field(
+    ge=1, description="Processes stepping the envs, this one included (default: every core when the evaluation is "
+    "large enough to pay for starting the others; 1: this process only); results are the same for any number")]
+
+
 class EvaluateSettings(EnvSettings):
     """Evaluate a policy deterministically on an env (by default the one it trained on)."""
 
@@ -50,9 +56,7 @@ class EvaluateSettings(EnvSettings):
                         "zero, random")
     episodes: int = Field(10, gt=0, description="Evaluation episodes")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (env resets: episode i starts from seed + i)")
-    workers: int | None = Field(None, ge=1, description="Processes stepping the envs, this one included "
-                                "(default: every core when the evaluation is large enough to pay for starting "
-                                "the others; 1: this process only); results are the same for any number")
+    workers: EnvWorkers = None
 
 
 class EvaluateSummary(Summary):
@@ -228,9 +232,7 @@ class ZeroshotSettings(Settings):
                                                                 "never trained on")
     episodes: int = Field(500, gt=0, description="Episodes per run and env")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (env resets)")
-    workers: int | None = Field(None, ge=1, description="Processes stepping the envs, this one included "
-                                "(default: every core when the evaluation is large enough to pay for starting "
-                                "the others; 1: this process only); results are the same for any number")
+    workers: EnvWorkers = None
 
     @model_validator(mode="before")
     @classmethod
