@@ -98,6 +98,7 @@ class Budgets:
     # and whether the loop runs (a search of the one-shot path's settings can leave its ~10 min out)
     overrides: tuple[tuple[str, str, str], ...] = ()
     loop: bool = True
+    one_shot: bool = True  # development only: False leaves collect -> fit -> mpc out (a search of the loop's)
 
 
 FULL = Budgets()
@@ -154,6 +155,9 @@ def step_fields(seed: int, budgets: Budgets) -> dict[str, dict[str, Any]]:
             fields[name][key] = json.loads(value) if value.startswith("[") else value  # a list: hidden=[200,200]
     if not budgets.loop:
         del fields["mbrl"]
+    if not budgets.one_shot:
+        for name in ("collect", "fit", "mpc_user", "mpc_learned"):
+            del fields[name]
     return fields
 
 
@@ -196,7 +200,9 @@ def body_free(seed: int, settings: dict[str, Any]) -> dict[str, Any]:
     out["oracle"]["seed"] = BODY_SEED
     if "mbrl" in out:
         out["mbrl"]["seed"] = BODY_SEED
-    out["mpc_user"]["seed"] = out["mpc_learned"]["seed"] = BODY_FIRST_RESET
+    for name in ("mpc_user", "mpc_learned"):
+        if name in out:
+            out[name]["seed"] = BODY_FIRST_RESET
     return out
 
 
@@ -307,12 +313,14 @@ def run_body(seed: int, budgets: Budgets, folder: Path, baselines: dict[str, lis
         returns["oracle"], plan_ms = timed("oracle", oracle_returns, env_id, seed, resets, dict(budgets.oracle))
     say(f"body {seed}: random {np.mean(returns['random']):.2f}")
     say(f"body {seed}: oracle {np.mean(returns['oracle']):.2f} ({plan_ms:.0f} ms a step)")
-    data = step("collect")
-    model = step("fit", data.path)
-    for name in ("mpc_user", "mpc_learned"):
-        result = step(name, model.path)
-        returns[name] = [float(x) for x in np.load(result.path / "episodes.npz")["returns"]]
-        say(f"body {seed}: {name} {np.mean(returns[name]):.2f}")
+    model = None
+    if budgets.one_shot:
+        data = step("collect")
+        model = step("fit", data.path)
+        for name in ("mpc_user", "mpc_learned"):
+            result = step(name, model.path)
+            returns[name] = [float(x) for x in np.load(result.path / "episodes.npz")["returns"]]
+            say(f"body {seed}: {name} {np.mean(returns[name]):.2f}")
     curve: list[dict[str, float | None]] = []
     if budgets.loop:
         curve = loop_curve(step("mbrl").path)
@@ -323,7 +331,7 @@ def run_body(seed: int, budgets: Budgets, folder: Path, baselines: dict[str, lis
            "body": asdict(bodies.generate(seed, muscles_of(seed))), "eval_reset_seeds": resets,
            "return_mean": means, "gap_closed": gap_shares(means), "returns": returns,
            "loop": {"curve": curve, "env_steps": curve[-1]["env_steps"], "rounds": len(curve)} if curve else None,
-           "oracle_plan_ms_median": plan_ms, "valid_mse": model.summary.get("valid_mse"),
+           "oracle_plan_ms_median": plan_ms, "valid_mse": model.summary.get("valid_mse") if model else None,
            "baselines_reused": baselines is not None,
            "wall_seconds": {**walls, "total": round(sum(walls.values()), 1)},
            "settings": settings, "git": git_state()}
@@ -410,6 +418,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
                              "collect.noise_beta=1; a headline runs motorlab's defaults")
     parser.add_argument("--no-loop", action="store_true",
                         help="development bodies only: leave the loop out (a search of the one-shot path's settings)")
+    parser.add_argument("--no-one-shot", action="store_true",
+                        help="development bodies only: leave collect -> fit -> mpc out (a search of the loop's settings)")
     parser.add_argument("--baselines-from", type=Path, default=None, metavar="DIR",
                         help="take random's and the oracle's returns from DIR/body-sN/body.json (a --keep of an "
                              "earlier run on the same episodes, generator and oracle), instead of playing them again")
@@ -481,12 +491,14 @@ def main(argv: list[str] | None = None) -> None:
     os.environ["PYTHONPATH"] = os.pathsep.join([str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])])
     from dataclasses import replace
 
-    budgets = replace(QUICK if args.quick else FULL, overrides=args.overrides, loop=not args.no_loop)
+    budgets = replace(QUICK if args.quick else FULL, overrides=args.overrides, loop=not args.no_loop,
+                      one_shot=not args.no_one_shot)
     harness = Harness(NAME)
     mode = harness.seeds.mode(args.bodies)
-    if mode == "headline" and (args.overrides or args.no_loop or args.baselines_from):
-        raise SystemExit("a headline runs motorlab's defaults on every method, from scratch: --set, --no-loop and "
-                         "--baselines-from are for development bodies (0-99)")
+    if mode == "headline" and (args.overrides or args.no_loop or args.no_one_shot
+                                  or args.baselines_from):
+        raise SystemExit("a headline runs motorlab's defaults on every method, from scratch: --set, --no-loop, "
+                         "--no-one-shot and --baselines-from are for development bodies (0-99)")
     if args.quick and mode == "headline":
         raise SystemExit("--quick is a smoke run: run it on development bodies (0-99)")
     per_body = common_settings(args.bodies, {s: resolved_settings(s, budgets) for s in args.bodies})

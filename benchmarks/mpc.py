@@ -28,9 +28,9 @@ import torch
 from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
 from motorlab.control.mpc_episodes import build_policy, run_episodes
+from motorlab.dynamics.layouts.reacher import REACHER
 from motorlab.dynamics.model import load_model
 from motorlab.dynamics.rewards import reacher_distance
-from motorlab.dynamics.state import REACHER
 from motorlab.envs import EnvConfig, make_env
 from motorlab.kinds.control import MpcSettings
 from motorlab.kinds.dynamics import DYNAMICS_COLLECT, DYNAMICS_FIT

@@ -37,8 +37,8 @@ from motorlab import trackers
 from motorlab.control.mpc import FaultCounts
 from motorlab.control.mpc_episodes import MPCEpisodes, build_policy, planner_fault_line, require_plannable, run_episodes
 from motorlab.dynamics.collection import collect_transitions, episode_arrays
+from motorlab.dynamics.layouts import env_layout
 from motorlab.dynamics.model import MODEL_JSON, ForwardModel, load_model
-from motorlab.dynamics.state import env_layout
 from motorlab.dynamics.train import evaluate_rows, fit_model
 from motorlab.dynamics.transitions import TRANSITIONS, Transitions, concatenate, load_transitions
 from motorlab.envs import EnvConfig, env_record, make_env

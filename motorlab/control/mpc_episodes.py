@@ -19,9 +19,9 @@ from rich.progress import Progress
 
 from motorlab.control.mpc import FaultCounts, MPCPolicy, PlannerFaults, model_scorer
 from motorlab.control.planners import make_planner
+from motorlab.dynamics.layouts import env_layout
 from motorlab.dynamics.model import ForwardModel, device_for, load_model
 from motorlab.dynamics.rewards import resolve_task
-from motorlab.dynamics.state import env_layout, xy_columns
 from motorlab.envs import EnvConfig, describe_env, env_record, make_env
 from motorlab.envs.spaces import require_actions
 from motorlab.errors import MotorlabError
@@ -114,16 +114,12 @@ def _keys(layout: list[dict] | None) -> str:
 
 
 def _distance(layout, obs: np.ndarray) -> float:
-    """Distance to the goal for layouts that know both ends: the fingertip's to the target (reacher),
-    the achieved_goal's to the desired_goal (a Dict observation with both); else NaN."""
-    xy = xy_columns(layout.labels)
-    if xy is not None and len(layout.goal_labels) == 2:
-        reached = layout.state(obs)[xy]
-    elif layout.achieved is not None:
-        reached = layout.state(obs)[layout.achieved]
-    else:
+    """Distance to the goal for layouts that know both ends (`StateLayout.reached`): the fingertip's to the
+    target (reacher), the achieved_goal's to the desired_goal (a Dict observation with both); else NaN."""
+    reached = layout.reached
+    if reached is None or len(reached.columns) != len(layout.goal_labels):
         return float("nan")
-    return float(np.linalg.norm(reached - layout.goal(obs)))
+    return float(np.linalg.norm(layout.state(obs)[list(reached.columns)] - layout.goal(obs)))
 
 
 class EpisodePath(NamedTuple):

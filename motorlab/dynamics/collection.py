@@ -26,8 +26,9 @@ import torch
 from rich.progress import Progress
 
 from motorlab import processes
+from motorlab.dynamics.layouts import env_layout
 from motorlab.dynamics.reacher_sim import arm_models, closed_form_arm, rollout_reacher, sample_initial_states
-from motorlab.dynamics.state import StateLayout, env_layout
+from motorlab.dynamics.state import StateLayout
 from motorlab.dynamics.transitions import Transitions
 from motorlab.envs import EnvConfig, describe_env, env_record, facts, is_bare, make_env, option_name
 from motorlab.envs.spaces import encode_space, flat_space, require_actions

@@ -16,7 +16,7 @@ from motorlab import trackers
 from motorlab.control import planners
 from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, check_env_id, env_record, facts, make_env
 from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.kinds.dynamics import ModelSettings, with_env
+from motorlab.kinds.dynamics import ModelSettings, StateLayoutName, state_field, with_env
 from motorlab.report.results import Metric
 from motorlab.runs import MetricsWriter, atomic_write_npz
 from motorlab.settings import MAX_SEED, Settings, Summary, UserCode
@@ -185,7 +185,7 @@ class MpcSummary(PlannerFaultsSummary):
     return_mean: float
     return_std: float
     return_min: float
-    final_distance_mean: float | None  # Reacher's fingertip-to-target distance, where the state has one
+    final_distance_mean: float | None  # from what the layout reaches with to its goal (StateLayout.reached), if any
     final_distance_median: float | None
     plan_ms_median: float
     plan_call_ms_median: float
@@ -369,8 +369,7 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
                                       "it, not their mean (e.g. InvertedPendulum's 1000 on every episode)")
     max_env_steps: int | None = Field(None, gt=0, description="A budget of env steps: stop after the round whose "
                                       "collection reaches it (--rounds stays a cap)")
-    state: Literal["auto", "reacher", "observation"] = Field(
-        "auto", description="State layout: auto (Reacher: the arm's 8-number state; else the observation)")
+    state: StateLayoutName = state_field()
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (resets, random actions, fitting, the planner)")
     device: str = Field("auto", description="Where the model trains and the planner runs: auto (a GPU where torch "
                         "sees one, else the CPU), cpu, cuda, cuda:N")

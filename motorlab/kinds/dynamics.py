@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import numpy as np
-from pydantic import Field, model_validator
+from pydantic import AfterValidator, Field, model_validator
 from rich.console import Console
 
-from motorlab.dynamics.state import xy_columns
+from motorlab.dynamics.layouts import about as layouts_about
+from motorlab.dynamics.layouts import check_name, reached_of, reaching
 from motorlab.dynamics.transitions import TRANSITIONS, load_transitions
 from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, check_env_id, describe_env
 from motorlab.envs.spaces import decode_space, require_actions
@@ -30,6 +31,15 @@ def with_env(what: str, settings: EnvSettings) -> str:
     return what.format(**{**settings.model_dump(), "env": describe_env(settings.env)})
 
 
+# a layout is one file in motorlab.dynamics.layouts: the names and --help come from there
+StateLayoutName = Annotated[str, AfterValidator(check_name)]
+
+
+def state_field() -> Any:
+    return Field("auto", description="State layout: auto (the env's catalogue entry's: Reacher's 8 numbers; else "
+                 f"the observation); {layouts_about()}")
+
+
 class DynamicsCollectSettings(EnvSettings):
     """The env as every env-building kind takes it (EnvConfig: id, delay, history, noise, ...,
     flat on the command line and in recipes): the transitions are what that env gives."""
@@ -43,9 +53,7 @@ class DynamicsCollectSettings(EnvSettings):
     policy: str = Field("random", description="random (random actions, colored by --noise-beta) or a run folder "
                         "from `motorlab train`")
     workers: int | None = Field(None, gt=0, description="Processes or threads (default: all cores)")
-    state: Literal["auto", "reacher", "observation"] = Field(
-        "auto", description="State layout: auto (Reacher: cos, sin, joint velocities, fingertip x-y; else the "
-        "observation), reacher, observation")
+    state: StateLayoutName = state_field()
     simulator: Literal["auto", "closed-form", "mujoco", "gymnasium"] = Field(
         "auto", description="auto (Reacher with random actions and no env settings besides its id: closed-form "
         "where the arm's closed-form dynamics reproduce MuJoCo's, else mujoco; any other env, env settings or "
@@ -308,9 +316,18 @@ class DynamicsCheckSettings(Settings):
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (initial states and actions)")
 
 
+REACH_ERROR = "_error_mean_"  # <what reaches>_error_mean_h<k>: tip_error_mean_h5 for Reacher's fingertip
+
+
+def _reach_scale(key: str) -> tuple[float, str]:
+    reached = reaching(key.partition(REACH_ERROR)[0])
+    return reached.scale if reached is not None else (1.0, "")
+
+
 class DynamicsCheckSummary(Summary):
-    """Also state_nrmse_h<k> for k in 1, 5, 10, 25 and _final, and for layouts with a fingertip
-    tip_error_mean_h<k> and tip_error_mean_final."""
+    """Also state_nrmse_h<k> for k in 1, 5, 10, 25 and _final, and for layouts that reach for a goal
+    with part of the state (motorlab.dynamics.state.Reached) <key>_error_mean_h<k> and _final:
+    tip_error_mean_h<k> for Reacher's fingertip, achieved_goal_error_mean_h<k> for a Dict goal."""
 
     env_id: str
     episodes: int
@@ -325,7 +342,7 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
 
     name = "dynamics-check"
     what = "check {model} open loop, {episodes} episodes"
-    key_figures = ("plots/tip_error.png", "plots/error_by_dimension.png", "plots/traces.png")
+    key_figures = ("plots/reach_error.png", "plots/error_by_dimension.png", "plots/traces.png")
     refs = (Ref("model", ("model",)),)
     arguments = ("model",)
     examples = ("motorlab dynamics check runs/reacher-model --episodes 5",)
@@ -354,13 +371,18 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
         nrmse = np.sqrt(((diff / scale) ** 2).mean(-1))  # (E, T+1)
         reported = [h for h in REPORT_STEPS if h <= last and r["live"][:, h].any()]
         keys: dict[str, Any] = {}
-        xy = xy_columns(model.meta.get("state_labels") or [])
-        if xy:
-            tip = np.linalg.norm(diff[..., xy], axis=-1)
-            keys.update({f"tip_error_mean_h{h}": at(tip, h) for h in reported})
-            keys["tip_error_mean_final"] = float(tip[episodes, ends].mean())
-            error_vs_horizon(np.arange(last + 1), {"fingertip": tip * 1000}, run_dir / "plots" / "tip_error.png",
-                             f"{env_id}: open-loop fingertip error", "fingertip error (mm)")
+        # what the layout reaches for its goal with (Reacher's fingertip): its own error, in its own words
+        reached = reached_of(model.meta.get("state_layout") or "", model.meta.get("state_labels") or [],
+                             model.meta.get("goal_labels") or [])
+        xy = list(reached.columns) if reached is not None and len(reached.columns) == 2 else None
+        if reached is not None:
+            gap = np.linalg.norm(diff[..., list(reached.columns)], axis=-1)
+            keys.update({f"{reached.key}{REACH_ERROR}h{h}": at(gap, h) for h in reported})
+            keys[f"{reached.key}{REACH_ERROR}final"] = float(gap[episodes, ends].mean())
+            factor, unit = reached.scale
+            error_vs_horizon(np.arange(last + 1), {reached.label: gap * factor}, run_dir / "plots" / "reach_error.png",
+                             f"{env_id}: open-loop {reached.label} error",
+                             f"{reached.label} error" + (f" ({unit})" if unit else ""))
         keys.update({f"state_nrmse_h{h}": at(nrmse, h) for h in reported})
         keys["state_nrmse_final"] = float(nrmse[episodes, ends].mean())
         error_vs_horizon(np.arange(last + 1), {"state (normalized RMSE)": nrmse},
@@ -380,33 +402,36 @@ class DynamicsCheckKind(StepKind[DynamicsCheckSettings, DynamicsCheckSummary]):
         names = tuple(labels[c] for c in cols)
         xy_traces(r["true"][..., cols], r["model"][..., cols], r["goals"] if xy else None,
                   run_dir / "plots" / "traces.png", f"{env_id}: simulator vs model, {settings.episodes} episodes",
-                  tuple(n + (" (m)" if xy else "") for n in names))
+                  tuple(n + (f" ({reached.unit})" if xy and reached is not None and reached.unit else "") for n in names))
         atomic_write_npz(run_dir / "rollouts.npz", **r)
         summary = DynamicsCheckSummary(env_id=env_id, episodes=settings.episodes, horizon=last, **keys)
         return self.finish(run_dir, settings, summary)
 
     def headline(self, s: DynamicsCheckSummary) -> dict[str, Any]:
-        return {k: v for k, v in s.keys().items() if k.startswith(("tip_error_mean_", "state_nrmse_"))}
+        return {k: v for k, v in s.keys().items() if REACH_ERROR in k or k.startswith("state_nrmse_")}
 
     def metric(self, key: str) -> Metric:
         horizon = key.rsplit("_", 1)[-1].removeprefix("h")  # "h10" -> "10", "final"
         where = "at the last step" if horizon == "final" else f"after {horizon} step{'s' * (horizon != '1')}"
-        if key.startswith("tip_error_mean_"):
-            return Metric(key, f"fingertip error {where}", "mm", scale=1000)
+        what, sep, _ = key.partition(REACH_ERROR)
+        if sep and (reached := reaching(what)) is not None:
+            factor, unit = reached.scale
+            return Metric(key, f"{reached.label} error {where}", unit or "number", scale=factor)
         if key.startswith("state_nrmse_"):
             return Metric(key, f"state NRMSE {where}")
         return super().metric(key)
 
     def numbers(self, settings: DynamicsCheckSettings, h: dict[str, Any]) -> list[Number]:
-        """The open-loop fingertip error where the state has a fingertip, else the state's NRMSE."""
-        tips = [k for k in h if k.startswith("tip_error_mean_")]
-        return [n for k in (tips or [k for k in h if k.startswith("state_nrmse_")]) if (n := self.metric(k).number(h))]
+        """The open-loop error of what reaches for the goal (Reacher's fingertip) where the layout has one,
+        else the state's NRMSE."""
+        reach = [k for k in h if REACH_ERROR in k]
+        return [n for k in (reach or [k for k in h if k.startswith("state_nrmse_")]) if (n := self.metric(k).number(h))]
 
     def report(self, s: DynamicsCheckSummary, settings: DynamicsCheckSettings, console: Console) -> None:
         keys = s.keys()
-        tip = {k: v for k, v in keys.items() if k.startswith("tip_error_mean_h")}
+        reach = [(k, v, _reach_scale(k)) for k, v in keys.items() if REACH_ERROR in k and not k.endswith("_final")]
         console.print("open-loop error: " + ", ".join(
-            [f"{k.removeprefix('tip_error_mean_')} {v * 1000:.1f} mm" for k, v in tip.items()]
+            [f"{k.rsplit('_', 1)[-1]} {v * factor:.1f} {unit}".rstrip() for k, v, (factor, unit) in reach]
             or [f"{k.removeprefix('state_nrmse_')} {v:.3f}" for k, v in keys.items() if k.startswith("state_nrmse_h")]))
         console.print(f"worst entry: {s.worst_dimension} ({s.worst_dimension_nrmse:.3f} after "
                       f"{s.worst_dimension_horizon} steps); written: {s.run_dir}/error_by_dimension.csv, "

@@ -9,9 +9,9 @@ import mujoco
 import numpy as np
 import pytest
 
+from motorlab.dynamics.layouts import layout_for
 from motorlab.dynamics.planar_arm import PlanarArm
 from motorlab.dynamics.reacher_sim import arm_models, closed_form_arm, rollout_reacher, sample_initial_states
-from motorlab.dynamics.state import layout_for
 from motorlab.errors import MotorlabError
 
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level

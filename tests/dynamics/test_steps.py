@@ -37,7 +37,7 @@ def test_collect_fit_check_mpc(pipeline, tmp_path):
     assert_ok(proc)
     check = read_summary(tmp_path / "check")
     assert check["tip_error_mean_h1"] < check["tip_error_mean_final"]  # open-loop error grows with the horizon
-    for name in ("error_vs_horizon", "tip_error", "traces"):
+    for name in ("error_vs_horizon", "reach_error", "traces"):
         assert_png(tmp_path / "check" / "plots" / f"{name}.png")
 
     proc = run_cli("mpc", "Reacher-v5", "--model", pipeline / "model", "--episodes", "2", "--horizon", "3",
