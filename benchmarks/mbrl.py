@@ -34,7 +34,7 @@ Development and headline (benchmarks/provenance.py, Harness)
   (scripts/devlog_from_history.py).
 
 What runs
-  The loop: motorlab.kinds.control.MBRL (collect with MPC on the last model -> refit the ensemble ->
+  The loop: motorlab.kinds.planning.MBRL (collect with MPC on the last model -> refit the ensemble ->
   evaluate; round 1 random), 5 seeds, each in its own process, 2 at a time (--loop-jobs; the
   loop plans on one torch thread, so each run has a core to itself; --loop-jobs 1: one at a time, alone
   on the machine). Its settings are the loop's DEFAULTS (motorlab's, and the env
@@ -57,9 +57,9 @@ What runs
   learner's last evaluation at or before each, per seed and over seeds, beside the first hit; a run
   that stopped at the threshold before a budget carries its last evaluation, and says so.
   Evaluation episodes (both learners): seed s's episode j resets with s * 1,000,000 + 900,000 + j, the
-  loop's own evaluation seeds (motorlab.control.mbrl), the same at every evaluation; SAC seed s and loop
+  loop's own evaluation seeds (motorlab.planning.mbrl), the same at every evaluation; SAC seed s and loop
   seed s meet the same 10 initial states. Evaluation steps are never counted as env steps.
-  The arm's oracle: motorlab.control.oracle.oracle_episodes, MPC on the true simulator, on seed s's
+  The arm's oracle: motorlab.planning.oracle.oracle_episodes, MPC on the true simulator, on seed s's
   evaluation reset seeds, for each loop seed s (SAC seed s uses the same threshold). It costs ~0.2 s
   per control step, so by default it plays --oracle-episodes 3 of the 10 (the first 3) per seed;
   the threshold compares the learners' mean over 10 episodes to the oracle's mean over those 3 (the
@@ -150,12 +150,15 @@ import argparse
 import csv
 import importlib
 import json
+import os
 import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 from pathlib import Path
+
+from motorlab.processes import die_with_parent
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
@@ -198,7 +201,7 @@ PLAN_MS_TARGET = 50.0
 WALL_TARGET_S = 40 * 60
 QUICK = {"seeds": [0], "sac_steps": 2000, "oracle_episodes": 2}
 QUICK_LOOP = {"budget": 300, "rounds": 8}  # rounds: a cap on the smoke run's time (early pendulum episodes are short)
-# the loop's evaluation reset seeds (motorlab.control.mbrl.SEED_STRIDE, EVAL_OFFSET; checked in main)
+# the loop's evaluation reset seeds (motorlab.planning.mbrl.SEED_STRIDE, EVAL_OFFSET; checked in main)
 SEED_STRIDE, EVAL_OFFSET = 1_000_000, 900_000
 
 
@@ -301,7 +304,8 @@ def run_sac(env_id: str, seed: int, cap: int, eval_every: int, seeds: list[int],
 def in_processes(fn, jobs: list[tuple], workers: int, label) -> list:
     """fn(*job) for every job in spawned processes, `workers` at a time; results in job order."""
     out: list = [None] * len(jobs)
-    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+    with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=die_with_parent,
+                             initargs=(os.getpid(),)) as pool:  # a killed benchmark leaves no worker training
         futures = {pool.submit(fn, *job): i for i, job in enumerate(jobs)}
         for fut in as_completed(futures):
             out[futures[fut]] = fut.result()
@@ -317,7 +321,7 @@ def run_oracle(env_id: str, seed: int, seeds: list[int], settings: dict) -> dict
     import numpy as np
     import torch
 
-    from motorlab.control.oracle import oracle_episodes
+    from motorlab.planning.oracle import oracle_episodes
 
     torch.set_num_threads(1)
     started = time.perf_counter()
@@ -385,7 +389,7 @@ def run_loop(settings: dict, out_dir: Path) -> dict:
     too: the same numbers at any --loop-jobs); its learning curve from out_dir/curve.csv."""
     import torch
 
-    from motorlab.kinds.control import MBRL, MbrlSettings
+    from motorlab.kinds.planning import MBRL, MbrlSettings
 
     torch.set_num_threads(1)
 
@@ -398,7 +402,7 @@ def run_loop(settings: dict, out_dir: Path) -> dict:
     if (out_dir / "summary.json").is_file():  # finished in an earlier invocation: read back, not run again
         from types import SimpleNamespace
 
-        from motorlab.control.mbrl import check_resumable
+        from motorlab.planning.mbrl import check_resumable
 
         check_resumable(out_dir, resolved.loop_plan(), resume=True)  # the loop's own settings, unchanged
         summary = SimpleNamespace(**json.loads((out_dir / "summary.json").read_text()))
@@ -666,7 +670,7 @@ def eval_interval(name: str, budget: int, overrides: dict) -> int:
     episodes that end early (the pendulum) is shorter: capped at the loop's STEPS_PER_ROUND."""
     import gymnasium as gym
 
-    from motorlab.kinds.control import STEPS_PER_ROUND, MbrlSettings
+    from motorlab.kinds.planning import STEPS_PER_ROUND, MbrlSettings
     from motorlab.user_modules import split_env_id
 
     resolved = MbrlSettings(**loop_settings(name, 0, budget, None, None, overrides))
@@ -713,8 +717,8 @@ def fixed_budget_table(loop: list[dict], sac: list[dict], budgets: list[int]) ->
 def main(argv: list[str] | None = None) -> None:
     args = parse(argv)
     name, env = args.env, ENVS[args.env]
-    from motorlab.control import mbrl as loop_module
-    from motorlab.kinds.control import MbrlSettings
+    from motorlab.kinds.planning import MbrlSettings
+    from motorlab.planning import mbrl as loop_module
 
     if (loop_module.SEED_STRIDE, loop_module.EVAL_OFFSET) != (SEED_STRIDE, EVAL_OFFSET):
         raise SystemExit("the loop's evaluation reset seeds changed: update SEED_STRIDE, EVAL_OFFSET here")
@@ -871,7 +875,7 @@ def main(argv: list[str] | None = None) -> None:
             "meets_threshold": [meets({"return_mean": by_seed[s]["return_mean"],
                                        "return_min": min(by_seed[s]["returns"])}, env["on"], thresholds[s])
                                 for s in loop_seeds],
-            "note": "the oracle (motorlab.control.oracle: MPC on the true simulator) with the loop's planner "
+            "note": "the oracle (motorlab.planning.oracle: MPC on the true simulator) with the loop's planner "
                     f"settings, on each loop seed's {EVAL_EPISODES} evaluation reset seeds: the return the loop's "
                     "planner reaches with a perfect model; a learned model's loop can match it, not beat it "
                     "(but for the planner's own randomness)"}

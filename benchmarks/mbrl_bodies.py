@@ -16,7 +16,7 @@ joint, excitations in [0, 1]), even seeds motor arms (bodies:GeneratedArm-sN-v0)
 Per body, on the same 10 evaluation episodes (reset seeds N * 1,000,000 + 900,000 + j, j < 10: the loop's
 own evaluation seeds with its seed = N, so a headline body meets episodes no development run played):
   random   uniform random actions (the action space seeded with each episode's reset seed)
-  oracle   motorlab.control.oracle.oracle_episodes: CEM on the true simulator, its defaults (horizon 15,
+  oracle   motorlab.planning.oracle.oracle_episodes: CEM on the true simulator, its defaults (horizon 15,
            population 100, 3 iterations, 10 elites), the planner seeded with N
   one-shot as a user runs it, through motorlab's Python API (the CLI's steps): dynamics collect (400
            random episodes) -> dynamics fit --learn-reward -> mpc with the user's torch reward
@@ -70,13 +70,15 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+from motorlab.processes import die_with_parent
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from provenance import Harness, git_state, seed_list  # noqa: E402  (benchmarks/ is the script's folder)
 
 NAME = "mbrl_bodies"
 HEADLINE_BODIES = list(range(100, 110))
-SEED_STRIDE, EVAL_OFFSET = 1_000_000, 900_000  # motorlab.control.mbrl's evaluation reset seeds (checked in main)
+SEED_STRIDE, EVAL_OFFSET = 1_000_000, 900_000  # motorlab.planning.mbrl's evaluation reset seeds (checked in main)
 TARGETS = {"loop": 0.70, "mpc_user": 0.60, "mpc_learned": 0.50}
 K_NEEDED, N_JUDGED = 8, 10
 BODY_RESULT = "body.json"
@@ -162,8 +164,8 @@ def step_fields(seed: int, budgets: Budgets) -> dict[str, dict[str, Any]]:
 
 
 def kinds() -> dict[str, Any]:
-    from motorlab.kinds.control import MBRL, MPC
     from motorlab.kinds.dynamics import DYNAMICS_COLLECT, DYNAMICS_FIT
+    from motorlab.kinds.planning import MBRL, MPC
 
     return {"collect": DYNAMICS_COLLECT, "fit": DYNAMICS_FIT, "mpc_user": MPC, "mpc_learned": MPC, "mbrl": MBRL}
 
@@ -263,7 +265,7 @@ def oracle_returns(env_id: str, seed: int, resets: list[int], planner: dict[str,
     """The oracle's returns and its median planning time per control step (ms)."""
     import numpy as np
 
-    from motorlab.control.oracle import oracle_episodes
+    from motorlab.planning.oracle import oracle_episodes
 
     result = oracle_episodes(env_id, len(resets), resets, seed=seed, **planner)
     return [float(x) for x in result.returns], float(np.median(result.plan_ms))
@@ -471,7 +473,8 @@ def baselines_of(seed: int, root: Path | None, budgets: Budgets) -> dict[str, An
 
 def in_processes(jobs: list[tuple], workers: int) -> dict[int, dict[str, Any]]:
     out = {}
-    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+    with ProcessPoolExecutor(workers, mp_context=get_context("spawn"), initializer=die_with_parent,
+                             initargs=(os.getpid(),)) as pool:  # a killed benchmark leaves no worker training
         futures = {pool.submit(run_body, *job): job[0] for job in jobs}
         for fut in as_completed(futures):
             r = fut.result()
@@ -483,7 +486,7 @@ def in_processes(jobs: list[tuple], workers: int) -> dict[int, dict[str, Any]]:
 
 def main(argv: list[str] | None = None) -> None:
     args = parse(argv)
-    from motorlab.control import mbrl as loop_module
+    from motorlab.planning import mbrl as loop_module
 
     if (loop_module.SEED_STRIDE, loop_module.EVAL_OFFSET) != (SEED_STRIDE, EVAL_OFFSET):
         raise SystemExit("the loop's evaluation reset seeds changed: update SEED_STRIDE, EVAL_OFFSET here")

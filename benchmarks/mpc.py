@@ -27,13 +27,13 @@ import numpy as np
 import torch
 from provenance import Recorder  # benchmarks/provenance.py: the script's folder is on sys.path
 
-from motorlab.control.mpc_episodes import build_policy, run_episodes
 from motorlab.dynamics.layouts.reacher import REACHER
 from motorlab.dynamics.model import load_model
-from motorlab.dynamics.rewards import reacher_distance
+from motorlab.dynamics.planner_rewards import reacher_distance
 from motorlab.envs import EnvConfig, make_env
-from motorlab.kinds.control import MpcSettings
 from motorlab.kinds.dynamics import DYNAMICS_COLLECT, DYNAMICS_FIT
+from motorlab.kinds.planning import MpcSettings
+from motorlab.planning.mpc_episodes import build_policy, run_episodes
 
 TARGETS = {"plan_ms_median": 5.0, "return_mean": -4.0, "final_distance_mean": 0.010, "pipeline_seconds": 180.0}
 # The time targets were set on a machine where the reference planner took 29.7 ms a step

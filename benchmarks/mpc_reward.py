@@ -22,7 +22,7 @@ What runs
   same arithmetic in benchmarks/user_reacher_reward.py, `--reward user_reacher_reward:reward` with
   benchmarks/ on sys.path, on the model without heads), "learned" (the reward head, on the model with
   it), and for information "builtin_on_head_model" (the bundled reward on the model with the head).
-  Planner: motorlab.control.mpc_episodes.build_policy(env, "Reacher-v5", model, "cem", seed, reward=...,
+  Planner: motorlab.planning.mpc_episodes.build_policy(env, "Reacher-v5", model, "cem", seed, reward=...,
   propagation=..., horizon=15, population=100, iterations=5), one env, torch on 1 thread, CPU.
 
 Measured
@@ -58,10 +58,10 @@ sys.path.insert(0, str(HERE))  # benchmarks/user_reacher_reward.py, as a user's 
 
 from provenance import Recorder  # noqa: E402  (benchmarks/ is the script's folder)
 
-from motorlab.control.mpc_episodes import build_policy  # noqa: E402
 from motorlab.dynamics.collection import collect_transitions  # noqa: E402
 from motorlab.dynamics.train import fit_model  # noqa: E402
 from motorlab.envs import EnvConfig, make_env  # noqa: E402
+from motorlab.planning.mpc_episodes import build_policy  # noqa: E402
 
 ENV_ID = "Reacher-v5"
 USER_REWARD = "user_reacher_reward:reward"

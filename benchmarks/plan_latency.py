@@ -38,12 +38,12 @@ def latency(name: str, steps: int, overrides: dict[str, str]) -> dict:
     import numpy as np
     import torch
 
-    from motorlab.control.mbrl import env_config
-    from motorlab.control.mpc_episodes import build_policy
     from motorlab.dynamics.collection import collect_transitions
     from motorlab.dynamics.train import fit_model
     from motorlab.envs import make_env
-    from motorlab.kinds.control import MbrlSettings
+    from motorlab.kinds.planning import MbrlSettings
+    from motorlab.planning.mbrl import env_config
+    from motorlab.planning.mpc_episodes import build_policy
 
     torch.set_num_threads(1)
     spec = ENVS[name]

@@ -1,5 +1,5 @@
 """Reacher-v5's reward on observations, written as a user would: `--reward user_reacher_reward:reward`
-(with benchmarks/ on the path). The same arithmetic as motorlab.dynamics.rewards.reacher_obs_v5, so
+(with benchmarks/ on the path). The same arithmetic as motorlab.dynamics.planner_rewards.reacher_obs_v5, so
 benchmarks/mpc_reward.py can time a user's reward against the bundled one."""
 
 import torch

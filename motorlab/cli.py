@@ -1,4 +1,4 @@
-"""The `motorlab` command: one sub-command per `Command` in motorlab.commands, each made from its
+"""The `motorlab` command: one sub-command per `Command` in motorlab.registry, each made from its
 settings model by motorlab.commandline. Nothing here knows a command's options.
 
 User mistakes (motorlab.errors.MotorlabError, invalid settings, Click's usage errors) and what the
@@ -26,9 +26,9 @@ from rich.markup import escape  # noqa: E402
 
 from motorlab.command import Command  # noqa: E402
 from motorlab.commandline import Given, click_command  # noqa: E402
-from motorlab.commands import COMMANDS, GROUPS  # noqa: E402
 from motorlab.errors import MotorlabError, StorageError  # noqa: E402
 from motorlab.processes import stopped_by_signals  # noqa: E402
+from motorlab.registry import COMMANDS, GROUPS  # noqa: E402
 from motorlab.user_modules import import_modules  # noqa: E402
 
 HELP = (

@@ -378,8 +378,11 @@ class RatioInterval:
         return f"95% bootstrap CI over {self.seeds[0]} and {self.seeds[1]} seeds"
 
     def text(self) -> str:
-        """E.g. "[6.1, 12.5]", "[6.1, ∞]", "[0, 2.4]"."""
-        return f"[{self.low:.3g}, {'∞' if math.isinf(self.high) else f'{self.high:.3g}'}]"
+        """E.g. "[6.1, 12.5]"; an open end as an open bracket: "[6.1, ∞)", "(0, 2.4]" (the ratio is only
+        known to be below 2.4), "(0, ∞)": a reader sees a bound, not a measured 0."""
+        low = "(0" if self.low == 0 else f"[{self.low:.3g}"
+        high = "∞)" if math.isinf(self.high) else f"{self.high:.3g}]"
+        return f"{low}, {high}"
 
     def to_json(self) -> dict[str, Any]:
         return {"low": self.low, "high": None if math.isinf(self.high) else self.high,
@@ -418,7 +421,7 @@ class StepsRatio:
 
     @property
     def text(self) -> str:
-        """E.g. "= 6, 95% bootstrap CI over 5 and 5 seeds [4, ∞]", "> 30, no interval: ..."."""
+        """E.g. "= 6, 95% bootstrap CI over 5 and 5 seeds [4, ∞)", "> 30, no interval: ..."."""
         sign = {"exact": "=", "lower": ">", "upper": "<"}.get(self.bound)
         point = "unknown (both medians censored)" if sign is None else f"{sign} {self.ratio:.3g}"
         return f"{point}, {self.ci.method} {self.ci.text()}" if self.ci else f"{point}, {self.ci_method}"

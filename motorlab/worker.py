@@ -33,8 +33,8 @@ from rich.console import Console  # noqa: E402
 
 from motorlab import jobs, trackers  # noqa: E402
 from motorlab.cli import one_line_errors  # noqa: E402
-from motorlab.commands import BY_NAME  # noqa: E402
 from motorlab.errors import MotorlabError  # noqa: E402
+from motorlab.registry import BY_NAME  # noqa: E402
 from motorlab.user_modules import import_modules  # noqa: E402
 
 

@@ -57,7 +57,7 @@ EACH_TEST = {"tests/test_notebooks.py"}
 SECONDS = {
     "tests/rl/test_tqc.py": 5, "tests/rl/test_crossq.py": 9, "tests/rl/test_recurrent_ppo.py": 6,
     "tests/rl/test_algos.py": 3, "tests/envs/test_catalog.py": 3, "tests/test_command.py": 3,
-    "ray": 100, "tests/envs/test_upkie.py": 25, "sar-hand-quick": 110, "hand": 110, "tests/control/test_mbrl.py": 90,
+    "ray": 100, "tests/envs/test_upkie.py": 25, "sar-hand-quick": 110, "hand": 110, "tests/planning/test_mbrl.py": 90,
     "tests/tuning/test_tune.py": 75, "tests/envs/test_user_env.py": 35, "tests/studies/test_schedule.py": 30,
     "tests/synergies/test_signals.py": 20, "tests/rl/test_train.py": 50, "tests/trackers/test_trackers.py": 30,
     "tests/adversarial/test_fuzz.py": 25, "tests/report/test_html.py": 31, "tests/rl/test_checkpoint.py": 31, "tests/test_recipes.py": 27,
@@ -80,9 +80,9 @@ SECONDS = {
     "tests/adversarial/test_user_code_failures.py": 25, "tests/adversarial/test_spaces_generated.py": 15,
     "tests/api/test_errors.py": 15, "tests/adversarial/test_os_errors.py": 6, "tests/test_claims.py": 4,
     "tests/adversarial/test_run_folder_lifecycle.py": 3, "tests/adversarial/test_credentials.py": 3,
-    "tests/control/test_oracle.py": 12, "tests/control/test_planning.py": 20,
+    "tests/planning/test_oracle.py": 12, "tests/planning/test_planning.py": 20,
     "tests/envs/test_cartpole_swingup.py": 3, "tests/studies/test_mbrl_cartpole_recipe.py": 40,
-    "tests/dynamics/test_diverging_episodes.py": 5,
+    "tests/dynamics/test_diverging_episodes.py": 5, "tests/dynamics/test_layouts.py": 3,
     # issue 53's
     "tests/test_intervals_generated.py": 20, "tests/test_bodies.py": 20, "tests/test_mbrl_bodies.py": 11,
     "tests/dynamics/test_colored_actions.py": 18, "tests/test_docs_numbers.py": 8, "tests/test_benchmark_mbrl.py": 5,
@@ -94,7 +94,7 @@ SECONDS = {
     "tests/synergies/test_ablation.py": 35,  # issue 55's
     # issue 54's
     "tests/rl/test_sar_presets.py": 22, "tests/rl/test_wall_budget.py": 25, "tests/test_benchmark_learner_per_hour.py": 3,
-    "tests/test_gpu_check.py": 3, "tests/test_benchmark_sar_hand_scaled.py": 5, "tests/control/test_planner_registry.py": 5,
+    "tests/test_gpu_check.py": 3, "tests/test_benchmark_sar_hand_scaled.py": 5, "tests/planning/test_planner_registry.py": 5,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[sar_synergies]": 85,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[your_own_body]": 45,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[robust_pendulum]": 40,

@@ -125,10 +125,10 @@ def _random_distances(env_id: str, reset: int) -> np.ndarray:
 
 
 def _oracle_distances(env_id: str, reset: int) -> np.ndarray:
-    """The same for the oracle, as motorlab.control.oracle.oracle_episodes plays it (CEM on the true
+    """The same for the oracle, as motorlab.planning.oracle.oracle_episodes plays it (CEM on the true
     simulator), on a small budget (horizon 10, population 50, 2 iterations), the distances recorded."""
-    from motorlab.control.oracle import SimulatorScorer, physics_state
-    from motorlab.control.planners.cem import CEMPlanner
+    from motorlab.planning.oracle import SimulatorScorer, physics_state
+    from motorlab.planning.planners.cem import CEMPlanner
 
     env, scorer = gym.make(env_id), SimulatorScorer(env_id)
     planner = CEMPlanner(scorer, env.action_space.low, env.action_space.high, horizon=10, population=50,

@@ -16,7 +16,6 @@ from rich.console import Console
 from motorlab.command import Command, NoFolder
 from motorlab.errors import MotorlabError
 from motorlab.kinds import KINDS
-from motorlab.kinds.control import MBRL, MPC, MbrlSummary, MpcSummary
 from motorlab.kinds.dynamics import (
     DYNAMICS_CHECK,
     DYNAMICS_COLLECT,
@@ -28,6 +27,7 @@ from motorlab.kinds.dynamics import (
 from motorlab.kinds.evaluate import EVALUATE, ZEROSHOT, EvaluateSummary, ZeroshotSummary
 from motorlab.kinds.export import EXPORT, Exported
 from motorlab.kinds.media import COMPARE, VIDEO, VideoSummary
+from motorlab.kinds.planning import MBRL, MPC, MbrlSummary, MpcSummary
 from motorlab.kinds.report import PLOT, REPORT
 from motorlab.kinds.robustness import ROBUSTNESS, RobustnessSummary
 from motorlab.kinds.synergies import COLLECT, FIT, VAF, CollectSummary, FitSummary, VafSummary

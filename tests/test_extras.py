@@ -183,7 +183,7 @@ def test_missing_ray(monkeypatch, tmp_path):
 
 
 def test_missing_evotorch(monkeypatch):
-    from motorlab.control.planners import make_planner
+    from motorlab.planning.planners import make_planner
 
     def score(states, actions, goals):
         return -actions.square().sum((1, 2))

@@ -26,7 +26,7 @@ def test_seeds_parse_and_odd_bodies_are_muscle_arms():
 
 
 def test_every_method_meets_the_loops_evaluation_episodes_fresh_for_each_body():
-    from motorlab.control import mbrl
+    from motorlab.planning import mbrl
 
     assert (mbrl.SEED_STRIDE, mbrl.EVAL_OFFSET) == (mb.SEED_STRIDE, mb.EVAL_OFFSET)
     fields = mb.step_fields(7, mb.FULL)
@@ -51,7 +51,7 @@ def test_bodies_get_motorlabs_defaults_and_nothing_of_their_own():
     for name in a:
         differ = {k for k in a[name] if a[name][k] != b[name][k]}
         assert differ <= {"env", "seed"}, (name, differ)
-    from motorlab.kinds.control import MbrlSettings
+    from motorlab.kinds.planning import MbrlSettings
 
     resolved = {s: mb.resolved_settings(s, mb.FULL) for s in (0, 1, 2, 105)}
     common = mb.common_settings(list(resolved), resolved)  # motor and muscle arms alike, once the body is named

@@ -21,7 +21,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # as the CLI: videos render offscreen
 
 from motorlab.api import dynamics, synergies  # noqa: E402
 from motorlab.api.checks import api_function  # noqa: E402
-from motorlab.api.control import mbrl, mpc  # noqa: E402
+from motorlab.api.planning import mbrl, mpc  # noqa: E402
 from motorlab.api.policies import Run, compare, evaluate, robustness, train, video, zeroshot  # noqa: E402
 from motorlab.api.studies import run_recipe, sweep, tune  # noqa: E402
 from motorlab.api.views import PolicyFunction, Result, Study, Sweep, Tune, load  # noqa: E402

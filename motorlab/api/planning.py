@@ -9,7 +9,7 @@ from motorlab.api import running
 from motorlab.api.checks import api_function
 from motorlab.api.running import Track
 from motorlab.api.views import Result
-from motorlab.kinds.control import MBRL, MPC
+from motorlab.kinds.planning import MBRL, MPC
 
 
 @api_function

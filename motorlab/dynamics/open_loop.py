@@ -82,7 +82,7 @@ def rollout_error(model: ForwardModel, data, rows: np.ndarray, steps: int = ROLL
     episodes). A row's path stops at its episode's end. None when no start has a next step; a step
     ahead no path reaches repeats the last measured one.
 
-    What the planner's termination probability reads (motorlab.control.mpc.EndProbability): how
+    What the planner's termination probability reads (motorlab.planning.mpc.EndProbability): how
     far a predicted state may be from the true one t steps ahead.
 
     Why the median, not the root mean square: a few rows no model predicts (InvertedPendulum's cart

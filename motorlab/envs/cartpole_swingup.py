@@ -15,7 +15,7 @@ rail, l = 0.6.
 
 Reward (PETS'): exp(-|tip - (0, l)|^2 / l^2) - 0.01 |a|^2, the tip read from the observation after
 the step: near 1 with the pole upright above the rail's centre, exp(-4) ~ 0.018 hanging down there.
-It is a function of the next observation and the action alone; motorlab.dynamics.rewards'
+It is a function of the next observation and the action alone; motorlab.dynamics.planner_rewards'
 `cartpole_swingup` computes it in torch with the same arithmetic, for the planner.
 
 Importing this module imports MuJoCo; registering the id does not (motorlab.envs registers it

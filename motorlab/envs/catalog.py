@@ -16,7 +16,7 @@ the env class's `metadata["motorlab"]`, the first family pattern that matches (a
 the bundled ones), the defaults. Ids are matched without their `module:` part.
 
 Domain floor: imports Gymnasium and the ground floor only; the planner's rewards are named by
-dotted path ("motorlab.dynamics.rewards:reacher_v5"), resolved by motorlab.dynamics.rewards.
+dotted path ("motorlab.dynamics.planner_rewards:reacher_v5"), resolved by motorlab.dynamics.planner_rewards.
 """
 
 from __future__ import annotations
@@ -42,13 +42,13 @@ PLANNER_KEYS = ("horizon", "population", "iterations", "elites", "optimizer", "t
 MODEL_KEYS = ("hidden", "nonlinearity", "epochs", "ensemble", "batch_size", "lr",
               "nll_beta")  # the model-based loop's forward model
 LOOP_KEYS = ("episodes_per_round", "collect_steps", "collect_noise")  # the model-based loop's rounds
-_REWARDS = "motorlab.dynamics.rewards"  # the bundled planner rewards live there (a layer above)
+_REWARDS = "motorlab.dynamics.planner_rewards"  # the bundled planner rewards live there (a layer above)
 
 
 @dataclass(frozen=True)
 class Planning:
     """The planner's task on one state layout: a reward and a termination, each a
-    "module:function" name or a callable (motorlab.dynamics.rewards resolves them).
+    "module:function" name or a callable (motorlab.dynamics.planner_rewards resolves them).
     `state_size`: the state size they index into (a model whose state differs is refused)."""
 
     layout: str
@@ -276,7 +276,7 @@ _exact("Reacher-v5", planning=(_plan("reacher", "reacher_v5", state_size=8),
 _exact("Reacher-v4", planning=(_plan("reacher", "reacher_v4", state_size=8),
                                _plan("observation", "reacher_obs_v4", state_size=11)))
 # Pusher looks 25 steps ahead (mbrl-lib's PETS Pusher: 25) with 3 iterations, the default's cost (15 x 5).
-# The planner on the true simulator (motorlab.control.oracle; seed 0's first 3 evaluation episodes, one
+# The planner on the true simulator (motorlab.planning.oracle; seed 0's first 3 evaluation episodes, one
 # run each): horizon 15 x 5 iterations -41.5 (-50.1, -38.1, -36.4); 25 x 3 -38.7; 25 x 5 -36.2 at 1.7x
 # the cost; 40 x 3 -39.2. On each benchmark seed's 10 evaluation episodes (benchmarks/mbrl.py --ceiling),
 # 25 x 3 scores -36.5, -34.8, -38.4, -38.6 and -35.2: SAC's IQM at 30k steps (-37.1) on 3 of 5.

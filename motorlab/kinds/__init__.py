@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.kinds.ablate import ABLATE
-from motorlab.kinds.control import MBRL, MPC
 from motorlab.kinds.dynamics import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
 from motorlab.kinds.evaluate import EVALUATE, ZEROSHOT
 from motorlab.kinds.import_emg import IMPORT_EMG
 from motorlab.kinds.media import COMPARE, VIDEO
+from motorlab.kinds.planning import MBRL, MPC
 from motorlab.kinds.robustness import ROBUSTNESS
 from motorlab.kinds.similarity import SIMILARITY
 from motorlab.kinds.synergies import COLLECT, FIT, VAF

@@ -13,17 +13,17 @@ from rich.console import Console
 from rich.markup import escape
 
 from motorlab import trackers
-from motorlab.control import planners
 from motorlab.envs import ENV_KEYS, EnvConfig, EnvSettings, check_env_id, env_record, facts, make_env
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.kinds.dynamics import ModelSettings, StateLayoutName, state_field, with_env
+from motorlab.planning import planners
 from motorlab.report.results import Metric
 from motorlab.runs import MetricsWriter, atomic_write_npz
 from motorlab.settings import MAX_SEED, Settings, Summary, UserCode
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
 
 if TYPE_CHECKING:  # the planner's domain code (torch) is imported where a run needs it
-    from motorlab.control.mpc import FaultCounts
+    from motorlab.planning.mpc import FaultCounts
 
 
 def _planner_function(what: str) -> Callable[[str], None]:
@@ -32,7 +32,7 @@ def _planner_function(what: str) -> Callable[[str], None]:
 
     def check(spec: str) -> None:
         if ":" in spec:
-            from motorlab.dynamics.rewards import load_function  # torch: only where a function is named
+            from motorlab.dynamics.planner_rewards import load_function  # torch: only where a function is named
 
             load_function(spec, what)
 
@@ -61,7 +61,7 @@ class PlannerSettings(Settings):
     optimizer: str = Field("cem", description=planners.about())
     temperature: float = Field(0.5, gt=0, description="MPPI: weights exp(standardized return / temperature); "
                                "smaller is greedier")
-    # white by default: on Pusher-v5's true simulator (motorlab.control.oracle, horizon 25, 3 iterations, seed 0's
+    # white by default: on Pusher-v5's true simulator (motorlab.planning.oracle, horizon 25, 3 iterations, seed 0's
     # 10 evaluation episodes) white noise scored -36.5, beta 1 -38.0, 2 -38.0, 2.5 -37.5 (not better, within noise)
     noise_beta: float = Field(0.0, ge=0, description="Colour of the sampled action sequences' noise (iCEM): power "
                               "falling as 1/f^beta along the horizon; 0 white, 2 smooth (red); cem and mppi")
@@ -89,7 +89,7 @@ class PlannerSettings(Settings):
     @field_validator("optimizer")
     @classmethod
     def _known_planner(cls, v: str) -> str:
-        if v not in planners.names():  # one line with close matches (motorlab.control.planners)
+        if v not in planners.names():  # one line with close matches (motorlab.planning.planners)
             raise MotorlabError(f"--optimizer {v!r}: choose {', '.join(planners.names())}"
                                 f"{did_you_mean(v, planners.names())}.")
         return v
@@ -141,7 +141,7 @@ PLANNED_ENV_REFUSED = {
 
 class PlannerFaultsSummary(Summary):
     """The numerical faults of a run that plans: episodes that ended on one, and the non-finite
-    predictions and rewards its planner rejected (motorlab.control.mpc.PlannerFaults)."""
+    predictions and rewards its planner rejected (motorlab.planning.mpc.PlannerFaults)."""
 
     numerical_faults: int = 0  # episode_faults + planner_faults
     episode_faults: int = 0  # episodes ended on a numerical fault (NaN/Inf or a diverging simulation)
@@ -241,7 +241,7 @@ class MpcKind(StepKind[MpcSettings, MpcSummary]):
 
     def run(self, settings: MpcSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> MpcSummary:
-        from motorlab.control.mpc_episodes import build_policy, planner_fault_line, record_video, run_episodes
+        from motorlab.planning.mpc_episodes import build_policy, planner_fault_line, record_video, run_episodes
         from motorlab.report.dynamics_plots import distance_over_time
 
         s = settings
@@ -390,7 +390,7 @@ class MbrlSettings(PlannerSettings, ModelSettings, EnvSettings):
         return max(1, round(STEPS_PER_ROUND / limit)) if limit else 1
 
     def loop_plan(self) -> Any:
-        from motorlab.control.mbrl import LoopPlan, layout_name
+        from motorlab.planning.mbrl import LoopPlan, layout_name
 
         fit = self.fit_args()
         holdout_every = round(1 / self.valid_fraction) if self.valid_fraction > 0 else 0
@@ -499,8 +499,8 @@ class MbrlKind(StepKind[MbrlSettings, MbrlSummary]):
             progress: bool = True) -> MbrlSummary:
         import shutil
 
-        from motorlab.control.mbrl import ROUND_JSON, check_resumable, reached, run_loop
-        from motorlab.control.mpc_episodes import planner_fault_line
+        from motorlab.planning.mbrl import ROUND_JSON, check_resumable, reached, run_loop
+        from motorlab.planning.mpc_episodes import planner_fault_line
         from motorlab.report.dynamics_plots import mbrl_curve
 
         s = settings

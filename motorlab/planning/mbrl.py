@@ -34,8 +34,6 @@ import torch
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from motorlab import trackers
-from motorlab.control.mpc import FaultCounts
-from motorlab.control.mpc_episodes import MPCEpisodes, build_policy, planner_fault_line, require_plannable, run_episodes
 from motorlab.dynamics.collection import collect_transitions, episode_arrays
 from motorlab.dynamics.layouts import env_layout
 from motorlab.dynamics.model import MODEL_JSON, ForwardModel, load_model
@@ -43,6 +41,14 @@ from motorlab.dynamics.train import evaluate_rows, fit_model
 from motorlab.dynamics.transitions import TRANSITIONS, Transitions, concatenate, load_transitions
 from motorlab.envs import EnvConfig, env_record, make_env
 from motorlab.errors import MotorlabError
+from motorlab.planning.mpc import FaultCounts
+from motorlab.planning.mpc_episodes import (
+    MPCEpisodes,
+    build_policy,
+    planner_fault_line,
+    require_plannable,
+    run_episodes,
+)
 from motorlab.runs import MetricsWriter, read_json, write_json
 
 ROUND_JSON = "round.json"
@@ -78,7 +84,7 @@ class RoundRecord:
 @dataclass
 class PhaseFaults:
     """The numerical faults of a round's collection or evaluation: its episodes' faults.log lines, and
-    what the planner met (see motorlab.control.mpc.PlannerFaults)."""
+    what the planner met (see motorlab.planning.mpc.PlannerFaults)."""
 
     log: list[str] = field(default_factory=list)
     episodes: int = 0  # episodes that ended on a numerical fault (one line each in `log`)
@@ -282,7 +288,7 @@ class LoopResult:
     records: list[RoundRecord]
     model: ForwardModel  # the last round's
     transitions: Transitions  # every round's
-    task: Any  # the reward and termination the planner scored (motorlab.dynamics.rewards.Task)
+    task: Any  # the reward and termination the planner scored (motorlab.dynamics.planner_rewards.Task)
     faults: PhaseFaults = field(default_factory=PhaseFaults)  # every round's
 
 

@@ -165,7 +165,7 @@ def model_scorer(model, task, discount: float = 1.0, propagation: str = "mean", 
                  generator: torch.Generator | None = None, faults: PlannerFaults | None = None,
                  termination_draws: int = 0, termination_margin: float = 0.0) -> Scorer:
     """Return of each action sequence under the forward model and a task (reward, termination;
-    see motorlab.dynamics.rewards.Task; a None reward or a "learned" termination use the model's heads)
+    see motorlab.dynamics.planner_rewards.Task; a None reward or a "learned" termination use the model's heads)
     or a bare torch reward (state, action, next_state, goal) -> (...,).
 
     Mean propagation predicts the whole path first (`fast_rollout`, a probabilistic member's Gaussian

@@ -17,15 +17,15 @@ import numpy as np
 import torch
 from rich.progress import Progress
 
-from motorlab.control.mpc import FaultCounts, MPCPolicy, PlannerFaults, model_scorer
-from motorlab.control.planners import make_planner
 from motorlab.dynamics.layouts import env_layout
 from motorlab.dynamics.model import ForwardModel, device_for, load_model
-from motorlab.dynamics.rewards import resolve_task
+from motorlab.dynamics.planner_rewards import resolve_task
 from motorlab.envs import EnvConfig, describe_env, env_record, make_env
 from motorlab.envs.spaces import require_actions
 from motorlab.errors import MotorlabError
 from motorlab.faults import fault_line, fault_of
+from motorlab.planning.mpc import FaultCounts, MPCPolicy, PlannerFaults, model_scorer
+from motorlab.planning.planners import make_planner
 from motorlab.report.video import filming, record_episode, write_mp4
 
 
@@ -36,7 +36,7 @@ def build_policy(env, env_id: str | EnvConfig, model: Path | ForwardModel, optim
     """An MPC policy for `env` on a forward model (or the model folder holding one), checked against the
     env and its layout. `env_id`: the env's id, or the EnvConfig it was made from (its --sar makes the
     planner's actions synergies). `reward` and `termination` say what it scores
-    (motorlab.dynamics.rewards.resolve_task); `settings` are the optimizer's (horizon, population,
+    (motorlab.dynamics.planner_rewards.resolve_task); `settings` are the optimizer's (horizon, population,
     iterations, elites or temperature); `explore`: MPCPolicy's exploration noise."""
     cfg = env_config(env_id)
     env_id = cfg.id

@@ -1,6 +1,6 @@
 """The oracle: MPC that plans on the true simulator, the limit MPC on a learned model can reach.
 
-`SimulatorScorer` scores the batched CEM's candidate action sequences (motorlab.control.mpc) by
+`SimulatorScorer` scores the batched CEM's candidate action sequences (motorlab.planning.mpc) by
 rolling each through a private copy of the env, from the controlled env's physics state, and
 summing the env's own rewards (`env.step`'s: any Gymnasium MuJoCo env, a user's with its own reward
 too). The ending step of a candidate that terminates is paid; the steps after it are not simulated.
@@ -13,7 +13,7 @@ mjSTATE_INTEGRATION)` as float64 (`physics_state`): time, qpos, qvel, act, the s
 mocap poses, userdata, plugin state, active equalities, ctrl and the applied forces, i.e. everything
 `mj_step` reads (a superset of mjSTATE_FULLPHYSICS, and of Gymnasium's `set_state(qpos, qvel)`);
 `mj_setState` + `mj_forward` put it into the copy, which then steps exactly as the controlled env
-would (tests/control/test_oracle.py checks it to the last bit on InvertedPendulum-v5 and Reacher-v5).
+would (tests/planning/test_oracle.py checks it to the last bit on InvertedPendulum-v5 and Reacher-v5).
 
 What a user's env must satisfy for the oracle to be exact: its reward and termination are functions
 of that MuJoCo state, the model and the action, and of what its `reset(seed)` draws (the scorer
@@ -45,12 +45,12 @@ import torch
 from gymnasium.wrappers import FlattenObservation, FrameStackObservation, OrderEnforcing, PassiveEnvChecker, TimeLimit
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from motorlab.control.mpc_episodes import env_config, require_plannable
-from motorlab.control.planners.cem import CEMPlanner
 from motorlab.envs import EnvConfig, make_env
 from motorlab.envs.disturbances import mujoco_model_data
 from motorlab.envs.wrappers import NumericalGuard
 from motorlab.errors import MotorlabError
+from motorlab.planning.mpc_episodes import env_config, require_plannable
+from motorlab.planning.planners.cem import CEMPlanner
 
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION  # what `physics_state` reads and the scorer sets
 
@@ -122,7 +122,7 @@ def refuse_hidden_state(cfg: EnvConfig) -> None:
 
 
 class SimulatorScorer:
-    """A `Scorer` (motorlab.control.mpc) on the true simulator: each candidate's return when its actions
+    """A `Scorer` (motorlab.planning.mpc) on the true simulator: each candidate's return when its actions
     are stepped through a private copy of the env (made from the same EnvConfig, sharing no MjData with
     the controlled env) from its start state.
 
@@ -154,7 +154,7 @@ class SimulatorScorer:
     def __call__(self, states: torch.Tensor, actions: torch.Tensor, goals: torch.Tensor) -> torch.Tensor:
         if states.dtype != torch.float64 or states.shape[-1] != self.state_size:
             raise MotorlabError(f"the simulator scorer takes MuJoCo states as float64 (N, {self.state_size}) "
-                                f"(motorlab.control.oracle.physics_state), got {tuple(states.shape)} {states.dtype}.")
+                                f"(motorlab.planning.oracle.physics_state), got {tuple(states.shape)} {states.dtype}.")
         starts = states.cpu().numpy()
         plans = actions.cpu().numpy()
         model, data, step = self.model, self.data, self._target.step
@@ -204,7 +204,7 @@ def oracle_episodes(env: EnvConfig | str, episodes: int, seeds: list[int], *, ho
                     seed: int = 0, progress: bool = False) -> OracleResult:
     """Episodes of MPC that plans on the true simulator: the limit a learned model's MPC can reach.
 
-    Every control step, CEM (motorlab.control.planners.cem.CEMPlanner, warm-started from the last plan, reset
+    Every control step, CEM (motorlab.planning.planners.cem.CEMPlanner, warm-started from the last plan, reset
     at each episode) plans from the env's physics state, scoring candidates with `SimulatorScorer`.
 
     Args:

@@ -1,3 +1,3 @@
 """Report primitives: headline numbers (results.py), figures (PNG, non-interactive matplotlib),
 tables, the HTML report and filming (video.py), below the domain code that uses them; and, above
-it, the commands that show runs (steps.py: video, compare; commands.py: report, plot)."""
+it, the commands that show runs (motorlab.kinds.media: video, compare; motorlab.kinds.report: report, plot)."""

@@ -24,7 +24,7 @@ from motorlab.stats import aggregate, trial_scores
 
 GRID_POINTS = 100
 Curve = Literal["training", "evaluation"]
-LOOP_CURVE = "curve.csv"  # an mbrl loop's rounds (motorlab.control.mbrl.CURVE, a layer above)
+LOOP_CURVE = "curve.csv"  # an mbrl loop's rounds (motorlab.planning.mbrl.CURVE, a layer above)
 LOOP_MODEL = "model"  # an mbrl loop's last model, what "@loop" names in a recipe
 
 

@@ -22,9 +22,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel
 
-from motorlab.commands import COMMANDS
 from motorlab.envs import ENV_KEYS, EnvConfig
 from motorlab.errors import MotorlabError
+from motorlab.registry import COMMANDS
 from motorlab.runs import write_toml
 from motorlab.settings import MAX_INT, MAX_SEED
 

@@ -61,10 +61,10 @@ def test_the_loops_episodes_name_the_faulted_ones_and_the_loop_leaves_them_out(m
     of their transitions, though the guard left their observations finite."""
     from types import SimpleNamespace
 
-    from motorlab.control import mbrl
-    from motorlab.control.mpc import PlannerFaults
-    from motorlab.control.mpc_episodes import run_episodes
     from motorlab.dynamics.layouts import layout_for
+    from motorlab.planning import mbrl
+    from motorlab.planning.mpc import PlannerFaults
+    from motorlab.planning.mpc_episodes import run_episodes
 
     fault_at = {"7": 2, "9": 5}
     cfg = EnvConfig.model_validate({"id": ENV, "kwargs": {"fault_at": fault_at}})

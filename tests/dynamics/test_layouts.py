@@ -13,8 +13,8 @@ from motorlab.dynamics.layouts import check_name, layout_for, reached_of, reachi
 from motorlab.dynamics.layouts.observation import build as observation_layout
 from motorlab.dynamics.state import KeySlice
 from motorlab.errors import MotorlabError
-from motorlab.kinds.control import MbrlSettings
 from motorlab.kinds.dynamics import DynamicsCollectSettings
+from motorlab.kinds.planning import MbrlSettings
 
 NEW_LAYOUT = '''"""`--state mirror`: the observation backwards (a test's layout)."""
 from motorlab.dynamics.layouts.base import LayoutSpec

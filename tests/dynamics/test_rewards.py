@@ -1,4 +1,4 @@
-"""Rewards and terminations the planner scores predicted paths with (motorlab/dynamics/rewards.py):
+"""Rewards and terminations the planner scores predicted paths with (motorlab/dynamics/planner_rewards.py):
 the bundled ones equal the Gymnasium envs' own on real transitions, a user's torch function from
 their package reproduces their env's reward, and every wrong input gets one line naming the fix."""
 
@@ -9,9 +9,9 @@ import pytest
 import torch
 
 from motorlab import user_modules
-from motorlab.dynamics import rewards
+from motorlab.dynamics import planner_rewards as rewards
 from motorlab.dynamics.collection import collect_transitions
-from motorlab.dynamics.rewards import (
+from motorlab.dynamics.planner_rewards import (
     PENDULUM_RAIL_END,
     Task,
     UserFunction,
@@ -216,3 +216,12 @@ def test_load_function_passes_the_module_on():
     assert ARM_REWARD in user_modules.imported_names()
     assert "--termination userpkg.arm_reward: name a function as MODULE:FUNCTION" in one_line_error(
         load_function, ARM_REWARD, what="termination")
+
+
+def test_the_old_module_name_still_works_and_says_where_it_moved():
+    import motorlab.dynamics.rewards as old
+
+    with pytest.warns(DeprecationWarning, match="moved to motorlab.dynamics.planner_rewards.register"):
+        assert old.register is rewards.register
+    with pytest.raises(AttributeError, match="planner_rewards"):
+        old.no_such_name  # noqa: B018

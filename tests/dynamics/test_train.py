@@ -10,17 +10,17 @@ import pytest
 import torch
 from torch.nn import functional as F
 
-from motorlab.control.mpc import model_scorer
-from motorlab.control.planners.cem import CEMPlanner
-from motorlab.control.planners.evotorch import EvoTorchCEM
-from motorlab.control.planners.mppi import MPPIPlanner
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import DEFAULT_NONLINEARITY, ForwardModel, Normalizer, load_model
-from motorlab.dynamics.rewards import reacher_v5
+from motorlab.dynamics.planner_rewards import reacher_v5
 from motorlab.dynamics.train import fit_model, normalized_mse, split_episodes
 from motorlab.dynamics.transitions import load_transitions
 from motorlab.errors import MotorlabError
 from motorlab.kinds.dynamics import ModelSettings
+from motorlab.planning.mpc import model_scorer
+from motorlab.planning.planners.cem import CEMPlanner
+from motorlab.planning.planners.evotorch import EvoTorchCEM
+from motorlab.planning.planners.mppi import MPPIPlanner
 
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level
 
@@ -148,8 +148,8 @@ def test_a_fit_keeps_the_best_epochs_weights_or_the_last():
 
 
 def test_dynamics_fit_keeps_the_best_epoch_and_the_loop_the_last():
-    from motorlab.kinds.control import MbrlSettings
     from motorlab.kinds.dynamics import DynamicsFitSettings
+    from motorlab.kinds.planning import MbrlSettings
 
     assert DynamicsFitSettings.model_fields["keep_weights"].default == "best"
     assert MbrlSettings.model_fields["keep_weights"].default == "last"
@@ -285,7 +285,7 @@ def test_fast_rollout_with_a_reward_head_equals_step_fn(members, probabilistic, 
     """A model with heads plans on the fast path under mean propagation: the same path and reward-head
     predictions as step_fn's, and the same returns in model_scorer (learned reward, and an exact one
     on the head model); the termination column (and a probabilistic member's variances) left out."""
-    from motorlab.dynamics.rewards import Task
+    from motorlab.dynamics.planner_rewards import Task
 
     rng = np.random.default_rng(members)
     torch.manual_seed(members)
@@ -328,7 +328,7 @@ def test_ts_rollout_equals_step_fn_trajectory_sampling(probabilistic, heads, non
     """The planner's TS path draws the same noise as step_fn's "ts" propagation (one seeded generator,
     the same draws in the same order) and so gives the same paths, each row on its member, and the same
     reward-head predictions; model_scorer plans on it (the same returns as stepping by hand)."""
-    from motorlab.dynamics.rewards import Task
+    from motorlab.dynamics.planner_rewards import Task
 
     rng = np.random.default_rng(3)
     torch.manual_seed(3)

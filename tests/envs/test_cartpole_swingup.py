@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from motorlab.dynamics.rewards import cartpole_swingup, resolve_task
+from motorlab.dynamics.planner_rewards import cartpole_swingup, resolve_task
 from motorlab.envs import EnvConfig, facts, make_env
 from motorlab.envs.cartpole_swingup import ACTION_COST, POLE_LENGTH
 
@@ -118,7 +118,7 @@ def test_make_env_builds_it_and_the_catalogue_has_its_reward(env):
     f = facts(ENV_ID)
     [plan] = f.planning
     assert plan.layout == "observation" and plan.state_size == 5
-    assert plan.reward == "motorlab.dynamics.rewards:cartpole_swingup" and plan.termination is None
+    assert plan.reward == "motorlab.dynamics.planner_rewards:cartpole_swingup" and plan.termination is None
     assert f.max_return is None and len(f.obs_labels) == 5 and not f.falls
 
 

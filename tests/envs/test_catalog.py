@@ -69,8 +69,8 @@ def test_bundled_specifics():
     assert facts("Reacher-v5").pid_gains is None and facts("Reacher-v4").state_layout == "reacher"
     assert facts("Reacher-v5").closed_form == "reacher" and facts("Pusher-v5").state_layout == "observation"
     v5, v4 = ({p.layout: p.reward for p in facts(i).planning} for i in ("Reacher-v5", "Reacher-v4"))
-    assert v5 == {"reacher": "motorlab.dynamics.rewards:reacher_v5", "observation":
-                  "motorlab.dynamics.rewards:reacher_obs_v5"}
+    assert v5 == {"reacher": "motorlab.dynamics.planner_rewards:reacher_v5", "observation":
+                  "motorlab.dynamics.planner_rewards:reacher_obs_v5"}
     assert v4["observation"].endswith("reacher_obs_v4")  # v4 scores the state before the step
     assert facts("InvertedPendulum-v5").planning[0].termination.endswith("inverted_pendulum_rail_end")
     assert facts("FetchReach-v4").broken and not facts("AdroitHandDoor-v1").broken
@@ -95,7 +95,7 @@ def test_register_env_exact_and_pattern():
 
 
 def test_the_loop_takes_an_envs_model_and_planner_defaults_and_the_user_overrides_them():
-    from motorlab.kinds.control import MbrlSettings
+    from motorlab.kinds.planning import MbrlSettings
 
     register_env("Pendulum-v1", model={"hidden": [32, 32, 32], "epochs": 7}, planner={"horizon": 9},
                  loop={"collect_steps": 50})
@@ -145,7 +145,7 @@ def test_metadata_facts_and_evaluation_honours_them():
 
 
 def test_planner_reward_declared_for_a_user_env(tmp_path, monkeypatch):
-    from motorlab.dynamics.rewards import UserFunction, builtin_envs, resolve_task
+    from motorlab.dynamics.planner_rewards import UserFunction, builtin_envs, resolve_task
 
     (tmp_path / "catalog_task.py").write_text(textwrap.dedent("""
         def reward(obs, action, next_obs):
@@ -216,7 +216,7 @@ def test_pid_uses_the_gains_a_user_module_declares(tmp_path, monkeypatch):
 
 # The modules that tested env-id prefixes before the catalogue, and what they tested with
 FORMER = ["envs/__init__.py", "evaluation/rollouts.py", "evaluation/pool.py", "dynamics/collection.py",
-          "dynamics/state.py", "dynamics/rewards.py", "controllers/pid.py", "report/video.py"]
+          "dynamics/state.py", "dynamics/planner_rewards.py", "controllers/pid.py", "report/video.py"]
 FAMILIES = ("Reacher", "Inverted", "Pusher", "myo", "Upkie", "Cookie", "Hopper", "Walker", "Humanoid", "Ant",
             "Fetch", "PointMaze", "AntMaze", "Hand", "Adroit", "Franka")
 PREFIX_TEST = re.compile(r"startswith\(\s*(?:\"(?:%s)|[A-Z_]*(?:PREFIX|FALL|ALIVE|BROKEN|GAINS))" % "|".join(FAMILIES))

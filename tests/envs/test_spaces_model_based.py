@@ -16,22 +16,22 @@ import numpy as np
 import pytest
 import torch
 
-from motorlab.control.mpc import PlannerFaults, model_scorer
-from motorlab.control.mpc_episodes import build_policy, run_episodes
-from motorlab.control.planners.cem import CEMPlanner
-from motorlab.control.planners.mppi import MPPIPlanner
 from motorlab.controllers.lqr import LQRSettings, learn_lqr
 from motorlab.controllers.pid import pid_for_env
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.model import ForwardModel, load_model
-from motorlab.dynamics.rewards import Task, resolve_task
+from motorlab.dynamics.planner_rewards import Task, resolve_task
 from motorlab.dynamics.transitions import load_transitions
 from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
-from motorlab.kinds.control import MPC
 from motorlab.kinds.dynamics import DYNAMICS_CHECK, DYNAMICS_COLLECT, DYNAMICS_FIT
+from motorlab.kinds.planning import MPC
 from motorlab.kinds.synergies import COLLECT
 from motorlab.kinds.train import TRAIN
+from motorlab.planning.mpc import PlannerFaults, model_scorer
+from motorlab.planning.mpc_episodes import build_policy, run_episodes
+from motorlab.planning.planners.cem import CEMPlanner
+from motorlab.planning.planners.mppi import MPPIPlanner
 from tests.helpers import assert_ok, read_summary, run_cli, run_kind
 
 with contextlib.redirect_stderr(io.StringIO()):  # its import prints a notice about other envs, once
@@ -237,7 +237,7 @@ def test_the_guarded_update_plans_as_the_fast_one_when_all_is_finite(kind, monke
 
     def plans(guarded: bool):
         if guarded:
-            monkeypatch.setattr("motorlab.control.mpc.all_finite", lambda values: False)
+            monkeypatch.setattr("motorlab.planning.mpc.all_finite", lambda values: False)
         faults = PlannerFaults()
         planner = _planner(kind, model_scorer(_Rows(), reward, faults=faults), faults)
         actions = [planner.plan(torch.zeros(3, 1), torch.zeros(3, 0)) for _ in range(3)]

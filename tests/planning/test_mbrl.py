@@ -24,8 +24,8 @@ from motorlab.dynamics.model import ForwardModel, device_for
 from motorlab.dynamics.train import fit_model
 from motorlab.dynamics.transitions import Transitions
 from motorlab.errors import MotorlabError
-from motorlab.kinds.control import MPC
 from motorlab.kinds.dynamics import DYNAMICS_CHECK, DYNAMICS_FIT
+from motorlab.kinds.planning import MPC
 from tests.helpers import USER_PACKAGES, assert_ok, assert_one_line_error, read_summary, run_cli, run_here, run_kind
 
 IP = "InvertedPendulum-v5"
@@ -196,24 +196,25 @@ def test_a_user_reward_function_and_a_learned_reward_plan_the_users_arm(arm_mode
 
 
 def test_bad_rewards_and_an_env_without_one_are_one_line_errors(arm_model, tmp_path):
+    # in this process (run_here): what each command answers, not a process start (7 of them: ~20 s)
     done = tmp_path / "done"
-    assert_ok(cli("mpc", ARM, "--model", arm_model, "--episodes", "1", "--horizon", "3", "--population", "20",
+    assert_ok(run_here("mpc", ARM, "--model", arm_model, "--episodes", "1", "--horizon", "3", "--population", "20",
                   "--iterations", "1", "--elites", "2", "--reward", "userpkg.arm_reward:reward", "--out", done))
     before = (done / "summary.json").read_bytes()
-    wrong_shape = cli("mpc", ARM, "--model", arm_model, "--reward", "userpkg.arm_reward:keepdim_reward",
+    wrong_shape = run_here("mpc", ARM, "--model", arm_model, "--reward", "userpkg.arm_reward:keepdim_reward",
                       "--out", done)
     assert_one_line_error(wrong_shape, "userpkg.arm_reward:keepdim_reward")
-    wrong_signature = cli("mpc", ARM, "--model", arm_model, "--reward", "userpkg.arm_reward:two_arguments",
+    wrong_signature = run_here("mpc", ARM, "--model", arm_model, "--reward", "userpkg.arm_reward:two_arguments",
                               "--out", done)
     assert_one_line_error(wrong_signature, "(obs, action, next_obs)")
     assert (done / "summary.json").read_bytes() == before  # the finished run is untouched
 
     # a model without a reward head, on an env motorlab has no reward for: the three ways, in one line
     plain = tmp_path / "plain"
-    assert_ok(cli("dynamics", "fit", arm_model.parent / "data", "--epochs", "2", "--out", plain))
-    missing = cli("mpc", ARM, "--model", plain, "--out", tmp_path / "x")
+    assert_ok(run_here("dynamics", "fit", arm_model.parent / "data", "--epochs", "2", "--out", plain))
+    missing = run_here("mpc", ARM, "--model", plain, "--out", tmp_path / "x")
     assert_one_line_error(missing, "--reward builtin", "--reward MODULE:FUNCTION", "--reward learned")
-    ts = cli("mpc", ARM, "--model", arm_model, "--reward", "learned", "--propagation", "ts", "--particles", "3",
+    ts = run_here("mpc", ARM, "--model", arm_model, "--reward", "learned", "--propagation", "ts", "--particles", "3",
                  "--out", tmp_path / "y")
     assert_one_line_error(ts, "--particles 3", "multiple of 2")
 
@@ -343,7 +344,7 @@ def test_mbrl_and_mpc_take_env_settings_flat_and_plan_through_the_wrappers(tmp_p
 
 def test_the_builtin_reward_reads_the_newest_of_stacked_observations():
     """Under --history the bundled reward (written for one observation) equals the env's own reward."""
-    from motorlab.dynamics.rewards import resolve_task
+    from motorlab.dynamics.planner_rewards import resolve_task
     from motorlab.envs import EnvConfig
 
     for env_id in ("Reacher-v5", IP):
@@ -363,7 +364,7 @@ def test_the_builtin_reward_reads_the_newest_of_stacked_observations():
 
 
 def test_planning_refuses_env_settings_it_cannot_honour_in_one_line(tmp_path):
-    from motorlab.kinds.control import MBRL
+    from motorlab.kinds.planning import MBRL
 
     # reward shaping and a success rule: mpc and mbrl report the env's own return, and --reward is the planner's
     with pytest.raises(MotorlabError, match=r"^env\.reward 'alive': mbrl reports the env's own return"):
@@ -385,9 +386,9 @@ def test_config_toml_and_loop_json_written_before_still_load(tmp_path):
     import tomllib
     from dataclasses import asdict
 
-    from motorlab.control.mbrl import LOOP_JSON, _comparable, check_resumable
     from motorlab.envs import EnvConfig
-    from motorlab.kinds.control import MBRL
+    from motorlab.kinds.planning import MBRL
+    from motorlab.planning.mbrl import LOOP_JSON, _comparable, check_resumable
 
     old = f'env = "{IP}"\nmodel = "runs/m"\nreward = "builtin"\nepisodes = 5\nhorizon = 15\n'
     mpc = MPC.validate(tomllib.loads(old))
@@ -408,7 +409,7 @@ def test_collect_steps_cuts_collected_episodes_and_the_catalogue_sets_it_for_the
     the model is refit that often; evaluation episodes still run to the time limit. The pendulum's
     catalogue entry cuts at 200, and the user's setting wins."""
     from motorlab.dynamics.transitions import load_transitions
-    from motorlab.kinds.control import MBRL
+    from motorlab.kinds.planning import MBRL
 
     assert MBRL.make(env=IP).collect_steps == 200 and MBRL.make(env=IP, collect_steps=50).collect_steps == 50
     assert MBRL.make(env="Reacher-v5").collect_steps is None
@@ -439,10 +440,10 @@ def test_exploration_noise_widens_the_collected_actions_and_leaves_the_plan_and_
     changes what the later rounds collect, not how a round's model is evaluated."""
     from types import SimpleNamespace
 
-    from motorlab.control.mbrl import _comparable
-    from motorlab.control.mpc import MPCPolicy
     from motorlab.dynamics.transitions import load_transitions
-    from motorlab.kinds.control import MBRL
+    from motorlab.kinds.planning import MBRL
+    from motorlab.planning.mbrl import _comparable
+    from motorlab.planning.mpc import MPCPolicy
 
     planned = torch.tensor([[0.5, -1.9]]).repeat(4000, 1)
     planner = SimpleNamespace(plan=lambda s, g: planned.clone(), low=torch.tensor([-1.0, -2.0]),
@@ -488,8 +489,8 @@ def test_exploration_noise_widens_the_collected_actions_and_leaves_the_plan_and_
 def test_eval_every_always_evaluates_the_round_that_ends_the_loop(rounds, every, per_round, budget):
     """Whatever the cap, the budget and --eval-every, the loop's last round is evaluated (its return is
     the loop's) and the others exactly on multiples of eval_every: walked as run_loop walks them."""
-    from motorlab.control.mbrl import evaluates, is_last_round
-    from motorlab.kinds.control import MBRL
+    from motorlab.kinds.planning import MBRL
+    from motorlab.planning.mbrl import evaluates, is_last_round
 
     plan = replace(MBRL.make(env=IP).loop_plan(), rounds=rounds, eval_every=every, max_env_steps=budget)
     walked = []
@@ -506,8 +507,8 @@ def test_eval_every_always_evaluates_the_round_that_ends_the_loop(rounds, every,
 def test_eval_every_leaves_the_models_alone_and_a_resume_may_change_it(tmp_path):
     """Evaluating every 2nd round (and the last) skips round 1's evaluation and changes nothing the
     rounds learn: the same collected returns, held-out errors and evaluated returns as every round's."""
-    from motorlab.control.mbrl import _comparable
-    from motorlab.kinds.control import MBRL
+    from motorlab.kinds.planning import MBRL
+    from motorlab.planning.mbrl import _comparable
 
     kept = {}
     for every in (1, 2):

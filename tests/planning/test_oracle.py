@@ -1,4 +1,4 @@
-"""The oracle (motorlab.control.oracle): CEM planning on a copy of the true simulator scores an action
+"""The oracle (motorlab.planning.oracle): CEM planning on a copy of the true simulator scores an action
 sequence exactly as stepping the env does, leaves the controlled env alone, balances the pendulum and
 reaches Reacher's target far better than random actions."""
 
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from motorlab.control.oracle import OracleResult, SimulatorScorer, oracle_episodes, physics_state, set_physics_state
 from motorlab.envs import EnvConfig, make_env
 from motorlab.envs.disturbances import mujoco_model_data
 from motorlab.errors import MotorlabError
+from motorlab.planning.oracle import OracleResult, SimulatorScorer, oracle_episodes, physics_state, set_physics_state
 
 PENDULUM, REACHER = "InvertedPendulum-v5", "Reacher-v5"
 

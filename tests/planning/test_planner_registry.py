@@ -1,12 +1,12 @@
-"""Planners are a registry: a new optimizer is one file in motorlab/control/planners/, found by name; the
+"""Planners are a registry: a new optimizer is one file in motorlab/planning/planners/, found by name; the
 settings model, --help and the plan it is given follow from it."""
 
 from __future__ import annotations
 
 import pytest
 
-from motorlab.control import planners
 from motorlab.errors import MotorlabError
+from motorlab.planning import planners
 
 pytestmark = pytest.mark.fast
 
@@ -46,7 +46,7 @@ def test_the_bundled_planners_are_their_modules():
 
 
 def test_a_new_planner_is_one_file(shooting):
-    from motorlab.kinds.control import PlannerSettings
+    from motorlab.kinds.planning import PlannerSettings
 
     assert "shooting" in planners.names() and "shooting: random shooting" in planners.about()
     settings = PlannerSettings.model_validate({"optimizer": "shooting", "horizon": 7, "population": 9})

@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 import torch
 
-from motorlab.control.mbrl import RoundRecord, reached
-from motorlab.control.mpc import EndProbability, end_spread
-from motorlab.control.mpc_episodes import build_policy
-from motorlab.control.planners.base import colored_noise
 from motorlab.dynamics.collection import collect_transitions
 from motorlab.dynamics.open_loop import rollout_error
-from motorlab.dynamics.rewards import inverted_pendulum_termination
+from motorlab.dynamics.planner_rewards import inverted_pendulum_termination
 from motorlab.dynamics.train import fit_model
+from motorlab.planning.mbrl import RoundRecord, reached
+from motorlab.planning.mpc import EndProbability, end_spread
+from motorlab.planning.mpc_episodes import build_policy
+from motorlab.planning.planners.base import colored_noise
 
 IP = "InvertedPendulum-v5"
 

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import torch
 
-from motorlab.control.mpc import PlannerFaults, Scorer, all_finite
 from motorlab.errors import MotorlabError
+from motorlab.planning.mpc import PlannerFaults, Scorer, all_finite
 
 
 def check_plan_settings(horizon: int, population: int, iterations: int, elites: int) -> None:

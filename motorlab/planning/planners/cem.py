@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from motorlab.control.mpc import PlannerFaults, Scorer
-from motorlab.control.planners.base import GaussianPlanner, _PlanRecord, check_plan_settings
+from motorlab.planning.mpc import PlannerFaults, Scorer
+from motorlab.planning.planners.base import GaussianPlanner, _PlanRecord, check_plan_settings
 
 
 class CEMPlanner(GaussianPlanner):

@@ -7,9 +7,9 @@ import logging
 import numpy as np
 import torch
 
-from motorlab.control.mpc import PlannerFaults, Scorer
-from motorlab.control.planners.base import check_plan_settings
 from motorlab.extras import require
+from motorlab.planning.mpc import PlannerFaults, Scorer
+from motorlab.planning.planners.base import check_plan_settings
 
 
 class EvoTorchCEM:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from motorlab.control.mpc import PlannerFaults, Scorer
-from motorlab.control.planners.base import GaussianPlanner, _PlanRecord, check_plan_settings
 from motorlab.errors import MotorlabError
+from motorlab.planning.mpc import PlannerFaults, Scorer
+from motorlab.planning.planners.base import GaussianPlanner, _PlanRecord, check_plan_settings
 
 
 class MPPIPlanner(GaussianPlanner):
