@@ -14,7 +14,7 @@ their keys ("achieved_goal[0]", ...), and takes the desired_goal as the planner'
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import gymnasium as gym
@@ -43,6 +43,23 @@ class Reached:
 
     def to_json(self) -> dict:
         return {"columns": list(self.columns), "key": self.key, "label": self.label, "unit": self.unit}
+
+
+def achieved_columns(labels: Sequence[str], goal_labels: Sequence[str]) -> tuple[int, ...]:
+    """The state's achieved_goal columns (labelled "achieved_goal[i]") where the goal is a desired_goal of
+    the same size, else none: the one place a goal-conditioned task's reaching entries are read, for a
+    live layout and for a recorded one (a model's `state_labels` and `goal_labels`) alike."""
+    columns = tuple(i for i, label in enumerate(labels) if label.startswith(f"{ACHIEVED}["))
+    return columns if columns and len(columns) == len(goal_labels) else ()
+
+
+def reached_by(reaching: Reached | None, labels: Sequence[str], goal_labels: Sequence[str]) -> Reached | None:
+    """What reaches for the goal: the layout's own (Reacher's fingertip), else a goal-conditioned task's
+    achieved_goal (`achieved_columns`), else None."""
+    if reaching is not None:
+        return reaching
+    columns = achieved_columns(labels, goal_labels)
+    return Reached(columns, ACHIEVED, "achieved goal") if columns else None
 
 
 @dataclass(frozen=True)
@@ -81,21 +98,13 @@ class StateLayout:
     def achieved(self) -> slice | None:
         """The state's achieved_goal entries where the goal is the desired_goal of the same size
         (a goal-conditioned task): what the goal reward and the distance to the goal compare."""
-        achieved, desired = self.key(ACHIEVED), self.key(DESIRED)
-        if achieved is None or desired is None or achieved.stop - achieved.start != len(self.goal_labels):
-            return None
-        return slice(achieved.start, achieved.stop)
+        columns = achieved_columns(self.labels, self.goal_labels)
+        return slice(columns[0], columns[-1] + 1) if columns else None
 
     @property
     def reached(self) -> Reached | None:
-        """What reaches for the goal: the layout's own (Reacher's fingertip), else a goal-conditioned
-        task's achieved_goal (compared with the desired_goal of the same size), else None."""
-        if self.reaching is not None:
-            return self.reaching
-        achieved = self.achieved
-        if achieved is None:
-            return None
-        return Reached(tuple(range(achieved.start, achieved.stop)), ACHIEVED, "achieved goal")
+        """What reaches for the goal (`reached_by`)."""
+        return reached_by(self.reaching, self.labels, self.goal_labels)
 
     def keys_json(self) -> list[dict] | None:
         """The keys' slices as transitions.npz and model.json record them (None for a Box observation)."""

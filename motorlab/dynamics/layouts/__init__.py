@@ -7,16 +7,13 @@ the module's docstring, `--state NAME`: what it is, is its line in --help), foun
 
 from __future__ import annotations
 
-import ast
 import functools
 import importlib
-import importlib.util
-import pkgutil
 from dataclasses import replace
-from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
 from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.plugins import help_lines, module_names
 
 if TYPE_CHECKING:  # numpy and gymnasium come with the layouts, not with --help
     import gymnasium as gym
@@ -31,8 +28,7 @@ DEFAULT = "observation"
 @functools.cache
 def names() -> tuple[str, ...]:
     """Every layout's name (its module's): the default first."""
-    found = sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name != "base" and not m.name.startswith("_"))
-    return tuple(sorted(found, key=lambda n: (n != DEFAULT, n)))
+    return module_names(__path__, first=DEFAULT)
 
 
 def check_name(name: str, auto: bool = True) -> str:
@@ -54,12 +50,7 @@ def spec(name: str) -> LayoutSpec:
 
 def about() -> str:
     """Each layout in a line, for --help: its module docstring's first line, read without importing it."""
-    lines = []
-    for name in names():
-        found = importlib.util.find_spec(f"{LAYOUTS}.{name}")  # finds its file; runs nothing of it
-        doc = ast.get_docstring(ast.parse(Path(found.origin).read_text())) if found and found.origin else None
-        lines.append((doc or name).splitlines()[0].replace(f"`--state {name}`: ", f"{name}: ").rstrip("."))
-    return "; ".join(lines)
+    return help_lines(LAYOUTS, names(), "--state")
 
 
 def layout_for(env_id: str, obs_dim: int, name: str = "auto", keys: Sequence[KeySlice] = ()) -> StateLayout:
@@ -109,12 +100,6 @@ def reached_of(name: str, labels: Sequence[str], goal_labels: Sequence[str]) -> 
     """What a recorded layout (a model's or transitions' `state_layout`, `state_labels`, `goal_labels`)
     reaches for its goal with: the layout's own, else the achieved_goal entries where the goal is the
     desired_goal of the same size, else None."""
-    from motorlab.dynamics.state import ACHIEVED, Reached
+    from motorlab.dynamics.state import reached_by
 
-    own = spec(name).reaching if name in names() else None
-    if own is not None:
-        return own
-    columns = tuple(i for i, label in enumerate(labels) if label.startswith(f"{ACHIEVED}["))
-    if columns and len(columns) == len(goal_labels):
-        return Reached(columns, ACHIEVED, "achieved goal")
-    return None
+    return reached_by(spec(name).reaching if name in names() else None, labels, goal_labels)

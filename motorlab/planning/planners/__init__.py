@@ -7,15 +7,12 @@ A planner class takes (score, low, high, **settings) and says which of the plan'
 
 from __future__ import annotations
 
-import ast
 import functools
 import importlib
-import importlib.util
-import pkgutil
-from pathlib import Path
 from typing import Any
 
 from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.plugins import help_lines, module_names
 
 PLANNERS = __name__
 
@@ -23,8 +20,7 @@ PLANNERS = __name__
 @functools.cache
 def names() -> tuple[str, ...]:
     """Every planner's name (its module's), in a fixed order: cem first, the default."""
-    found = sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name != "base")
-    return tuple(sorted(found, key=lambda n: (n != "cem", n)))
+    return module_names(__path__, first="cem")
 
 
 def _module(name: str) -> Any:
@@ -40,13 +36,7 @@ def planner_class(name: str) -> type:
 def about() -> str:
     """Each planner in a line, for --help: its module docstring's first line, read without importing the
     module (a planner imports torch; --help does not need it)."""
-    lines = []
-    for name in names():
-        spec = importlib.util.find_spec(f"{PLANNERS}.{name}")  # finds its file; runs nothing of it
-        doc = ast.get_docstring(ast.parse(Path(spec.origin).read_text())) if spec and spec.origin else None
-        doc = doc or name
-        lines.append(doc.splitlines()[0].replace(f"`--optimizer {name}`: ", f"{name}: ").rstrip("."))
-    return "; ".join(lines)
+    return help_lines(PLANNERS, names(), "--optimizer")
 
 
 def settings_of(name: str) -> tuple[str, ...]:
