@@ -23,7 +23,7 @@ __version__ = "0.1.0"
 # The API's names, loaded from motorlab.api when first used. `motorlab.dynamics` and `motorlab.synergies`
 # are the domain packages; their collect / fit / ... are the API's (see their __init__.py).
 __all__ = ["train", "evaluate", "video", "zeroshot", "robustness", "compare", "mpc", "mbrl", "run_recipe", "sweep",
-           "tune", "load", "synergies", "Result", "Run", "Study", "Sweep", "Tune", "MotorlabError", "SettingsError",
+           "tune", "step", "recipe", "load", "synergies", "Result", "Run", "Study", "Sweep", "Tune", "MotorlabError", "SettingsError",
            "ArgumentError", "StorageError", "dynamics", "tracking", "register_env"]
 
 

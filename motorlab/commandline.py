@@ -44,9 +44,10 @@ class Given:
 
 
 def _base(annotation: Any) -> Any:
-    """The type inside Optional[...]."""
+    """The type inside Optional[...]; of a union of several, its first: how the command line gives the
+    value (`grid: list[str] | dict[str, list[Any]]`: KEY=V1,V2 text here, a dict from Python)."""
     args = [a for a in get_args(annotation) if a is not type(None)]
-    return args[0] if get_origin(annotation) in (Union, UnionType) and len(args) == 1 else annotation
+    return args[0] if get_origin(annotation) in (Union, UnionType) and args else annotation
 
 
 def _is_bool(annotation: Any) -> bool:
@@ -205,6 +206,59 @@ def click_command(cmd: Command, callback: Callable[[Command, Given], None]) -> c
     return click.Command(cmd.command.split()[-1], params=parameters(cmd), help=text, short_help=short,
                          epilog=epilog(cmd), callback=lambda **values: callback(cmd, given(cmd, values)),
                          context_settings={"max_content_width": 120})
+
+
+def command_line(cmd: Command, fields: dict[str, Any]) -> list[str]:
+    """The words after `motorlab <command>` that give `fields` (flat, as `Given.fields` holds them, the
+    flat env settings included): what `parse` reads back into the same fields. For records and
+    reproduce lines of settings made in Python (a sweep's or search's target)."""
+    kinds = {**{n: value_kind(i.annotation) for n, i in cmd.settings.model_fields.items()},
+             **{a: value_kind(i.annotation) for a, (i, _) in _env_fields(cmd.settings).items()}}
+    positional = [_text(fields[a]) for a in cmd.arguments if a in fields]
+    words: list[str] = []
+    for name, value in fields.items():
+        if name in cmd.arguments or value is None:
+            continue
+        names = _option_names(cmd, name)
+        flag = names[0].split("/")[0]
+        kind = kinds.get(name, "text")
+        if kind == "flag":
+            off = names[0].split("/")[1] if "/" in names[0] else f"--no-{flag[2:]}"
+            words.append(flag if value else off)
+        elif kind == "numbers":
+            words += [flag, ",".join(json.dumps(v) for v in value)]
+        elif kind == "many":
+            for item in value:
+                words += [flag, _text(item)]
+        elif kind == "pairs":
+            for key, item in value.items():
+                words += [flag, f"{key}={_pair_value(item)}"]
+        else:
+            words += [flag, _text(value)]
+    return positional + words
+
+
+def _text(value: Any) -> str:
+    """A value as an option gives it: text as it is, a float exactly (repr), others as str."""
+    if isinstance(value, float):
+        return repr(value)
+    return value if isinstance(value, str) else str(value)
+
+
+def _pair_value(value: Any) -> str:
+    """A KEY=VALUE item's VALUE that `json_or_text` reads back as `value`: text that would read as JSON
+    ("1", "true") and every other value as JSON."""
+    if isinstance(value, str) and not _reads_as_json(value):
+        return value
+    return json.dumps(value)
+
+
+def _reads_as_json(text: str) -> bool:
+    try:
+        json.loads(text)
+    except json.JSONDecodeError:
+        return False
+    return True
 
 
 def parse(cmd: Command, words: list[str], where: str) -> Given:

@@ -138,11 +138,14 @@ def test_ray_asha_budget_comes_from_the_targets_kind(tmp_path, target, space, ex
     --timesteps read from the command text; unknown when the search varies it or the kind has none."""
     from motorlab.kinds.train import TRAIN
     from motorlab.tuning.ray_search import budget
+    from motorlab.sweeps.targets import read_target
+    from motorlab.tuning.space import parse_space
     from motorlab.tuning.trials import Planner
     from motorlab.tuning.tune import make_spec
 
-    spec = make_spec(target, space, 1, 1, "return", None, tmp_path, None, None, "tpe", "median", 0, 100, 1, 0)
-    planner = Planner(spec.target, spec.space, {})
+    spec = make_spec(read_target(target, "tune"), parse_space(space), 1, 1, "return", None, tmp_path, None, None,
+                     "tpe", "median", 0, 100, 1, 0)
+    planner = Planner(read_target(target, "tune"), spec.space, {})
     if expected == "default":
         expected = TRAIN.settings.model_fields["timesteps"].default
     assert budget(spec, planner) == expected

@@ -23,7 +23,7 @@ from motorlab.api import dynamics, synergies  # noqa: E402
 from motorlab.api.checks import api_function  # noqa: E402
 from motorlab.api.planning import mbrl, mpc  # noqa: E402
 from motorlab.api.policies import Run, compare, evaluate, robustness, train, video, zeroshot  # noqa: E402
-from motorlab.api.studies import run_recipe, sweep, tune  # noqa: E402
+from motorlab.api.studies import recipe, run_recipe, step, sweep, tune  # noqa: E402
 from motorlab.api.views import PolicyFunction, Result, Study, Sweep, Tune, load  # noqa: E402
 from motorlab.envs import catalog  # noqa: E402
 from motorlab.errors import ArgumentError, MotorlabError, SettingsError, StorageError  # noqa: E402
@@ -33,7 +33,7 @@ register_env = api_function(catalog.register_env)
 
 __all__ = [
     "train", "evaluate", "video", "zeroshot", "robustness", "compare", "mpc", "mbrl",
-    "run_recipe", "sweep", "tune", "load", "synergies", "dynamics",
+    "run_recipe", "sweep", "tune", "step", "recipe", "load", "synergies", "dynamics",
     "Result", "Run", "Study", "Sweep", "Tune", "PolicyFunction", "MotorlabError", "tracking", "register_env",
     "SettingsError", "ArgumentError", "StorageError",
 ]

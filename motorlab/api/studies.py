@@ -7,9 +7,10 @@ from typing import Any
 
 from motorlab import trackers
 from motorlab.api.checks import api_function
-from motorlab.api.running import Track, console, folders
+from motorlab.api.running import Track, console, folders, path_of
 from motorlab.api.views import Study, Sweep, Tune
 from motorlab.errors import MotorlabError
+from motorlab.sweeps.targets import RecipeTarget, StepTarget, Target, recipe_target, step_target
 
 
 @api_function
@@ -41,7 +42,7 @@ def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: st
     from motorlab.studies import Execution, run_study
 
     block = folders(resume, overwrite)
-    study = load_recipe(str(recipe), fields)
+    study = load_recipe(str(recipe), {k: path_of(v) for k, v in fields.items()})  # a Path or a Result: its path
     with trackers.tracking(track), block:
         summary = run_study(study, Path(out) if out is not None else None, console=console(),
                             execution=Execution(backend, address, max_parallel, parallel_steps))
@@ -49,9 +50,39 @@ def run_recipe(recipe: str | Path, out: str | Path | None = None, *, backend: st
 
 
 @api_function
-def sweep(target: str | Path, seeds: int | list[int] | None = None, grid: list[str] | dict[str, list[Any]] | None = None,
-          *, backend: str | None = None, address: str | None = None, max_parallel: int | None = None,
-          out: str | Path | None = None, track: Track = None, resume: bool = False, overwrite: bool = False) -> Sweep:
+def step(command: str, **fields: Any) -> StepTarget:
+    """What a sweep or a search repeats: a step kind and its settings, as keyword arguments named as the
+    command's options (None: the default). Judged now by the kind's settings model, as the CLI judges them.
+
+        motorlab.sweep(motorlab.step("train", env="InvertedPendulum-v5", preset="fast", until_solved=True),
+                       seeds=5, grid={"lr": [3e-4, 1e-3]})
+
+    Args:
+        command: the command, as the CLI names it: "train", "evaluate", "mpc", "dynamics fit", ...
+        **fields: its settings (not the seed: the sweep sets it), e.g. `env`, `algo`, `timesteps`;
+            `hyperparams={...}` for train's SB3 keyword arguments (`--set`).
+
+    Returns:
+        The target, for `sweep` and `tune`; `.text` is its command line.
+    """
+    return step_target(command, "sweep", **{k: path_of(v) for k, v in fields.items()})
+
+
+@api_function
+def recipe(recipe: str | Path, **fields: Any) -> RecipeTarget:
+    """What a sweep or a search repeats: a whole study, a bundled recipe's name or a TOML file, with fields
+    set in every trial as `run_recipe` sets them (FIELD, `**{"STEP.FIELD": value}` or an input).
+
+        motorlab.sweep(motorlab.recipe("pendulum"), seeds=3, grid={"ppo.timesteps": [50_000, 100_000]})
+    """
+    return recipe_target(recipe, **{k: path_of(v) for k, v in fields.items()})
+
+
+@api_function
+def sweep(target: str | Path | Target, seeds: int | list[int] | None = None,
+          grid: list[str] | dict[str, list[Any]] | None = None, *, backend: str | None = None,
+          address: str | None = None, max_parallel: int | None = None, out: str | Path | None = None,
+          track: Track = None, resume: bool = False, overwrite: bool = False) -> Sweep:
     """Run a command or a study for several seeds and settings, then aggregate with rliable
     (`motorlab sweep`): IQMs with 95% CIs, probabilities of improvement, performance profiles.
 
@@ -59,10 +90,11 @@ def sweep(target: str | Path, seeds: int | list[int] | None = None, grid: list[s
     here is that default, `motorlab sweep --help` lists them), and it runs as the command does.
 
     Args:
-        target: a motorlab command line ("train InvertedPendulum-v5 --preset fast --until-solved")
-            or a recipe (each trial runs the whole study).
+        target: `step(...)` or `recipe(...)`; or, as the command line gives it, a motorlab command line
+            ("train InvertedPendulum-v5 --preset fast --until-solved") or a recipe's name or file.
         seeds: seeds per setting (0..N-1), or the seeds themselves.
-        grid: settings to cross: ["lr=3e-4,1e-3", "n_envs=1,2"] or {"lr": [3e-4, 1e-3]}.
+        grid: settings to cross, {"lr": [3e-4, 1e-3], "n_envs": [1, 2]}: each value as it is (numbers stay
+            numbers, text is read as the command line reads it); or the command line's ["lr=3e-4,1e-3"].
         backend: "local" (a pool of processes) or "ray" (a cluster at `address`).
         resume: run again into a finished sweep's `out`, keeping its finished trials.
         overwrite: replace the sweep in `out` whole.
@@ -74,8 +106,8 @@ def sweep(target: str | Path, seeds: int | list[int] | None = None, grid: list[s
 
     given = {"seeds": seeds} if not isinstance(seeds, list) else {}
     how = SWEEP.how(out=out, track=track, resume=resume, overwrite=overwrite)
-    settings = SWEEP.make(how, target=str(target), grid=_pairs(grid), backend=backend, address=address,
-                          max_parallel=max_parallel, **given)
+    settings = SWEEP.make(how, target=str(target) if isinstance(target, Path) else target, grid=grid,
+                          backend=backend, address=address, max_parallel=max_parallel, **given)
     if isinstance(seeds, list):  # the seeds themselves (the command line counts them: 0..N-1)
         if not seeds or any(isinstance(x, bool) or not isinstance(x, int) or x < 0 for x in seeds) \
                 or len(set(seeds)) != len(seeds):
@@ -86,7 +118,7 @@ def sweep(target: str | Path, seeds: int | list[int] | None = None, grid: list[s
 
 
 @api_function
-def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int | None = None,
+def tune(target: str | Path | Target, space: list[str] | dict[str, Any], *, trials: int | None = None,
          seeds: int | None = None, objective: str | None = None, direction: str | None = None,
          out: str | Path | None = None, storage: str | None = None, study_name: str | None = None,
          sampler: str | None = None, sampler_seed: int | None = None, pruner: str | None = None,
@@ -101,10 +133,11 @@ def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int |
     lists them all), and it runs as the command does.
 
     Args:
-        target: a motorlab command line in quotes ("train InvertedPendulum-v5 --timesteps 50000
-            --until-solved") or a recipe.
-        space: what to search: ["lr=loguniform:1e-5,1e-2", "n_steps=choice:256,512"] or
-            {"lr": "loguniform:1e-5,1e-2"} (loguniform, uniform, int or choice).
+        target: `step(...)` or `recipe(...)`; or, as the command line gives it, a motorlab command line in
+            quotes ("train InvertedPendulum-v5 --timesteps 50000 --until-solved") or a recipe.
+        space: what to search, {"lr": optuna.distributions.FloatDistribution(1e-5, 1e-2, log=True),
+            "n_steps": optuna.distributions.CategoricalDistribution([256, 512])}, or as text
+            {"lr": "loguniform:1e-5,1e-2"} / ["lr=loguniform:1e-5,1e-2"] (loguniform, uniform, int or choice).
         objective: steps_to_success, final_return, success_rate, or any summary number
             (a study's: "STEP.METRIC").
         out: the search's folder; the same `out` resumes an unfinished search.
@@ -117,25 +150,10 @@ def tune(target: str | Path, space: list[str] | dict[str, str], *, trials: int |
     from motorlab.tuning.command import TUNE
 
     how = TUNE.how(out=out, track=track, resume=resume, overwrite=overwrite)
-    settings = TUNE.make(how, target=str(target), space=_pairs(space), trials=trials, seeds=seeds,
-                         objective=objective, direction=direction, storage=storage, study_name=study_name,
-                         sampler=sampler, sampler_seed=sampler_seed, pruner=pruner, prune_startup=prune_startup,
-                         report_every=report_every, fresh_seeds=fresh_seeds, max_parallel=max_parallel,
-                         backend=backend, address=address)
+    settings = TUNE.make(how, target=str(target) if isinstance(target, Path) else target, space=space, trials=trials,
+                         seeds=seeds, objective=objective, direction=direction, storage=storage,
+                         study_name=study_name, sampler=sampler, sampler_seed=sampler_seed, pruner=pruner,
+                         prune_startup=prune_startup, report_every=report_every, fresh_seeds=fresh_seeds,
+                         max_parallel=max_parallel, backend=backend, address=address)
     summary = TUNE.invoke(settings, how, console=console())
     return Tune(summary["tune_dir"])
-
-
-def _pairs(values: list[str] | dict[str, Any] | None) -> list[str] | None:
-    """KEY=VALUE strings from a dict, as the command line gives them: a list's values joined with
-    commas, or with | where one holds a comma itself ("linear:3e-4,0")."""
-    if values is None or isinstance(values, list):
-        return values
-    pairs = []
-    for key, value in values.items():
-        if isinstance(value, str):
-            pairs.append(f"{key}={value}")
-        else:
-            texts = [str(v) for v in value]
-            pairs.append(f"{key}={('|' if any(',' in t for t in texts) else ',').join(texts)}")
-    return pairs

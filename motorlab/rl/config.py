@@ -65,6 +65,12 @@ class TrainConfig(EnvSettings):
                       "unless learning_starts is set")
     lqr: LQRSettings = Field(default_factory=LQRSettings, json_schema_extra={"cli": False})  # recipes and --config only
 
+    @field_validator("lr", "clip_range", mode="before")
+    @classmethod
+    def _number_as_schedule(cls, v):
+        """A constant given as a number (Python's lr=3e-4, a sweep grid's [3e-4, 1e-3]): its exact text."""
+        return repr(float(v)) if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+
     @field_validator("lr", "clip_range")
     @classmethod
     def _check_schedule(cls, v, info):

@@ -2,25 +2,31 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from rich.console import Console
 
 from motorlab.command import Command, Resumable
-from motorlab.launcher import ExecutionSettings
+from motorlab.sweeps.grid import read_grid
+from motorlab.sweeps.targets import TargetSettings
 
 
-class SweepSettings(ExecutionSettings):
-    target: str = Field(description=(
-        "A recipe (bundled name or .toml file: each trial runs the whole study) or a motorlab command line in quotes "
-        "(train, evaluate, mpc, dynamics fit, ...); the sweep sets each trial's seed and folder. Its --config and "
-        "--track apply to every trial; --out, --overwrite and --resume are the sweep's own"))
+class SweepSettings(TargetSettings):
+    # the target (TargetSettings) and the grid are read once, here: from the command line's text, or as Python
+    # gives them (a `StepTarget` / `RecipeTarget`, a dict grid); the sweep sees them typed
+    owner: ClassVar[str] = "sweep"
+
     seeds: int = Field(5, ge=1, description="Seeds per setting: 0..N-1")
-    grid: list[str] | None = Field(None, description=(
+    grid: list[str] | dict[str, list[Any]] | None = Field(None, description=(
         "KEY=V1,V2 (every combination runs). Commands: KEY is a setting (lr, n_envs, delay, normalize=true,false) "
         "or, for train, an SB3 hyperparameter. Recipes: FIELD for every step that has it, or STEP.FIELD. Values "
         "holding commas: separate them with |, e.g. lr='linear:1e-3,0|3e-4'"))
+
+    @field_validator("grid")
+    @classmethod
+    def _read_grid(cls, value: list[str] | dict[str, list[Any]] | None) -> dict[str, list[Any]]:
+        return read_grid(value)
 
 
 class SweepCommand(Command[SweepSettings]):

@@ -6,6 +6,7 @@ import hashlib
 import itertools
 import json
 import re
+from typing import Any
 
 from motorlab.errors import MotorlabError, mask_secrets
 
@@ -38,7 +39,33 @@ def parse_grid(items: list[str] | None) -> dict[str, list[str]]:
     return grid
 
 
-def settings(grid: dict[str, list[str]]) -> list[dict[str, str]]:
+def check_grid(grid: dict[str, Any]) -> dict[str, list[Any]]:
+    """A grid given in Python, {key: [values]}: the values as they are (numbers stay numbers; text is read
+    as the command line reads it), each key's list non-empty and without repeats.
+
+    Raises:
+        MotorlabError: a key that is not a non-empty string, a value list that is empty, not a list, or
+            repeats a value.
+    """
+    out: dict[str, list[Any]] = {}
+    for key, values in grid.items():
+        if not isinstance(key, str) or not key.strip() or "=" in key:
+            raise MotorlabError(f"grid key {key!r}: give a setting's name, e.g. grid={{'lr': [3e-4, 1e-3]}}.")
+        if isinstance(values, (str, bytes)) or not isinstance(values, (list, tuple)) or not values:
+            raise MotorlabError(f"grid {key!r}: give a non-empty list of values, e.g. grid={{{key!r}: [...]}}.")
+        texts = [json.dumps(v, sort_keys=True, default=str) for v in values]
+        if len(set(texts)) != len(texts):
+            raise MotorlabError(f"grid {key!r}: a value is repeated; each setting runs once per seed.")
+        out[key.strip()] = list(values)
+    return out
+
+
+def read_grid(grid: list[str] | dict[str, Any] | None) -> dict[str, list[Any]]:
+    """A grid as the command line gives it (`parse_grid`) or as Python does (`check_grid`)."""
+    return check_grid(grid) if isinstance(grid, dict) else parse_grid(grid)
+
+
+def settings(grid: dict[str, list[Any]]) -> list[dict[str, Any]]:
     """Every combination of the grid's values ([{}] for an empty grid: the target as given)."""
     keys = list(grid)
     return [dict(zip(keys, combo)) for combo in itertools.product(*(grid[k] for k in keys))]
@@ -48,7 +75,7 @@ SLUG_CHARS = 60  # of a folder name's readable part: a long value is cut there (
 HASH_CHARS = (8, 16, 64)  # of its hash: longer only where two settings of one sweep share the shorter
 
 
-def label(setting: dict[str, str], digits: int = HASH_CHARS[0]) -> str:
+def label(setting: dict[str, Any], digits: int = HASH_CHARS[0]) -> str:
     """A setting's name, also its folder name: a readable slug of its values and a hash of them as given,
     "lr=0.001,n_envs=2-85f7d7a1" ("default" with no grid). Slugs alone collide ("a b" and "a_b",
     unicode, long values cut short), and two settings in one folder would mix their runs; the hash of the
@@ -58,11 +85,11 @@ def label(setting: dict[str, str], digits: int = HASH_CHARS[0]) -> str:
         return "default"
     text = ",".join(f"{k.lstrip('-')}={v}" for k, v in setting.items())
     slug = re.sub(r"[^A-Za-z0-9=.,:+_-]", "_", mask_secrets(text))[:SLUG_CHARS]  # no "/" or spaces in folder names
-    digest = hashlib.sha256(json.dumps(list(setting.items())).encode()).hexdigest()[:digits]
+    digest = hashlib.sha256(json.dumps(list(setting.items()), default=str).encode()).hexdigest()[:digits]
     return f"{slug}-{digest}"
 
 
-def labels(settings: list[dict[str, str]]) -> list[str]:
+def labels(settings: list[dict[str, Any]]) -> list[str]:
     """Each setting's name (`label`), distinct for distinct settings: the hash is lengthened in the rare
     sweep where two settings share its first digits (the whole SHA-256 at most).
 

@@ -44,8 +44,9 @@ from motorlab.runs import (
 )
 from motorlab.settings import MAX_SEEDS
 from motorlab.stats import aggregate, trial_scores
-from motorlab.sweeps.grid import parse_grid, settings
-from motorlab.sweeps.trials import command_trials, parse_target, recipe_path, recipe_trials
+from motorlab.sweeps.grid import settings
+from motorlab.sweeps.targets import RecipeTarget, Target
+from motorlab.sweeps.trials import command_trials, recipe_trials
 
 
 def _seeds(seeds: int | list[int]) -> list[int]:
@@ -58,29 +59,27 @@ def _seeds(seeds: int | list[int]) -> list[int]:
     return list(seeds)
 
 
-def plan(target: str, seeds: int | list[int], grid: list[str] | None, sweep_dir: Path,
+def plan(target: Target, seeds: int | list[int], grid: dict[str, list[Any]], sweep_dir: Path,
          threads: dict[str, str] | None = None) -> tuple[list[dict[str, Any]], tuple[str, ...]]:
-    """The sweep's trials, every command line checked before any runs, and the target's own --track
-    (its trials are tracked there too).
+    """The sweep's trials, every one checked before any runs, and the target's own --track (its trials
+    are tracked there too).
 
     Raises:
-        MotorlabError: bad grid syntax, an option or recipe field the target does not have,
-            an unknown command or recipe, an invocation option the sweep does not apply per trial.
+        MotorlabError: an option or recipe field the target does not have, a value its settings refuse.
     """
-    combos = settings(parse_grid(grid))
+    combos = settings(grid)
     seed_list = _seeds(seeds)
-    recipe = recipe_path(target)
-    if recipe is not None:
-        return recipe_trials(recipe, combos, seed_list, sweep_dir, threads or {}), ()
-    command = parse_target(target)
-    return command_trials(command, combos, seed_list, sweep_dir, threads or {}), command.track
+    if isinstance(target, RecipeTarget):
+        return recipe_trials(target, combos, seed_list, sweep_dir, threads or {}), ()
+    return command_trials(target, combos, seed_list, sweep_dir, threads or {}), target.track
 
 
-def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = None, backend: str = "local",
-              address: str | None = None, max_parallel: int | None = None, out: Path | None = None,
-              console: Console | None = None) -> dict[str, Any]:
-    """Run every seed of every setting of `target` (a motorlab command line or a recipe) and
-    aggregate final return, success rate and steps-to-success across seeds with rliable.
+def run_sweep(target: Target, seeds: int | list[int] = 5, grid: dict[str, list[Any]] | None = None,
+              backend: str = "local", address: str | None = None, max_parallel: int | None = None,
+              out: Path | None = None, console: Console | None = None) -> dict[str, Any]:
+    """Run every seed of every setting of `target` (a step kind's or a recipe's, `motorlab.sweeps.targets`)
+    over `grid` ({key: [values]}) and aggregate final return, success rate and steps-to-success across
+    seeds with rliable.
 
     Returns:
         The summary (also `<sweep>/summary.json`), plus "sweep_dir".
@@ -96,16 +95,16 @@ def run_sweep(target: str, seeds: int | list[int] = 5, grid: list[str] | None = 
     threads = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if parallel != 1 else {}
     sweep_dir = run_path(out, "sweep")
     refuse_finished(sweep_dir, resumable=True, kind="sweep")  # a finished sweep is continued (--resume) or replaced, never by accident
-    trials, track = plan(target, seeds, grid, sweep_dir, threads)
+    trials, track = plan(target, seeds, grid or {}, sweep_dir, threads)
     with trackers.also(track, "the sweep's target"):  # checked before anything is written
-        return _run(target, trials, grid, backend, address, max_parallel, parallel, sweep_dir, console)
+        return _run(target, trials, grid or {}, backend, address, max_parallel, parallel, sweep_dir, console)
 
 
-def _run(target: str, trials: list[dict[str, Any]], grid: list[str] | None, backend: str, address: str | None,
+def _run(target: Target, trials: list[dict[str, Any]], grid: dict[str, list[Any]], backend: str, address: str | None,
          max_parallel: int | None, parallel: int | None, sweep_dir: Path, console: Console) -> dict[str, Any]:
     """The planned trials run (those not finished yet), then aggregated."""
     labels = list(dict.fromkeys(t["setting"] for t in trials))
-    config = mask_secrets({"sweep": target, "seeds": sorted({t["seed"] for t in trials}), "grid": grid or [],
+    config = mask_secrets({"sweep": target.text, "seeds": sorted({t["seed"] for t in trials}), "grid": grid,
                            "settings": labels, "backend": backend, "address": address, "max_parallel": max_parallel})
     prepare_run_dir(sweep_dir, "sweep", resumable=True)  # unfinished until the aggregate is written (--overwrite: a fresh folder)
     write_config(sweep_dir, config)
@@ -156,7 +155,7 @@ def _run(target: str, trials: list[dict[str, Any]], grid: list[str] | None, back
     return summary
 
 
-def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[str, Any]], sweep_dir: Path,
+def _write_results(target: Target, trials: list[dict[str, Any]], done: list[dict[str, Any]], sweep_dir: Path,
                    wall: float, console: Console) -> dict[str, Any]:
     labels = list(dict.fromkeys(t["setting"] for t in trials))
     scores = {s: [trial_scores(read_json(Path(t["run_dir"]) / "summary.json")) for t in done if t["setting"] == s]
@@ -164,14 +163,14 @@ def _write_results(target: str, trials: list[dict[str, Any]], done: list[dict[st
     scores = {s: v for s, v in scores.items() if v}
     flat, details = aggregate(scores) if scores else ({}, {"metrics": {}, "probability_of_improvement": {},
                                                             "profiles": {}})
-    target = mask_secrets(target)  # the sweep's files, plots and report record it
-    summary = {"sweep": target, "description": f"{len(labels)} settings × {len(trials) // max(1, len(labels))} "
+    text = target.text  # the sweep's files, plots and report record it, credentials masked
+    summary = {"sweep": text, "description": f"{len(labels)} settings × {len(trials) // max(1, len(labels))} "
                "seeds; IQM from 4 seeds (else the mean), 95% stratified-bootstrap CIs from 5 (rliable), the seeds' range below",
                "steps": labels, "trials": len(trials),
                "finished": len(done), "failed": len(trials) - len(done), "wall_seconds": round(wall, 2), **flat}
     write_json(sweep_dir / "aggregate.json", {"runs": {s: [t["run_dir"] for t in done if t["setting"] == s]
                                                        for s in labels}, **details})
-    title = f"sweep of {Path(target).name if recipe_path(target) else target}"
+    title = f"sweep of {target.path.name if isinstance(target, RecipeTarget) else text}"
     title = title if len(title) <= 60 else title[:57] + "..."
     if details["metrics"]:
         sweep_plots.interval_estimates(details["metrics"], sweep_dir / "plots" / "iqm.png", title)

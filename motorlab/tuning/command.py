@@ -3,21 +3,26 @@
 from __future__ import annotations
 
 import shlex
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from rich.console import Console
 
 from motorlab.command import Command, Resumable
 from motorlab.errors import mask_url
-from motorlab.launcher import ExecutionSettings
 from motorlab.settings import MAX_SEED, MAX_SEEDS
+from motorlab.sweeps.targets import TargetSettings
+
+if TYPE_CHECKING:
+    from motorlab.tuning.space import Space
 
 
-class TuneSettings(ExecutionSettings):
-    target: str = Field(description="A motorlab command line in quotes (train ...) or a recipe; each trial sets the "
-                        "seed and folder (its --config and --track apply to every trial)")
-    space: list[str] | None = Field(None, description=(
+class TuneSettings(TargetSettings):
+    # the target (TargetSettings) and the space are read once, here: from the command line's text, or as Python
+    # gives them (a `StepTarget` / `RecipeTarget`; Optuna distributions)
+    owner: ClassVar[str] = "tune"
+
+    space: list[str] | dict[str, Any] | None = Field(None, validate_default=True, description=(
         "KEY=DIST: loguniform:LOW,HIGH, uniform:LOW,HIGH, int:LOW,HIGH or choice:A,B,C. KEY: a setting (lr, n_envs, "
         "delay), a recipe FIELD or STEP.FIELD, or an SB3 hyperparameter (set.KEY, or any KEY that is not a setting)"))
     trials: int = Field(20, ge=1, description="Trials in all (COMPLETE and PRUNED), over every process sharing the "
@@ -45,6 +50,13 @@ class TuneSettings(ExecutionSettings):
                               "pruner")
     fresh_seeds: int | None = Field(None, ge=0, le=MAX_SEEDS, description="Seeds the best settings are re-run on after the search "
                                     "(default: --seeds; 0: none)")
+
+    @field_validator("space")
+    @classmethod
+    def _read_space(cls, value: list[str] | dict[str, Any] | None) -> Space:
+        from motorlab.tuning.space import Space, parse_space  # Optuna: imported when a search is made, not for --help
+
+        return Space(parse_space(value))
 
 
 class TuneCommand(Command[TuneSettings]):
@@ -74,10 +86,10 @@ class TuneCommand(Command[TuneSettings]):
         from motorlab.tuning.tune import make_spec, run_tune
 
         s = settings
-        spec = make_spec(s.target, s.space, s.trials, s.seeds, s.objective, s.direction, how.out, s.storage,
+        spec = make_spec(s.target, s.space.dists, s.trials, s.seeds, s.objective, s.direction, how.out, s.storage,
                          s.study_name, s.sampler, s.pruner, s.prune_startup, s.report_every, s.max_parallel,
                          s.fresh_seeds, backend=s.backend, address=s.address, sampler_seed=s.sampler_seed)
-        return {**run_tune(spec, console=console), "storage": spec.storage}
+        return {**run_tune(spec, s.target, console=console), "storage": spec.storage}
 
     def report(self, result: Any, settings: TuneSettings, console: Console) -> None:
         console.print(f"\n[bold]Results:[/bold] {result['tune_dir']}  (best.toml, trials.csv, table.txt, "

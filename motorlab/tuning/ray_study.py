@@ -114,7 +114,7 @@ class StudySearch(OptunaSearch):
             return None
         super().suggest(trial_id)  # asks the study: a queued trial's settings first, else the sampler's
         trial = self._ot_trials[trial_id]
-        values = {k: d.text(trial.params[k]) for k, d in self.spec.space.items()}
+        values = {k: d.value(trial.params[k]) for k, d in self.spec.space.items()}
         assert self._planner is not None
         try:
             runs = self._planner.plan(values, self.spec.seed_list, self.spec.out / "trials" / str(trial.number))

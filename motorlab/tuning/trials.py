@@ -17,15 +17,15 @@ from typing import Any
 from motorlab import launcher
 from motorlab.commandline import json_or_text
 from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.sweeps.trials import (
+from motorlab.sweeps.targets import (
     ALGORITHM_FIELDS,
+    RecipeTarget,
+    StepTarget,
+    Target,
     check_hyperparameters,
-    command_trials,
-    parse_target,
-    recipe_path,
-    recipe_trials,
     takes_hyperparameters,
 )
+from motorlab.sweeps.trials import command_trials, recipe_trials
 from motorlab.tuning.space import Dist
 
 FLAG = "--space"  # where a trial's settings come from, as errors name it
@@ -34,12 +34,12 @@ FLAG = "--space"  # where a trial's settings come from, as errors name it
 class Planner:
     """Turns sampled values into the trial processes of a command line or a recipe."""
 
-    def __init__(self, target: str, space: dict[str, Dist], threads: dict[str, str]):
-        self.target = target
+    def __init__(self, target: Target, space: dict[str, Dist], threads: dict[str, str]):
+        self.target = target  # read once, where it entered (motorlab.sweeps.targets)
         self.space = space
         self.threads = threads
-        self.recipe = recipe_path(target)
-        self.command = None if self.recipe else parse_target(target, "tune")  # read once; a mistake fails here
+        self.recipe = target if isinstance(target, RecipeTarget) else None
+        self.command = target if isinstance(target, StepTarget) else None
         self.options = self.command.options() if self.command else set()
         self.track = self.command.track if self.command else ()  # the target's own --track: its trials', too
 
@@ -52,8 +52,8 @@ class Planner:
         Raises:
             MotorlabError: one line naming the --space key and the fix.
         """
-        edges = {k: list(d.choices) if d.kind == "choice" else
-                 [str(int(v)) if d.kind == "int" else repr(v) for v in (d.low, d.high)] for k, d in self.space.items()}
+        edges = {k: list(d.choices) if d.kind == "choice" else [d.value(v) for v in (d.low, d.high)]
+                 for k, d in self.space.items()}
         if self.command is not None:
             self._check_passed_on(edges)
         with tempfile.TemporaryDirectory() as scratch:
@@ -67,7 +67,7 @@ class Planner:
         """The key is an SB3 hyperparameter (train's `--set KEY=VALUE`), not one of the command's settings."""
         return dist.is_hyperparam or dist.name.replace("-", "_") not in self.options
 
-    def _check_passed_on(self, edges: dict[str, list[str]]) -> None:
+    def _check_passed_on(self, edges: dict[str, list[Any]]) -> None:
         """The keys passed on as SB3 hyperparameters, with their edge values, against the command's
         settings and the algorithm its target trains, each named in its own error. A name that is no
         option gets the close options too: it may be a misspelt one. (When the space searches what
@@ -87,7 +87,7 @@ class Planner:
         searched = {d.name for d in self.space.values() if not self.passes_on(d)}
         if searched & set(ALGORITHM_FIELDS):
             return
-        algo = getattr(target.settings(target.kind.with_seed(target.given.fields, 0), f"motorlab tune {self.target!r}"),
+        algo = getattr(target.settings(target.kind.with_seed(target.given.fields, 0), f"motorlab tune {target.text!r}"),
                        "algo", None)
         for d in passed:
             flag = "--" + d.name.replace("_", "-")
@@ -97,11 +97,11 @@ class Planner:
                 raise MotorlabError(f"--space {d.key}: {'; '.join(problems)}; see motorlab {name} --help.")
             for value in edges[d.key]:
                 try:
-                    check_hyperparameters(algo, {d.name: json_or_text(value)})
+                    check_hyperparameters(algo, {d.name: json_or_text(value) if isinstance(value, str) else value})
                 except MotorlabError as e:
                     raise MotorlabError(f"--space {d.key}: {'; '.join([*problems, str(e)])}") from None
 
-    def plan(self, values: dict[str, str], seeds: list[int], trial_dir: Path) -> list[dict[str, Any]]:
+    def plan(self, values: dict[str, Any], seeds: list[int], trial_dir: Path) -> list[dict[str, Any]]:
         """One sweep trial per seed, with run folders trial_dir/seed<k>/.
 
         Raises:
@@ -176,9 +176,3 @@ class SeedRuns:
 
 def run_dirs(runs: list[dict[str, Any]]) -> list[Path]:
     return [Path(t["run_dir"]) for t in runs]
-
-
-def require_target(target: str) -> None:
-    if not target.strip():
-        raise MotorlabError("give a command line in quotes or a recipe to tune, e.g. "
-                            "motorlab tune \"train InvertedPendulum-v5\" --space lr=loguniform:1e-5,1e-2 ...")

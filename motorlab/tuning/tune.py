@@ -39,16 +39,17 @@ from motorlab.runs import (
     write_config,
 )
 from motorlab.settings import MAX_SEEDS
+from motorlab.sweeps.targets import Target
 from motorlab.tuning import outputs
 from motorlab.tuning.objective import Objective, steps_run
 from motorlab.tuning.search import TuneSpec, default_parallel, run_search, study_name
-from motorlab.tuning.space import parse_space
-from motorlab.tuning.trials import Planner, SeedRuns, require_target
+from motorlab.tuning.space import Dist
+from motorlab.tuning.trials import Planner, SeedRuns
 
 FRESH_SEED = 1000  # the fresh seeds are FRESH_SEED.. (or K.. when K is larger): never a search seed
 
 
-def make_spec(target: str, space: list[str] | None, trials: int, seeds: int, objective: str, direction: str | None,
+def make_spec(target: Target, space: dict[str, Dist], trials: int, seeds: int, objective: str, direction: str | None,
               out: Path | None, storage: str | None, name: str | None, sampler: str, pruner: str, prune_startup: int,
               report_every: int, max_parallel: int | None, fresh_seeds: int | None, backend: str = "local",
               address: str | None = None, sampler_seed: int | None = None) -> TuneSpec:
@@ -58,8 +59,7 @@ def make_spec(target: str, space: list[str] | None, trials: int, seeds: int, obj
         MotorlabError: bad spaces, counts or directions, --address without --backend ray, no Ray
             cluster at --address (before anything is written).
     """
-    require_target(target)
-    parsed = parse_space(space)
+    parsed = space
     if trials < 1:
         raise MotorlabError(f"--trials {trials}: give at least 1.")
     if not 1 <= seeds <= MAX_SEEDS:
@@ -73,16 +73,16 @@ def make_spec(target: str, space: list[str] | None, trials: int, seeds: int, obj
     goal = Objective.make(objective, direction)
     launcher.check_execution(backend, address, max_parallel)  # last: it may try to reach the cluster
     folder = run_path(out, "tune").resolve()
-    return TuneSpec(target=target, space=parsed, objective=goal, trials=trials, seeds=seeds, out=folder,
+    return TuneSpec(target=target.text, space=parsed, objective=goal, trials=trials, seeds=seeds, out=folder,
                     storage=storage or f"sqlite:///{folder / 'study.db'}",
-                    study_name=name or study_name(target, parsed, goal, seeds), sampler=sampler,
+                    study_name=name or study_name(target.text, parsed, goal, seeds), sampler=sampler,
                     sampler_seed=sampler_seed, pruner=pruner,
                     prune_startup=prune_startup, report_every=report_every,
                     max_parallel=default_parallel(max_parallel), fresh_seeds=seeds if fresh_seeds is None else fresh_seeds,
                     backend=backend, address=address, cluster_parallel=max_parallel if backend == "ray" else None)
 
 
-def run_tune(spec: TuneSpec, console: Console | None = None) -> dict[str, Any]:
+def run_tune(spec: TuneSpec, target: Target, console: Console | None = None) -> dict[str, Any]:
     """Search, write the outputs, re-run the best on fresh seeds. Returns the summary (also summary.json).
 
     Raises:
@@ -92,7 +92,7 @@ def run_tune(spec: TuneSpec, console: Console | None = None) -> dict[str, Any]:
     console = console or Console(stderr=True)
     threads = ({"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"} if spec.max_parallel != 1 or spec.backend == "ray"
                else {})
-    planner = Planner(spec.target, spec.space, threads)
+    planner = Planner(target, spec.space, threads)
     planner.check()
     with trackers.also(planner.track, "the tune's target"):  # checked before anything is written
         return _search(spec, planner, console)

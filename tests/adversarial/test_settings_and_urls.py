@@ -209,11 +209,12 @@ def test_unknown_or_mistyped_space_key_fails_before_the_study_exists(finished_tu
 
 def test_valid_hyperparameter_keys_pass_the_check():
     """`set.KEY`, and a KEY that is no option, reach PPO as hyperparameters: the check lets them through."""
+    from motorlab.sweeps.targets import read_target
     from motorlab.tuning.space import parse_space
     from motorlab.tuning.trials import Planner
 
     space = parse_space(["set.n_steps=int:64,128", "gamma=uniform:0.9,0.99", "lr=loguniform:1e-4,1e-3"])
-    planner = Planner(PPO, space, {})
+    planner = Planner(read_target(PPO, "tune"), space, {})
     planner.check()
     assert [planner.passes_on(d) for d in space.values()] == [True, True, False]
 

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from motorlab.errors import MotorlabError
 from motorlab.stats import aggregate, trial_scores
 from motorlab.sweeps.grid import label, labels, parse_grid, settings
-from motorlab.sweeps.trials import SWEEPABLE
+from motorlab.sweeps.targets import SWEEPABLE
 from tests.helpers import (
     ENV_ID,
     TINY_PPO,
@@ -186,7 +186,8 @@ def test_grid_settings_are_every_combination():
 
 
 def test_switch_options_take_true_or_false(tmp_path):
-    from motorlab.sweeps.trials import command_trials, parse_target
+    from motorlab.sweeps.targets import parse_target
+    from motorlab.sweeps.trials import command_trials
 
     target = parse_target(f"train {ENV_ID}")
     trials = command_trials(target, settings(parse_grid(["normalize=true,false"])), [0], tmp_path, {})
@@ -395,7 +396,8 @@ def test_trial_folders_are_distinct_for_distinct_settings_and_equal_for_equal_on
 
 
 def test_values_that_slugify_alike_get_their_own_folders(tmp_path):
-    from motorlab.sweeps.trials import command_trials, parse_target
+    from motorlab.sweeps.targets import parse_target
+    from motorlab.sweeps.trials import command_trials
 
     combos = settings(parse_grid(["set.note=a b|a_b|a/b|http://u:s3cretpw@h/x"]))
     trials = command_trials(parse_target(f"train {ENV_ID} --algo lqr"), combos, [0, 1], tmp_path, {})
@@ -428,7 +430,7 @@ def test_every_invocation_option_of_a_target_is_applied_or_refused(lqr_config, c
     """Any set of a command's invocation options, in any order, in a sweep or tune target: each one applied
     (--track, --config) or the target refused in one line naming an option given and where it goes."""
     from motorlab.kinds import for_command
-    from motorlab.sweeps.trials import APPLIED, parse_target
+    from motorlab.sweeps.targets import APPLIED, parse_target
 
     options = data.draw(st.lists(st.sampled_from(list(for_command(command).invocation.model_fields)), unique=True))
     words = [w.replace("CONFIG", str(lqr_config)) for o in options for w in OPTION_WORDS.get(o, [f"--{o}", "x"])]
