@@ -137,8 +137,8 @@ def test_ray_asha_budget_comes_from_the_targets_kind(tmp_path, target, space, ex
     """ASHA's max_t is the budget the target's kind plans (its settings, defaults included), not a
     --timesteps read from the command text; unknown when the search varies it or the kind has none."""
     from motorlab.kinds.train import TRAIN
-    from motorlab.tuning.ray_search import budget
     from motorlab.sweeps.targets import read_target
+    from motorlab.tuning.ray_search import budget
     from motorlab.tuning.space import parse_space
     from motorlab.tuning.trials import Planner
     from motorlab.tuning.tune import make_spec
