@@ -20,7 +20,7 @@ class SweepSettings(TargetSettings):
     seeds: int = Field(5, ge=1, description="Seeds per setting: 0..N-1")
     grid: list[str] | dict[str, list[Any]] | None = Field(None, description=(
         "KEY=V1,V2 (every combination runs). Commands: KEY is a setting (lr, n_envs, delay, normalize=true,false) "
-        "or, for train, an SB3 hyperparameter. Recipes: FIELD for every step that has it, or STEP.FIELD. Values "
+        "or, for train, an SB3 hyperparameter as set.KEY (set.gamma=0.98,0.99). Recipes: FIELD for every step that has it, or STEP.FIELD. Values "
         "holding commas: separate them with |, e.g. lr='linear:1e-3,0|3e-4'"))
 
     @field_validator("grid")

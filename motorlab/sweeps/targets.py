@@ -78,8 +78,10 @@ class StepTarget:
                                                             or key.startswith("set.")):
                     options = sorted(f"--{o.replace('_', '-')}" for o in self.options())
                     flag_name = "--" + name.replace("_", "-")
+                    hyper = (f"; an SB3 hyperparameter is given as {flag} set.{name}=..."
+                             if self.takes_hyperparameters() and not key.startswith("set.") else "")
                     raise MotorlabError(f"{flag} {key}: `motorlab {self.name}` has no option {flag_name}"
-                                        f"{did_you_mean(flag_name, options)}; see motorlab {self.name} --help.")
+                                        f"{did_you_mean(flag_name, options)}{hyper}; see motorlab {self.name} --help.")
                 value = json_or_text(text) if isinstance(text, str) else text
                 fields[HYPERPARAMETERS] = {**fields.get(HYPERPARAMETERS, {}), name: value}
                 continue
