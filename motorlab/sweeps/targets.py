@@ -247,9 +247,9 @@ def step_target(command: str, owner: str = "sweep", **fields: Any) -> StepTarget
     given = {k: v.as_posix() if isinstance(v, Path) else v for k, v in fields.items() if v is not None}
     if kind.SEED in given:
         raise MotorlabError(f"the {owner} sets {kind.SEED} of every trial itself; drop {kind.SEED}=.")
-    target = StepTarget("", kind, Given(given, {}))
+    target = StepTarget(mask_secrets(shlex.join([*command.split(), *command_line(kind, given)])), kind, Given(given, {}))
     target.settings(kind.with_seed(given, 0), f"{owner} target {command}")  # judged now, not per trial
-    return StepTarget(mask_secrets(shlex.join([*command.split(), *command_line(kind, given)])), kind, Given(given, {}))
+    return target
 
 
 def recipe_target(recipe: str | Path, **fields: Any) -> RecipeTarget:
