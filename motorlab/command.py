@@ -171,8 +171,10 @@ def option_error(e: ValidationError, model: type[BaseModel] | None = None) -> st
     label = f"--{name.replace('_', '-')}"
     if first["type"] == "extra_forbidden":
         return f"unknown setting {label}"
+    if first["type"] == "missing":
+        return f"{label} is required; give it (--help says what it takes)"
     given = first.get("input")
-    shown = f" {given!r}" if isinstance(given, (int, float, str)) and first["type"] != "missing" else ""
+    shown = f" {given!r}" if isinstance(given, (int, float, str)) else ""
     return f"{label}{shown}: {first['msg']}"
 
 

@@ -44,10 +44,15 @@ class Given:
 
 
 def _base(annotation: Any) -> Any:
-    """The type inside Optional[...]; of a union of several, its first: how the command line gives the
-    value (`grid: list[str] | dict[str, list[Any]]`: KEY=V1,V2 text here, a dict from Python)."""
+    """How the command line gives a field's value: the type inside Optional[...]; of a union of containers,
+    its first (`grid: list[str] | dict[str, list[Any]]`: KEY=V1,V2 items here, a dict from Python); any other
+    union is text its settings model reads (`obs_noise: float | str | list[float]`: 0.05, 0..0.1)."""
     args = [a for a in get_args(annotation) if a is not type(None)]
-    return args[0] if get_origin(annotation) in (Union, UnionType) and args else annotation
+    if get_origin(annotation) not in (Union, UnionType) or not args:
+        return annotation
+    if len(args) == 1 or all(get_origin(a) in (list, tuple, dict) for a in args):
+        return args[0]
+    return annotation
 
 
 def _is_bool(annotation: Any) -> bool:

@@ -367,3 +367,34 @@ def test_recipes_lists_kinds_and_the_schema():
     settings = RECIPES.make(json_schema=True)
     RECIPES.report(RECIPES.execute(settings, RECIPES.how(), console, False), settings, console)
     assert "discriminator" in json.loads(console.file.getvalue())
+
+
+def test_the_command_line_reads_no_field_narrower_than_its_settings():
+    """A field whose settings take several scalar types (`--obs-noise 0.05` or `0.05..0.1`) reaches its model as
+    the text given; the command line types a value (int, float, a switch) only where the model takes that
+    type alone. Judged for every field of every command, so a new field cannot be narrowed by its CLI."""
+    import types
+    import typing
+
+    from motorlab.commandline import value_kind
+    from motorlab.registry import COMMANDS
+
+    def members(annotation):
+        if typing.get_origin(annotation) is typing.Annotated:
+            return members(typing.get_args(annotation)[0])
+        if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+            return {m for a in typing.get_args(annotation) for m in members(a)} - {type(None)}
+        return {annotation}
+
+    scalar = {"int": int, "float": float, "flag": bool}
+    checked = 0
+    for cmd in COMMANDS.values():
+        for name, info in cmd.settings.model_fields.items():
+            kind = value_kind(info.annotation)
+            if kind in scalar:
+                assert members(info.annotation) == {scalar[kind]}, (cmd.name, name, info.annotation)
+            if kind in ("numbers", "many", "pairs"):  # a container: every member is one
+                assert all(typing.get_origin(m) in (list, tuple, dict) or m is dict for m in members(info.annotation)), \
+                    (cmd.name, name, info.annotation)
+            checked += 1
+    assert checked > 100

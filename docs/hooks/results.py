@@ -53,9 +53,14 @@ def load(file: str) -> dict[str, Any]:
 
 
 def lookup(data: Any, path: str, file: str = "") -> Any:
-    """The value at a dotted path; at each level the longest run of parts that is a key wins."""
+    """The value at a dotted path; at each level the longest run of parts that is a key wins (a number: a list's item)."""
     parts = path.split(".")
     while parts:
+        if isinstance(data, list) and parts[0].isdigit():  # an item of a list: pareto_front.0.minutes
+            if int(parts[0]) >= len(data):
+                raise MacroError(f"{file}.json: {path!r} has item {parts[0]} of a list of {len(data)}")
+            data, parts = data[int(parts[0])], parts[1:]
+            continue
         if not isinstance(data, dict):
             raise MacroError(f"{file}.json: {path!r} goes through a {type(data).__name__}, not an object")
         for n in range(len(parts), 0, -1):

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
-from pydantic import ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field, field_serializer, field_validator
 
 from motorlab.commandline import Given, command_line, json_or_text, numbers, pairs, parse, value_kind
 from motorlab.errors import MotorlabError, did_you_mean, mask_secrets
@@ -153,7 +153,7 @@ def parse_target(command: str, owner: str = "sweep") -> StepTarget:
     try:
         words = shlex.split(command)
     except ValueError as e:
-        raise MotorlabError(f"cannot read the command {mask_secrets(command)!r}: {e}.") from None
+        raise MotorlabError(f"cannot read the {owner} target {mask_secrets(command)!r}: {e}.") from None
     if words[:1] == ["motorlab"]:
         words = words[1:]
     for n in (2, 1):
@@ -163,13 +163,14 @@ def parse_target(command: str, owner: str = "sweep") -> StepTarget:
             break
     else:
         given = mask_secrets(" ".join(words[:2]))
-        raise MotorlabError(f"cannot {owner} {given!r}: give a recipe (name or .toml file) or one of the commands "
+        raise MotorlabError(f"the {owner} target {given!r} is no recipe or command: give a recipe (name or .toml "
+                            f"file) or one of the commands "
                             f"{', '.join(SWEEPABLE)}, quoted, e.g. motorlab {owner} \"train InvertedPendulum-v5 "
                             f"--preset fast\" --seeds 5{did_you_mean(given, SWEEPABLE)}")
     given = parse(kind, words[n:], f"motorlab {name}")
     if kind.SEED in given.fields:
         raise MotorlabError(f"the {owner} sets --{kind.SEED} of every trial itself; drop --{kind.SEED} from the "
-                            "command.")
+                            "target.")
     for option, value in given.how.items():
         if option not in APPLIED and value not in (None, False):
             raise MotorlabError(_refusal(option, owner))
@@ -209,7 +210,10 @@ class RecipeTarget:
         """As recorded and shown: the recipe as given, and the fields set as `motorlab run --set` gives them."""
         if not self.fields:
             return mask_secrets(self.name)
-        sets = [["--set", f"{k}={v if isinstance(v, str) else json.dumps(v)}"] for k, v in self.fields.items()]
+        # text that JSON would read as something else ("3", "true") is written as JSON text, so that
+        # `read_target` gives back the same value
+        sets = [["--set", f"{k}={v if isinstance(v, str) and json_or_text(v) == v else json.dumps(v)}"]
+                for k, v in self.fields.items()]
         return mask_secrets(shlex.join([self.name, *(w for pair in sets for w in pair)]))
 
     def data(self, data: dict[str, Any], source: str, flag: str) -> dict[str, Any]:
@@ -229,8 +233,33 @@ def read_target(text: str, owner: str = "sweep") -> Target:
     """
     if not text.strip():
         raise MotorlabError(f"give the {owner} a target: a recipe or a motorlab command line in quotes.")
-    path = recipe_path(text.strip())
-    return RecipeTarget(path, text.strip()) if path is not None else parse_target(text, owner)
+    try:
+        words = shlex.split(text)
+    except ValueError as e:
+        raise MotorlabError(f"cannot read the {owner} target {mask_secrets(text)!r}: {e}.") from None
+    path = recipe_path(words[0]) if words and words[0] not in SWEEPABLE else None
+    if path is None:
+        return parse_target(text, owner)
+    return RecipeTarget(path, words[0], recipe_sets(words[1:], f"{owner} target {words[0]}"))
+
+
+def recipe_sets(words: list[str], where: str) -> dict[str, Any]:
+    """The fields `--set FIELD=VALUE` words after a recipe's name set (as `motorlab run --set` reads
+    them: JSON where it is JSON, else text); what `RecipeTarget.text` writes reads back the same.
+
+    Raises:
+        MotorlabError: a word that is not --set FIELD=VALUE.
+    """
+    fields: dict[str, Any] = {}
+    rest = iter(words)
+    for word in rest:
+        item = word.removeprefix("--set=") if word.startswith("--set=") else next(rest, None) if word == "--set" else None
+        if item is None or "=" not in item:
+            raise MotorlabError(f"{where}: after a recipe's name give only --set FIELD=VALUE, not {word!r}; "
+                                f"e.g. \"pendulum --set ppo.timesteps=20000\".")
+        key, value = item.split("=", 1)
+        fields[key.strip()] = json_or_text(value)
+    return fields
 
 
 def step_target(command: str, owner: str = "sweep", **fields: Any) -> StepTarget:
@@ -277,3 +306,8 @@ class TargetSettings(ExecutionSettings):
     @classmethod
     def _read_target(cls, value: str | Target) -> Target:
         return read_target(value, cls.owner) if isinstance(value, str) else value
+
+    @field_serializer("target")
+    def _target_text(self, target: Target) -> str:
+        """config.toml records the target as its text, which `read_target` reads back to the same target."""
+        return target.text

@@ -5,7 +5,7 @@ from __future__ import annotations
 import shlex
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_serializer, field_validator
 from rich.console import Console
 
 from motorlab.command import Command, Resumable
@@ -22,7 +22,7 @@ class TuneSettings(TargetSettings):
     # gives them (a `StepTarget` / `RecipeTarget`; Optuna distributions)
     owner: ClassVar[str] = "tune"
 
-    space: list[str] | dict[str, Any] | None = Field(None, validate_default=True, description=(
+    space: list[str] | dict[str, Any] = Field(description=(
         "KEY=DIST: loguniform:LOW,HIGH, uniform:LOW,HIGH, int:LOW,HIGH or choice:A,B,C. KEY: a setting (lr, n_envs, "
         "delay), a recipe FIELD or STEP.FIELD, or an SB3 hyperparameter (set.KEY, or any KEY that is not a setting)"))
     trials: int = Field(20, ge=1, description="Trials in all (COMPLETE and PRUNED), over every process sharing the "
@@ -53,10 +53,15 @@ class TuneSettings(TargetSettings):
 
     @field_validator("space")
     @classmethod
-    def _read_space(cls, value: list[str] | dict[str, Any] | None) -> Space:
+    def _read_space(cls, value: list[str] | dict[str, Any]) -> Space:
         from motorlab.tuning.space import Space, parse_space  # Optuna: imported when a search is made, not for --help
 
         return Space(parse_space(value))
+
+    @field_serializer("space")
+    def _space_items(self, space: Space) -> list[str]:
+        """config.toml records the space as --space's KEY=KIND:ARGS items, which read back to the same space."""
+        return [d.item() for d in space.dists.values()]
 
 
 class TuneCommand(Command[TuneSettings]):

@@ -78,6 +78,14 @@ class Dist:
             return str(int(value))  # type: ignore[call-overload]
         return repr(float(value))  # type: ignore[arg-type]
 
+    def item(self) -> str:
+        """KEY=KIND:ARGS as `--space` gives it, bounds written exactly, so that `parse_dist` reads back
+        this distribution (choices from Python: their text, as the command line gives them)."""
+        if self.kind == "choice":
+            return f"{self.key}={self.describe()}"
+        low, high = (str(int(self.low)), str(int(self.high))) if self.kind == "int" else (repr(self.low), repr(self.high))
+        return f"{self.key}={self.kind}:{low},{high}"
+
     def describe(self) -> str:
         if self.kind == "choice":
             return f"{self.kind}:{','.join(c if isinstance(c, str) else json.dumps(c) for c in self.choices)}"

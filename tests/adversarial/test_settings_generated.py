@@ -40,7 +40,7 @@ REQUIRED = {
     "envs": ["InvertedPendulum-v5"], "policies": ["random"], "vary": ["delay=0,0.1"], "groups": {"a": ["runs/train"]},
     "env": "InvertedPendulum-v5", "transitions": "runs/collect", "model": "runs/fit", "source": "runs/train",
     "paths": ["runs/train"], "run_dir": "runs/train", "folder": "sk", "out": "sar.npz", "sar": "sar.npz",
-    "recipe": "pendulum", "target": "evaluate random",
+    "recipe": "pendulum", "target": "evaluate random", "space": ["episodes=int:1,9"],  # sweep, tune
     "file": "emg.csv", "rate": 2000.0,  # synergies import-emg
     "a": "runs/fit", "b": "runs/fit-b",  # synergies compare
 }

@@ -159,9 +159,9 @@ def test_grid_key_given_twice_is_refused():
 
 @pytest.mark.parametrize("target, fragment", [
     (f"train {ENV_ID} --seed 3", "sets --seed of every trial itself"),
-    ("plot runs/x", "cannot sweep 'plot runs/x'"),
+    ("plot runs/x", "the sweep target 'plot runs/x' is no recipe or command"),
     (f"train {ENV_ID} --timesteps many", "--timesteps"),
-    ("no-such-recipe", "cannot sweep"),
+    ("no-such-recipe", "the sweep target 'no-such-recipe' is no recipe or command"),
 ])
 def test_bad_target_gives_one_clear_line(tmp_path, target, fragment):
     out = tmp_path / "bad"

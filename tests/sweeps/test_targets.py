@@ -47,10 +47,13 @@ TRAIN_FIELDS = st.fixed_dictionaries({"env": st.just(ENV_ID)}, optional={
 @given(fields=TRAIN_FIELDS)
 def test_a_command_line_written_from_fields_reads_back_as_those_fields(fields):
     """`command_line` (a Python-made target's record and reproduce line) is what `parse` reads back into the
-    same fields: text that would read as JSON ("1", "true") stays text, numbers stay numbers."""
+    same settings: text that would read as JSON ("1", "true") stays text, numbers stay numbers (a field
+    the command line gives as text, like --delay's 0.1 or 0..0.2, is read by its settings model)."""
     kind = for_command("train")
     words = command_line(kind, fields)
-    assert parse(kind, shlex.split(shlex.join(words)), "test").fields == {k: v for k, v in fields.items() if v != {}}
+    read = parse(kind, shlex.split(shlex.join(words)), "test").fields
+    assert read.keys() == {k for k, v in fields.items() if v != {}}
+    assert kind.make(**read).model_dump() == kind.make(**fields).model_dump()
 
 
 def _trial_settings(target, grid):
@@ -97,7 +100,8 @@ def test_a_recipe_target_sets_its_fields_under_the_grid_in_every_trial(tmp_path)
     (lambda: SWEEP.make(None, target=f"train {ENV_ID}", grid={"lr": [1e-3, 1e-3]}), "repeated"),
     (lambda: SWEEP.make(None, target=f"train {ENV_ID}", grid={"lr": "1e-3"}), "--grid"),
     (lambda: SWEEP.make(None, target="  "), "give the sweep a target"),
-    (lambda: TUNE.make(None, target=f"train {ENV_ID}"), "at least one --space"),
+    (lambda: TUNE.make(None, target=f"train {ENV_ID}"), "--space is required"),
+    (lambda: TUNE.make(None, target=f"train {ENV_ID}", space=[]), "at least one --space"),
     (lambda: TUNE.make(None, target=f"train {ENV_ID}", space={"lr": 3}), "not int"),
     (lambda: TUNE.make(None, target=f"train {ENV_ID}",
                        space={"lr": optuna.distributions.FloatDistribution(0.1, 0.5, step=0.1)}), "stepped"),
@@ -144,3 +148,53 @@ def test_a_recipes_fields_from_python_may_be_paths_and_results(tmp_path):
         plan(target, [0], {}, tmp_path / "sweep")
     with pytest.raises(MotorlabError, match="sar.npz does not exist"):
         motorlab.run_recipe("sar-legs-published", tmp_path / "study", sar=sar)
+
+
+RECIPE_FIELDS = st.dictionaries(
+    st.sampled_from(["ppo.timesteps", "ppo.seed_note", "timesteps", "note"]),
+    st.one_of(st.integers(-10**6, 10**6), finite, st.booleans(), word, st.sampled_from(["3", "true", "1e-3", "a b", "x=y"])),
+    max_size=3)
+
+
+@settings_(max_examples=60, deadline=None)
+@given(fields=RECIPE_FIELDS, command=st.sampled_from(["sweep", "tune"]))
+def test_a_targets_config_reads_back_as_the_same_target(fields, command, tmp_path_factory):
+    """config.toml records a sweep's or search's target as its text, and that text read back is the same
+    target: a recipe with the fields it sets (text that JSON would read as a number stays text), or a
+    command line of a step kind."""
+    from motorlab.runs import write_toml
+
+    cmd = {"sweep": SWEEP, "tune": TUNE}[command]
+    extra = ({"grid": ["episodes=2,3"]} if command == "sweep"
+             else {"space": {"episodes": optuna.distributions.IntDistribution(2, 9),
+                             "noise": optuna.distributions.FloatDistribution(1.2345678901e-5, 0.3, log=True)}})
+    path = tmp_path_factory.mktemp("cfg") / "config.toml"
+    for target in (motorlab.recipe("pendulum", **fields), motorlab.step("evaluate", policy="random", env=ENV_ID)):
+        made = cmd.make(target=target, **extra)
+        write_toml(path, made.config())
+        again = cmd.validate(tomllib.loads(path.read_text()))
+        assert again.model_dump() == made.model_dump()
+        if isinstance(target, RecipeTarget):
+            assert again.target.fields == fields and again.target.path == target.path
+        else:
+            assert again.target.given.fields == target.given.fields
+
+
+def test_a_recipe_target_takes_only_sets_after_its_name():
+    with pytest.raises(MotorlabError, match="only --set FIELD=VALUE.*'--seeds'"):
+        read_target("pendulum --seeds 3")
+    assert read_target("pendulum --set=ppo.timesteps=5 --set note=a").fields == {"ppo.timesteps": 5, "note": "a"}
+
+
+@settings_(max_examples=80, deadline=None)
+@given(bounds=st.lists(st.floats(1e-12, 1e12, allow_nan=False), min_size=2, max_size=2, unique=True),
+       kind=st.sampled_from(["loguniform", "uniform", "int"]))
+def test_a_distributions_item_reads_back_exactly(bounds, kind):
+    """What config.toml records of a space (`Dist.item`) reads back to the same bounds, to the last bit."""
+    from motorlab.tuning.space import Dist, parse_dist
+
+    low, high = sorted(bounds)
+    if kind == "int":
+        low, high = float(int(low)), float(int(high) + 1)
+    made = Dist("k", kind, low, high)
+    assert parse_dist(made.item()) == made
