@@ -25,7 +25,10 @@ class CompareSettings(Settings):
     activations: str | None = Field(None, description="The activations the null shuffles (default: those B was "
                                     "fitted to, from B's fit run folder)")
     surrogates: int = Field(100, ge=10, description="Shuffled surrogates for the chance level")
-    max_samples: int = Field(20_000, gt=100, description="Samples each surrogate fit uses (a random draw)")
+    max_samples: int | None = Field(None, gt=100, description=(
+        "Samples each surrogate fit uses, a random draw (default: all, as many as B's fit saw). Fewer is faster but "
+        "lowers the chance level: a fit to fewer shuffled samples lands farther from any synergy set, so more pairs "
+        "look above chance (measured: the synergy_analysis benchmark)"))
     names_from: str | None = Field(None, description="An env id whose MuJoCo actuator names label a SAR saved "
                                    "without muscle names (MyoSuite's published SARs)")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="Random seed (shuffles, the surrogates' fits)")

@@ -52,6 +52,33 @@ def test_the_shuffled_null_lies_well_below_a_true_match(truth):
     assert match(truth.synergies, fitted_vectors(truth.activations, "nmf", 4, 0)).mean > 0.95 > null.p95
 
 
+def test_the_null_fits_each_surrogate_as_the_reference_was_fitted(truth):
+    """By default every surrogate is fitted to all the samples (the reference's own fit, on shuffled data); a
+    smaller draw, asked for, fits that many. A draw is not neutral: fewer shuffled samples land farther from
+    the reference (the benchmark measures it on the hand), so it is never the default."""
+    x = truth.activations
+    full = chance(truth.synergies, x, "nmf", 4, surrogates=10, seed=0, workers=1)
+    drawn = chance(truth.synergies, x, "nmf", 4, surrogates=10, seed=0, max_samples=x.shape[0] // 4, workers=1)
+    assert full.samples == x.shape[0] and drawn.samples == x.shape[0] // 4
+
+
+@settings(max_examples=3, deadline=None, derandomize=True, database=None)
+@given(seed=st.integers(1, 10_000))
+def test_the_scoring_fits_tolerance_moves_held_out_vaf_little(seed):
+    """The VAF curve's scoring fits stop at CV_TOL, sooner than sklearn's default; on generated ground truths
+    the held-out curve stays within 0.005 of the default tolerance's at every N (and both choose N = 4)."""
+    from unittest import mock
+
+    from motorlab.synergies import analysis
+
+    g = ground_truth(seed=seed, episodes=15)
+    fast = cross_validated_vaf(g.activations, g.episode, "nmf", max_n=6, folds=3, workers=1)
+    with mock.patch.object(analysis, "CV_TOL", 1e-4):
+        slow = cross_validated_vaf(g.activations, g.episode, "nmf", max_n=6, folds=3, workers=1)
+    assert np.max(np.abs(fast.mean - slow.mean)) < 0.005
+    assert [c.n for c in choices(fast)] == [c.n for c in choices(slow)] == [4, 4, 4]
+
+
 def test_in_sample_pca_vaf_is_the_explained_variance_ratio(truth):
     from motorlab.synergies.sar import vaf_curve
 
