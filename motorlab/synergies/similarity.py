@@ -84,11 +84,7 @@ def _surrogate(reference: np.ndarray, x: np.ndarray, method: str, n: int, seed: 
     from motorlab.synergies.vectors import fitted_vectors
 
     rng = np.random.default_rng(seed)
-    surrogate = shuffled(x, rng)
-    # NMF in single precision (sklearn keeps the input's): 1.4x faster, and on 100k samples of the MyoSuite hand
-    # the null's p95 moved by 0.0001 (20 surrogates, N = 10)
-    surrogate = surrogate.astype(np.float32) if method == "nmf" else surrogate
-    return match(reference, fitted_vectors(surrogate, method, n, seed), absolute).similarity
+    return match(reference, fitted_vectors(shuffled(x, rng), method, n, seed), absolute).similarity
 
 
 def chance(reference: np.ndarray, x: np.ndarray, method: str, n: int, surrogates: int = 100, seed: int = 0,
@@ -98,7 +94,7 @@ def chance(reference: np.ndarray, x: np.ndarray, method: str, n: int, surrogates
     `max_samples`: each surrogate is fitted to at most this many samples, drawn once at random; None: all of
     them, the default, so that a surrogate's fit is the reference's fit (same samples, method, N and
     tolerance) on data without co-activation. A smaller draw is faster but not neutral: on 100k samples of
-    the MyoSuite hand (N = 10) the null's p95 fell from 0.84 (all) to 0.80 (20k) and 0.75 (10k), a chance
+    the MyoSuite hand (N = 10) the null's p95 fell from 0.87 (all) to 0.80 (20k) and 0.74 (10k), a chance
     level too low, so pairs would pass it that should not (benchmarks/synergy_analysis.py records it).
     Surrogates run in parallel (joblib)."""
     from joblib import delayed
