@@ -55,8 +55,8 @@ docs: $(STAMP)  ## the documentation site in site/ (open site/index.html, offlin
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 # (test-fast runs the cart-pole recipe end to end as the model-based workflow's test; make test leaves it to test-long)
-test-fast: lint  ## the edit loop: unit tests and one end-to-end test per workflow (under 3 min; no browser needed)
-	$(VENV)/bin/python -m pytest -q -m fast
+test-fast: lint  ## the edit loop: unit tests and one end-to-end test per workflow (about 2 min on 2 cores; no browser)
+	$(VENV)/bin/python -m pytest -q -m fast -n 2 --dist loadfile
 
 # The tests marked `long` (tests/conftest.py LONG): end-to-end runs, rehearsals, Ray clusters (CI runs them after make test)
 test-long: $(STAMP) $(VENV)/.browser  ## the long end-to-end tests make test leaves out (CI runs them after make test)
