@@ -71,7 +71,7 @@ class StepTarget:
         """
         fields = dict(self.given.fields)
         model = self.kind.settings
-        for key, text in values.items():
+        for key, value in values.items():
             name = key.removeprefix("set.")
             if key in hyperparams or name in hyperparams or key.startswith("set.") or name not in self.options():
                 if not self.takes_hyperparameters() or not (key in hyperparams or name in hyperparams
@@ -82,27 +82,27 @@ class StepTarget:
                              if self.takes_hyperparameters() and not key.startswith("set.") else "")
                     raise MotorlabError(f"{flag} {key}: `motorlab {self.name}` has no option {flag_name}"
                                         f"{did_you_mean(flag_name, options)}{hyper}; see motorlab {self.name} --help.")
-                value = json_or_text(text) if isinstance(text, str) else text
+                value = json_or_text(value) if isinstance(value, str) else value
                 fields[HYPERPARAMETERS] = {**fields.get(HYPERPARAMETERS, {}), name: value}
                 continue
-            if not isinstance(text, str):  # a value from Python: the settings model judges it as it is
-                fields[name] = text
+            if not isinstance(value, str):  # a value from Python: the settings model judges it as it is
+                fields[name] = value
                 continue
             info = model.model_fields.get(name)
             kind = value_kind(info.annotation) if info is not None else "text"
             if kind == "flag":
-                if text.lower() not in SWITCH:
+                if value.lower() not in SWITCH:
                     raise MotorlabError(f"{flag} {key}: --{name.replace('_', '-')} is a switch; give true or false, "
-                                        f"not {text!r}.")
-                fields[name] = SWITCH[text.lower()]
+                                        f"not {value!r}.")
+                fields[name] = SWITCH[value.lower()]
             elif kind == "numbers":
-                fields[name] = numbers(text, f"{flag} {key}")
+                fields[name] = numbers(value, f"{flag} {key}")
             elif kind == "many":
-                fields[name] = [text]
+                fields[name] = [value]
             elif kind == "pairs":
-                fields[name] = {**fields.get(name, {}), **pairs([text], f"{flag} {key}")}
+                fields[name] = {**fields.get(name, {}), **pairs([value], f"{flag} {key}")}
             else:
-                fields[name] = text
+                fields[name] = value
         return fields
 
     def settings(self, fields: dict[str, Any], where: str) -> Settings:
