@@ -82,7 +82,8 @@ class Dist:
         """KEY=KIND:ARGS as `--space` gives it, bounds written exactly, so that `parse_dist` reads back
         this distribution (choices from Python: their text, as the command line gives them)."""
         if self.kind == "choice":
-            return f"{self.key}={self.describe()}"
+            texts = [c if isinstance(c, str) else json.dumps(c) for c in self.choices]
+            return f"{self.key}=choice:{('|' if any(',' in t for t in texts) else ',').join(texts)}"  # parse_dist's split
         low, high = (str(int(self.low)), str(int(self.high))) if self.kind == "int" else (repr(self.low), repr(self.high))
         return f"{self.key}={self.kind}:{low},{high}"
 

@@ -198,3 +198,14 @@ def test_a_distributions_item_reads_back_exactly(bounds, kind):
         low, high = float(int(low)), float(int(high) + 1)
     made = Dist("k", kind, low, high)
     assert parse_dist(made.item()) == made
+
+
+@settings_(max_examples=60, deadline=None)
+@given(choices=st.lists(st.text(st.characters(codec="ascii", exclude_characters="|"), min_size=1, max_size=6)
+                        .filter(lambda c: c.strip() == c), min_size=2, max_size=4, unique=True))
+def test_a_choices_item_reads_back_as_the_same_choices(choices):
+    """Choices with commas in them are written with |, which `parse_dist` splits on instead."""
+    from motorlab.tuning.space import Dist, parse_dist
+
+    made = Dist("k", "choice", choices=tuple(choices))
+    assert parse_dist(made.item()) == made
