@@ -250,16 +250,15 @@ def recipe_sets(words: list[str], where: str) -> dict[str, Any]:
     Raises:
         MotorlabError: a word that is not --set FIELD=VALUE.
     """
-    fields: dict[str, Any] = {}
+    items = []
     rest = iter(words)
     for word in rest:
         item = word.removeprefix("--set=") if word.startswith("--set=") else next(rest, None) if word == "--set" else None
         if item is None or "=" not in item:
             raise MotorlabError(f"{where}: after a recipe's name give only --set FIELD=VALUE, not {word!r}; "
                                 f"e.g. \"pendulum --set ppo.timesteps=20000\".")
-        key, value = item.split("=", 1)
-        fields[key.strip()] = json_or_text(value)
-    return fields
+        items.append(item)
+    return pairs(items, "--set")  # KEY=VALUE as every --set reads it
 
 
 def step_target(command: str, owner: str = "sweep", **fields: Any) -> StepTarget:
