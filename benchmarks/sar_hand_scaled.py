@@ -12,9 +12,13 @@ the recipe's divided by K; SAR-RL and RL-E2E run every seed of --seeds (>= 5 per
 
 The learner: --preset, by default the winner on myoHandPoseRandom-v0 of benchmarks/learner_per_hour.py's
 recorded headline (results/learner_per_hour.json). The scale: --scale, by default the smallest K whose
-study fits ~60 min here, from that learner's recorded env steps/s on the hand (one core): the
-study's env steps, 1M + S x 1.5M + S x 2.5M for S seeds, divided by K, over two cores at that rate,
-with 15% left for start-up, collection and evaluation.
+study fits ~60 min here: the study's env steps, 1M + S x 1.5M + S x 2.5M for S seeds, divided by K, over
+its two chains at once, with 15% left for start-up, collection and evaluation. A chain's rate is what the
+last recorded run of this study measured (results/sar_hand_scaled.json: its slower chain's env steps over
+its seconds) where that run used the same learner, else the learner's one-core rate on the hand
+(learner_per_hour.json) x CHAINS_SHARE: the two chains share the 2 cores with 4 env processes each, and
+the one-core rate alone gave 73 min for an hour's plan (the run of 2026-11-29: chains at ~335 and ~366
+env steps/s against the one-core 476).
 
 Seeds: headline seeds (100+, benchmarks/provenance.py): no run on them chose the learner or the scale;
 this needs committed code (run it from a git worktree). Development seeds (0-99) write a devlog line.
@@ -48,6 +52,9 @@ RECIPE = "sar-hand"
 HAND_TASK = "myoHandPoseRandom-v0"  # learner_per_hour's hand task: its winner and its rate
 STUDY_STEPS = {"play": 1_000_000, "sar-rl": 1_500_000, "rl-e2e": 2_500_000}
 TARGET_MINUTES, OVERHEAD = 60.0, 0.15
+# a chain's env steps/s beside the other chain, over the one-core rate: 335 / 476 in the run of 2026-11-29
+# (results/sar_hand_scaled.json at eb6da51, sar-sac-fast), where no run of the learner was recorded
+CHAINS_SHARE = 0.70
 SEEDS = SeedPlan(development=range(0, 100), headline=range(100, 1000))
 QUICK = {"scale": 5000, "seeds": [0, 1]}
 
@@ -64,9 +71,24 @@ def recorded_winner(results: Path) -> tuple[str, float]:
     return winner, rates[len(rates) // 2]
 
 
+def chain_rate(results: Path, preset: str, one_core: float) -> float:
+    """env steps/s a chain of this study makes beside the other: the last recorded run's slower chain (play
+    -> SAR-RL, or RL-E2E: their env steps over their seconds, all seeds) where it used `preset`, else
+    `one_core` x CHAINS_SHARE."""
+    path = results / "sar_hand_scaled.json"
+    if path.is_file():
+        run = json.loads(path.read_text())
+        if run.get("learner") == preset:
+            steps, seconds, n = run["env_steps_per_seed"], run["step_seconds"], len(run["seeds"])
+            chains = (((steps["play"] + n * steps["sar-rl"]) / (seconds["play"] + seconds["sar-rl"])),
+                      n * steps["rl-e2e"] / seconds["rl-e2e"])
+            return min(chains)
+    return one_core * CHAINS_SHARE
+
+
 def scale_for(rate: float, seeds: int, minutes: float = TARGET_MINUTES, cores: int = 2) -> int:
     """The smallest K whose study (1M + seeds x (1.5M + 2.5M) env steps, divided by K) fits `minutes` on
-    `cores` cores at `rate` env steps/s each, OVERHEAD of the time left for everything else."""
+    `cores` chains at `rate` env steps/s each (`chain_rate`), OVERHEAD of the time left for everything else."""
     steps = STUDY_STEPS["play"] + seeds * (STUDY_STEPS["sar-rl"] + STUDY_STEPS["rl-e2e"])
     return max(1, math.ceil(steps / (rate * cores * minutes * 60 * (1 - OVERHEAD))))
 
@@ -124,8 +146,9 @@ def main(argv: list[str] | None = None) -> None:
     seeds = args.seeds or (QUICK["seeds"] if args.quick else list(range(100, 105)))
     rate = None
     if args.preset is None or (args.scale is None and not args.quick):
-        winner, rate = recorded_winner(results)
+        winner, one_core = recorded_winner(results)
         args.preset = args.preset or winner
+        rate = chain_rate(results, args.preset, one_core)
     scale = args.scale or (QUICK["scale"] if args.quick else scale_for(rate, len(seeds)))
     given = given_fields(args.preset, scale, seeds)
     settings = {"recipe": RECIPE, "preset": args.preset, "scale": scale, "given": given,

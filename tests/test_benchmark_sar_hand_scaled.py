@@ -57,3 +57,28 @@ def test_zero_shot_success_per_arm_seed_and_env(tmp_path):
     assert shs.zero_shot(tmp_path, "sar-rl") == {"myoHandReorientID-v0": {"seed100": 0.4},
                                                  "myoHandReorientOOD-v0": {"seed100": 0.2}}
     assert shs.zero_shot(tmp_path, "rl-e2e") == {"myoHandReorientID-v0": {"seed100": 0.3}}
+
+
+def _recorded_run(folder: Path, learner: str) -> None:
+    (folder / "sar_hand_scaled.json").write_text(json.dumps({
+        "learner": learner, "seeds": [100, 101], "env_steps_per_seed": {"play": 1000, "sar-rl": 2000, "rl-e2e": 3000},
+        "step_seconds": {"play": 10.0, "sar-rl": 40.0, "rl-e2e": 30.0}}))
+
+
+def test_the_chain_rate_is_the_recorded_runs_slower_chain_for_the_same_learner(tmp_path):
+    _recorded_run(tmp_path, "sar-sac-fast")
+    # play -> SAR-RL: (1000 + 2 x 2000) / 50 s = 100/s; RL-E2E: 2 x 3000 / 30 s = 200/s
+    assert shs.chain_rate(tmp_path, "sar-sac-fast", one_core=476.0) == pytest.approx(100.0)
+    # another learner, or no recorded run: the one-core rate shared between the chains
+    assert shs.chain_rate(tmp_path, "sar-sac", one_core=476.0) == pytest.approx(476.0 * shs.CHAINS_SHARE)
+    assert shs.chain_rate(tmp_path / "nothing", "sar-sac-fast", one_core=476.0) == pytest.approx(476.0 * shs.CHAINS_SHARE)
+
+
+def test_the_recorded_run_would_have_planned_a_smaller_study():
+    """At the recorded run's own chain rate, the hour holds fewer env steps than the one-core rate promised."""
+    results = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
+    run = json.loads((results / "sar_hand_scaled.json").read_text())
+    _, one_core = shs.recorded_winner(results)
+    rate = shs.chain_rate(results, run["learner"], one_core)
+    assert rate < one_core
+    assert shs.scale_for(rate, len(run["seeds"])) >= shs.scale_for(one_core, len(run["seeds"]))
