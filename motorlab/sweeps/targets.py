@@ -150,10 +150,22 @@ def parse_target(command: str, owner: str = "sweep") -> StepTarget:
             does not parse, sets --seed (the sweep sets it), or gives an invocation option the
             sweep does not apply per trial (--out, --resume, --overwrite).
     """
+    return _step_target(command, target_words(command, owner), owner)
+
+
+def target_words(text: str, owner: str) -> list[str]:
+    """The target's text split as a shell splits it (the one place it is split).
+
+    Raises:
+        MotorlabError: unbalanced quotes or a dangling escape.
+    """
     try:
-        words = shlex.split(command)
+        return shlex.split(text)
     except ValueError as e:
-        raise MotorlabError(f"cannot read the {owner} target {mask_secrets(command)!r}: {e}.") from None
+        raise MotorlabError(f"cannot read the {owner} target {mask_secrets(text)!r}: {e}.") from None
+
+
+def _step_target(command: str, words: list[str], owner: str) -> StepTarget:
     if words[:1] == ["motorlab"]:
         words = words[1:]
     for n in (2, 1):
@@ -233,13 +245,10 @@ def read_target(text: str, owner: str = "sweep") -> Target:
     """
     if not text.strip():
         raise MotorlabError(f"give the {owner} a target: a recipe or a motorlab command line in quotes.")
-    try:
-        words = shlex.split(text)
-    except ValueError as e:
-        raise MotorlabError(f"cannot read the {owner} target {mask_secrets(text)!r}: {e}.") from None
+    words = target_words(text, owner)
     path = recipe_path(words[0]) if words and words[0] not in SWEEPABLE else None
     if path is None:
-        return parse_target(text, owner)
+        return _step_target(text, words, owner)
     return RecipeTarget(path, words[0], recipe_sets(words[1:], f"{owner} target {words[0]}"))
 
 
