@@ -19,7 +19,7 @@ Protocol
   (over that budget) are therefore near constant here, as they are in the first minutes of a study.
   Every M/10 minutes of training the policy plays --episodes deterministic episodes (reset seeds fixed
   by the run's seed); the last evaluation is the saved policy's, on the same episodes.
-  Contenders (motorlab presets, motorlab/rl/algos/):
+  Contenders (motorlab presets, motorlab/algos/):
     sar-sac          the reference: SAR's SAC, one gradient step per env step, [400, 300] networks
     sar-sac-half     ... one gradient step per 2 env steps; -quarter 4; -eighth 8
     sar-sac-256      ... [256, 256] networks

@@ -113,8 +113,8 @@ def given_fields(preset: str, scale: int, seeds: list[int]) -> dict:
 
 def replay_buffer(preset: str) -> bool:
     """Whether the preset's learner learns from a replay buffer (SAC, CrossQ: takes learning_starts)."""
-    from motorlab.rl import algos
-    from motorlab.rl.algos.base import OffPolicy
+    from motorlab import algos
+    from motorlab.algos.base import OffPolicy
     from motorlab.rl.config import PRESETS
 
     if preset not in PRESETS:

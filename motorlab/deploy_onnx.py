@@ -4,7 +4,7 @@ The graph holds everything between the robot's raw observation and the command i
 
     obs ─► history stack (K > 1) ─► normalization (obs_rms, clip) ─► the policy's deterministic
         action (PPO: the mean, clipped to the action box; SAC/TD3/TQC/CrossQ: tanh, unscaled to the
-        box; each algorithm's file in motorlab/rl/algos/ says how its actor computes it)
+        box; each algorithm's file in motorlab/algos/ says how its actor computes it)
         ─► SAR decode (runs acting in synergy space) ─► action
 
 so that onnxruntime and numpy are all a robot needs (docs/deployment.md; examples/onnx_runner.py).
@@ -54,12 +54,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from motorlab.algos.base import StateSpec
 from motorlab.envs import EnvConfig, env_dt, make_env
 from motorlab.envs.spaces import KeySlice, describe_space, layout_json
 from motorlab.errors import MotorlabError
 from motorlab.extras import missing
 from motorlab.policies import BUILTIN_POLICIES, POLICY_JSON, SB3Policy, load_policy_files
-from motorlab.rl.algos.base import StateSpec
 from motorlab.runs import CONFIG, atomic_write_bytes, read_json, require_run_dir, write_json
 from motorlab.synergies.wrapper import SynergyActionWrapper
 
@@ -80,7 +80,7 @@ def export_onnx(run_dir: Path, out: Path, seed: int = 0) -> dict[str, Any]:
     """Write a run's policy as `out/policy.onnx` and its interface as `out/policy.onnx.json`.
 
     Args:
-        run_dir: a finished run folder holding an SB3 policy (any in motorlab/rl/algos/, and A2C), from
+        run_dir: a finished run folder holding an SB3 policy (any in motorlab/algos/, and A2C), from
             `motorlab train` or `motorlab export`.
         out: the folder to write (created if needed; may be the run folder itself).
         seed: seeds the env episodes and random observations of the check.
@@ -181,7 +181,7 @@ def _sb3_meta(run_dir: Path) -> dict[str, Any]:
 
 
 def _sb3_titles() -> str:
-    from motorlab.rl import algos
+    from motorlab import algos
 
     return ", ".join(a.title for a in algos.registry().values() if a.sb3)
 
@@ -273,7 +273,7 @@ def _deployed_module(policy: SB3Policy, meta: dict, history: int, obs_size: int,
     from stable_baselines3.common.preprocessing import preprocess_obs
 
     sb3 = policy.policy
-    algo = policy.algorithm  # how its actor computes the deterministic action (motorlab/rl/algos/)
+    algo = policy.algorithm  # how its actor computes the deterministic action (motorlab/algos/)
     n_states = len(algo.onnx_states(sb3))
     dist = getattr(sb3, "action_dist", None) or getattr(getattr(sb3, "actor", None), "action_dist", None)
     discrete = isinstance(dist, CategoricalDistribution)  # its deterministic action: the most likely index

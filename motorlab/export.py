@@ -21,6 +21,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from motorlab import algos
 from motorlab.envs import EnvConfig, describe_env, env_record, make_env
 from motorlab.envs.spaces import describe_space, flat_space, is_dict, obs_layout
 from motorlab.errors import MotorlabError, did_you_mean
@@ -32,14 +33,13 @@ from motorlab.policies import (
     policy_classes,
     save_sb3_policy,
 )
-from motorlab.rl import algos
 from motorlab.runs import CONFIG, SUMMARY, atomic_path, prepare_run_dir, require_run_dir, write_config, write_summary
 
 # Files of a run folder that hold no pickle: what `export` copies and what is safe to send.
 SHAREABLE = ("policy.json", "policy.safetensors", CONFIG, "metrics.csv", "environment.json", "faults.log",
              "sar.npz", "activations.npz", "transitions.npz", "model.json", "model.safetensors", "episodes.npz")
 SHAREABLE_FOLDERS = ("plots", "videos")
-# SB3 policy modules -> motorlab algorithm names, as each algorithm declares them (rl/algos/; A2C's
+# SB3 policy modules -> motorlab algorithm names, as each algorithm declares them (algos/; A2C's
 # policy is PPO's ActorCriticPolicy)
 ALGO_OF_MODULE = {module: algo.name for algo in algos.registry().values() if algo.sb3 for module in algo.zip_modules}
 
@@ -78,7 +78,7 @@ def export_sb3_zip(zip_path: Path, out: Path, trust: bool, env: str | EnvConfig 
             checked against the policy's observation and action spaces.
         vecnormalize: the pickle `VecNormalize.save` wrote, if the policy was trained on
             normalized observations (its statistics go into policy.safetensors).
-        algo: an SB3 algorithm of motorlab.rl.algos, e.g. ppo (also for A2C), sac, tqc (default: read from
+        algo: an SB3 algorithm of motorlab.algos, e.g. ppo (also for A2C), sac, tqc (default: read from
             the zip's JSON, without unpickling).
 
     Raises:

@@ -3,7 +3,7 @@
 not need it). Each registry keeps its own look-up and errors; this is what they share.
 
 Hand-written rather than entry points: the entries live inside motorlab's own packages and are found by
-`pkgutil`, as `rl/algos` finds algorithms, so adding one is adding a file with no packaging metadata."""
+`pkgutil`, as `algos` finds algorithms, so adding one is adding a file with no packaging metadata."""
 
 from __future__ import annotations
 

@@ -114,8 +114,8 @@ class RandomPolicy:
 
 def policy_classes() -> dict[str, type]:
     """The SB3 policy classes a policy.json may name, by the name it writes (`policy_class_name`):
-    every SB3 algorithm's in motorlab/rl/algos/ (imports SB3)."""
-    from motorlab.rl import algos
+    every SB3 algorithm's in motorlab/algos/ (imports SB3)."""
+    from motorlab import algos
 
     return {name: cls for algo in algos.registry().values() if algo.sb3
             for name, cls in algo.network_classes().items()}
@@ -164,7 +164,7 @@ def decode_classes(value: Any) -> Any:
 class SB3Policy:
     """An SB3 policy network with optional observation normalization; deterministic actions.
 
-    Its algorithm (motorlab.rl.algos; by default the one whose network class it is) says how it
+    Its algorithm (motorlab.algos; by default the one whose network class it is) says how it
     acts: most act on each observation alone; a recurrent one keeps a state per row, which
     `reset(n)` starts from zeros and `reset_row(i)` zeroes for row i's next episode.
 
@@ -176,12 +176,12 @@ class SB3Policy:
 
     def __init__(self, policy, obs_mean=None, obs_var=None, clip_obs: float = 10.0, epsilon: float = 1e-8,
                  deterministic: bool = True, algorithm=None):
-        from motorlab.rl import algos
+        from motorlab import algos
 
         self.policy = policy
         self.algorithm = algorithm or algos.of_network(policy)
         if self.algorithm is None:
-            raise MotorlabError(f"the policy is a {type(policy).__name__}, which no algorithm in motorlab/rl/algos/ "
+            raise MotorlabError(f"the policy is a {type(policy).__name__}, which no algorithm in motorlab/algos/ "
                                 "builds.")
         self.state = None  # a recurrent policy's, row by row
         self.deterministic = deterministic  # False: sample from the policy (uses torch's RNG)
@@ -247,7 +247,7 @@ def save_sb3_policy(run_dir: Path, model, algo: str, vecnorm=None) -> None:
     """
     from safetensors.numpy import save
 
-    from motorlab.rl import algos
+    from motorlab import algos
 
     name = policy_class_name(model.policy)
     if name is None:

@@ -2,7 +2,7 @@
 
 Built-in policies without a network, below the policy loader (motorlab.policies), which loads them
 by name (`pid`) or from a run folder's policy.json, and below the algorithm registry
-(motorlab.rl.algos), whose LQR learner fits them.
+(motorlab.algos), whose LQR learner fits them.
 """
 
 from __future__ import annotations

@@ -174,7 +174,7 @@ def decode_space(d: dict[str, Any]) -> gym.Space:
 
 # ---- what motorlab can read and act in: checked when an env is made -----------------------------
 
-# action spaces some motorlab policy acts in (each component then declares its own: rl/algos)
+# action spaces some motorlab policy acts in (each component then declares its own: algos)
 ACTION_SPACES = ("Box", "Discrete", "MultiDiscrete", "MultiBinary")
 READABLE = "a Box of numbers (not an image), or a Dict of such Boxes"
 FLATTEN_HINT = "wrap your env in gymnasium.wrappers.FlattenObservation (or give it vector observations)"
@@ -213,7 +213,7 @@ def check_spaces(env: gym.Env, env_id: str) -> None:
     motorlab policy reads or whose actions none acts in. `make_env` calls it on every env it makes,
     so every kind refuses such an env at its door, before any work or file; what one component
     needs beyond this (Box actions, bounded ones) it declares itself (`require_actions`,
-    motorlab.rl.algos' `actions`).
+    motorlab.algos' `actions`).
 
     Raises:
         MotorlabError: e.g. "MyEnv-v0's observations are Tuple(...); motorlab reads a Box of numbers

@@ -17,8 +17,8 @@ from motorlab.errors import MotorlabError
 
 
 def _algo_help() -> str:
-    """--algo's help, naming the SB3 algorithms the registry knows (motorlab.rl.algos: no torch)."""
-    from motorlab.rl.algos import SB3Algorithm, registry
+    """--algo's help, naming the SB3 algorithms the registry knows (motorlab.algos: no torch)."""
+    from motorlab.algos import SB3Algorithm, registry
 
     names = [name for name, algo in registry().items() if isinstance(algo, SB3Algorithm)]
     return f"The SB3 algorithm of the zip: {', '.join(names)} (default: read from the zip)"

@@ -12,14 +12,14 @@ from typing import Any
 
 from pydantic import Field, field_validator, model_validator
 
+from motorlab import algos
 from motorlab.controllers.lqr import LQRSettings
 from motorlab.envs import EnvSettings, fold_env
 from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.rl import algos
 from motorlab.rl.schedules import schedule_ends
 from motorlab.settings import MAX_SEED
 
-# Every algorithm's presets, from its own module (motorlab/rl/algos/<name>.py).
+# Every algorithm's presets, from its own module (motorlab/algos/<name>.py).
 PRESETS: dict[str, dict[str, Any]] = algos.presets()
 
 

@@ -1,7 +1,7 @@
 """What a training run needs of its env, checked before anything is written: the algorithm fits
 the env's action space, and hindsight relabelling (--her) has goals to relabel.
 
-    actions         those the algorithm declares (rl/algos/<name>.py: Box only, or also
+    actions         those the algorithm declares (algos/<name>.py: Box only, or also
                     Discrete, MultiDiscrete, MultiBinary for PPO and RecurrentPPO)
     observations    a Dict one only for an algorithm with a multi-input policy
     --her           an algorithm that takes it (rl.config), a goal-conditioned env (motorlab.envs.spaces.is_goal_conditioned)
@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import gymnasium as gym
 
+from motorlab import algos
 from motorlab.envs import EnvConfig, make_env, reads_observations
 from motorlab.envs.spaces import describe_space, is_dict, is_goal_conditioned
 from motorlab.errors import MotorlabError
-from motorlab.rl import algos
 from motorlab.rl.config import TrainConfig
 
 
@@ -43,7 +43,7 @@ def check_train_env(cfg: TrainConfig) -> None:
 
 def check_actions(cfg: TrainConfig, space: gym.Space) -> None:
     """One line naming the space and the algorithms that fit it, when `cfg.algo` does not (the algorithm's
-    own declaration: motorlab.rl.algos.base.Algorithm.check_actions)."""
+    own declaration: motorlab.algos.base.Algorithm.check_actions)."""
     algos.get(cfg.algo).check_actions(space, cfg.env.id)
 
 

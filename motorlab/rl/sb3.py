@@ -1,4 +1,4 @@
-"""Stable-Baselines3 training with motorlab's tracking, for every SB3 algorithm in rl/algos/
+"""Stable-Baselines3 training with motorlab's tracking, for every SB3 algorithm in algos/
 (each says its class, policy, HER, settings checks and evaluation cadence; on- or off-policy is its type).
 
 Training envs keep a Dict observation (goal-conditioned tasks) as a Dict: the networks are SB3's
@@ -28,15 +28,14 @@ from stable_baselines3.common.logger import TensorBoardOutputFormat
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 from stable_baselines3.her.her_replay_buffer import HerReplayBuffer
 
-from motorlab import processes, trackers
+from motorlab import algos, processes, trackers
+from motorlab.algos import OnPolicy, SB3Algorithm
 from motorlab.envs import make_env
 from motorlab.envs.spaces import is_dict
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.evaluation import EpisodeSuccess, success_mode
 from motorlab.faults import fault_of
 from motorlab.policies import SB3Policy, flat_statistics, normalization, save_sb3_policy
-from motorlab.rl import algos
-from motorlab.rl.algos import OnPolicy, SB3Algorithm
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.monitor import TrainingMonitor
 from motorlab.rl.schedules import parse_schedule

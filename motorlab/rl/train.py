@@ -18,12 +18,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from motorlab import algos
 from motorlab.envs import max_return
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import success_by, success_mode
 from motorlab.policies import load_policy_files
 from motorlab.report.plots import plot_learning_curve
-from motorlab.rl import algos
 from motorlab.rl.config import TrainConfig
 from motorlab.rl.envcheck import check_train_env
 from motorlab.rl.monitor import EVAL_SEED_OFFSET, TrainingMonitor, monitor_record

@@ -1,4 +1,4 @@
-"""What every algorithm of motorlab/rl/algos/ must do, on a tiny budget: train, evaluate, resume,
+"""What every algorithm of motorlab/algos/ must do, on a tiny budget: train, evaluate, resume,
 export (pickle-free, acting as the SB3 model does), ONNX (onnxruntime equal to torch) and tune.
 Each algorithm's test file calls these with its name and small hyperparameters."""
 
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import motorlab
-from motorlab.rl import algos
+from motorlab import algos
 
 ENV = "Pendulum-v1"  # 200-step episodes, 3 observations, one Box action: seconds per run
 STEPS = 300

@@ -1,4 +1,4 @@
-"""The algorithm registry (motorlab/rl/algos/): found from the package's files, typed on- or
+"""The algorithm registry (motorlab/algos/): found from the package's files, typed on- or
 off-policy, the one source of --algo's names, the presets and their help."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import sys
 
 import pytest
 
+from motorlab import algos
+from motorlab.algos import OffPolicy, OnPolicy, SB3Algorithm
 from motorlab.errors import MotorlabError
-from motorlab.rl import algos
-from motorlab.rl.algos import OffPolicy, OnPolicy, SB3Algorithm
 
 pytestmark = pytest.mark.fast
 
@@ -21,7 +21,7 @@ def test_every_module_but_base_is_one_registered_algorithm():
     modules = {m.name for m in pkgutil.iter_modules(algos.__path__)} - algos.NOT_ALGORITHMS
     registered = {name: type(a).__module__ for name, a in algos.registry().items()}
     for module in modules:
-        algo = importlib.import_module(f"motorlab.rl.algos.{module}").ALGORITHM
+        algo = importlib.import_module(f"motorlab.algos.{module}").ALGORITHM
         assert algos.registry()[algo.name] is algo
     assert len(registered) == len(modules)
     assert set(algos.names()) == {"ppo", "sac", "td3", "lqr", "tqc", "crossq", "recurrentppo"}
@@ -111,6 +111,6 @@ def test_zip_modules_name_each_algorithm():
 
 
 def test_registry_and_help_import_no_torch():
-    code = ("import sys; from motorlab.rl import algos; from motorlab.rl.config import TrainConfig; algos.registry(); "
+    code = ("import sys; from motorlab import algos; from motorlab.rl.config import TrainConfig; algos.registry(); "
             "assert not {'torch', 'stable_baselines3', 'sb3_contrib'} & set(sys.modules), 'imported'")
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -1,4 +1,4 @@
-"""CrossQ (sb3-contrib, motorlab/rl/algos/crossq.py) through train, evaluate, resume, export, ONNX
+"""CrossQ (sb3-contrib, motorlab/algos/crossq.py) through train, evaluate, resume, export, ONNX
 and tune; its batch-renormalization statistics travel with the weights."""
 
 from __future__ import annotations
@@ -43,8 +43,8 @@ def test_tunes(tmp_path):
 
 
 def test_refuses_her_and_dict_observations():
+    from motorlab import algos
     from motorlab.errors import MotorlabError
-    from motorlab.rl import algos
     from motorlab.rl.config import TrainConfig
 
     with pytest.raises(MotorlabError, match="--her .* CrossQ .*--algo sac"):

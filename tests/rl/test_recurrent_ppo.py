@@ -1,4 +1,4 @@
-"""RecurrentPPO (sb3-contrib, motorlab/rl/algos/recurrent_ppo.py, `--algo recurrentppo`) through
+"""RecurrentPPO (sb3-contrib, motorlab/algos/recurrent_ppo.py, `--algo recurrentppo`) through
 train, evaluate, resume, export, ONNX and tune: its LSTM state is carried row by row, zeroed at
 episode starts, and an explicit input/output pair of the ONNX graph."""
 

@@ -1,4 +1,4 @@
-"""TQC (sb3-contrib, motorlab/rl/algos/tqc.py) through train, evaluate, resume, export, ONNX and tune."""
+"""TQC (sb3-contrib, motorlab/algos/tqc.py) through train, evaluate, resume, export, ONNX and tune."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The state layouts `--state NAME` knows: one module each in this package (`LAYOUT`, a `LayoutSpec`;
 the module's docstring, `--state NAME`: what it is, is its line in --help), found by name as
-`rl/algos` finds algorithms. A new layout is one file.
+`algos` finds algorithms. A new layout is one file.
 
 `layout_for` and `env_layout` build an env's layout by name ("auto": the env's catalogue entry's
 `state_layout`, else the observation)."""

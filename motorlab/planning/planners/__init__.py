@@ -1,5 +1,5 @@
 """The planners `--optimizer` names: one module each in this package (`PLANNER`, its class; the module's
-docstring, `--optimizer NAME`: what it does, is its line in --help), found here by name as `rl/algos` finds
+docstring, `--optimizer NAME`: what it does, is its line in --help), found here by name as `algos` finds
 algorithms. A new planner is one file.
 
 A planner class takes (score, low, high, **settings) and says which of the plan's settings it takes

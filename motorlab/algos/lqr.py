@@ -12,8 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from motorlab.algos.base import Algorithm, Preset
 from motorlab.errors import MotorlabError
-from motorlab.rl.algos.base import Algorithm, Preset
 
 
 @dataclass(frozen=True)

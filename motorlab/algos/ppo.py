@@ -4,7 +4,7 @@ SB3 zips of A2C are recognised as PPO too: A2C's policy is PPO's ActorCriticPoli
 exported policy acts and deploys as PPO's does.
 """
 
-from motorlab.rl.algos.base import OnPolicy, Preset
+from motorlab.algos.base import OnPolicy, Preset
 
 ALGORITHM = OnPolicy(
     name="ppo",

@@ -2,7 +2,7 @@
 
 from typing import Any
 
-from motorlab.rl.algos.base import OffPolicy
+from motorlab.algos.base import OffPolicy
 
 
 class TD3(OffPolicy):

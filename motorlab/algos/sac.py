@@ -1,6 +1,6 @@
 """SAC (Stable-Baselines3): off-policy, continuous actions, takes --her; the SAR study's presets."""
 
-from motorlab.rl.algos.base import OffPolicy, Preset
+from motorlab.algos.base import OffPolicy, Preset
 
 # The reference SAC settings of the SAR study (MyoSuite, Berg et al. 2023): play phase.
 SAR_SAC = {

@@ -6,7 +6,7 @@ and so takes no --her (HER needs the Dict of goals). Its actor's batch-renormali
 on their running statistics once the network is in eval mode, as every saved policy is.
 """
 
-from motorlab.rl.algos.base import OffPolicy, Preset
+from motorlab.algos.base import OffPolicy, Preset
 
 ALGORITHM = OffPolicy(
     name="crossq",

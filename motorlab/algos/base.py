@@ -9,7 +9,7 @@
         OffPolicy        learns from a replay buffer (SAC, TD3, ...): evaluated every 1000 steps
 
 Each algorithm lives in its own module of this package (`ALGORITHM = ...`), found there by
-`motorlab.rl.algos.registry`. Nothing here imports torch or SB3: `motorlab --help` reads names,
+`motorlab.algos.registry`. Nothing here imports torch or SB3: `motorlab --help` reads names,
 summaries and presets; the SB3 classes are imported when a run needs them.
 """
 
@@ -35,7 +35,7 @@ OFF_POLICY_EVAL_EVERY = 1000  # env steps between evaluations when the settings 
 def _package() -> Any:
     """The registry (the package that imports this module), looked up when a message needs it: an
     import here would be a circle."""
-    return importlib.import_module("motorlab.rl.algos")
+    return importlib.import_module("motorlab.algos")
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 curbs SAC's overestimation. Off-policy, continuous actions, takes --her; its actor is SAC's, so its
 policy acts and deploys (ONNX) as SAC's does."""
 
-from motorlab.rl.algos.base import OffPolicy
+from motorlab.algos.base import OffPolicy
 
 ALGORITHM = OffPolicy(
     name="tqc",

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from motorlab.rl.algos.base import ANY_ACTIONS, OnPolicy, StateSpec
+from motorlab.algos.base import ANY_ACTIONS, OnPolicy, StateSpec
 
 STATE_NAMES = ("lstm_h", "lstm_c")  # the actor LSTM's hidden and cell states
 

@@ -12,8 +12,8 @@ import pkgutil
 from functools import cache
 from typing import Any
 
+from motorlab.algos.base import Algorithm, OffPolicy, OnPolicy, Preset, SB3Algorithm
 from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.rl.algos.base import Algorithm, OffPolicy, OnPolicy, Preset, SB3Algorithm
 
 __all__ = ["Algorithm", "OffPolicy", "OnPolicy", "Preset", "SB3Algorithm", "get", "names", "of_network",
            "preset_help", "presets", "registry", "summary_help"]
