@@ -144,10 +144,19 @@ def build_model(cfg: TrainConfig, run_dir: Path) -> BaseAlgorithm:
     def env_fn() -> gym.Env:
         if os.getpid() == parent:
             return make_env(env_cfg, dict_obs=True)
-        processes.serve_parent(parent)  # a SubprocVecEnv worker: stopped by this process, and with it
-        return _ReportsFailure(make_env(env_cfg, dict_obs=True), _worker_report(parent))
+        report = _worker_report(parent)
+        try:
+            processes.serve_parent(parent)  # a SubprocVecEnv worker: stopped by this process, and with it
+            return _ReportsFailure(make_env(env_cfg, dict_obs=True), report)
+        except BaseException as e:  # SB3's worker would die with the trainer seeing only a reset pipe
+            why = str(e) if isinstance(e, MotorlabError) else _where(e)
+            _leave_report(report, f"an env worker of --n-envs could not make its env: {why}")
+            os._exit(2)  # quietly: the trainer says it, once (SB3's worker would print its traceback)
 
-    venv = make_vec_env(env_fn, n_envs=cfg.n_envs, seed=cfg.seed, vec_env_cls=vec_cls)
+    try:
+        venv = make_vec_env(env_fn, n_envs=cfg.n_envs, seed=cfg.seed, vec_env_cls=vec_cls)
+    except (EOFError, BrokenPipeError, ConnectionResetError):  # a worker stopped before it sent its spaces
+        raise MotorlabError(_worker_failure()) from None
     if cfg.normalize:  # a Dict observation: running statistics per key
         venv = VecNormalize(venv, norm_obs=True, norm_reward=False, clip_obs=10.0)
     algo = ALGORITHMS[cfg.algo]
@@ -300,9 +309,26 @@ class _ReportsFailure(gym.Wrapper):
             self._leave(e)
 
     def _leave(self, e: MotorlabError) -> None:
-        with contextlib.suppress(OSError):
-            self._report.write_text(f"an env worker of --n-envs: {e}")
+        _leave_report(self._report, f"an env worker of --n-envs: {e}")
         os._exit(2)
+
+
+def _leave_report(report: Path, line: str) -> None:
+    """The worker's one line for the trainer (`_worker_failure` reads it), written whole (temp file, then rename):
+    several workers may fail at once, and the trainer must never read half a line."""
+    with contextlib.suppress(OSError):
+        tmp = report.with_name(f"{report.name}.{os.getpid()}.tmp")
+        tmp.write_text(line)
+        os.replace(tmp, report)
+
+
+def _where(e: BaseException) -> str:
+    """`Type: message (file:line)` of an exception, at the innermost frame that raised it."""
+    import traceback
+
+    frames = traceback.extract_tb(e.__traceback__)
+    at = f" ({Path(frames[-1].filename).name}:{frames[-1].lineno})" if frames else ""
+    return f"{type(e).__name__}: {e}{at}"
 
 
 def _worker_failure() -> str:

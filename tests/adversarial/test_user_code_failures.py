@@ -48,6 +48,18 @@ class UserEnv(gym.Env):
         return self.observation_space.sample(), self.reward, False, self.ends and self.t >= 20, {}
 
 
+class NoWorkers(UserEnv):
+    """Made in the trainer's own process only: in any other (an env worker) it cannot start, as an env
+    tied to a licence, a display or a device may not."""
+
+    def __init__(self, **kwargs):
+        import multiprocessing
+
+        if multiprocessing.parent_process() is not None:
+            raise OSError("the licence server refused a second process")
+        super().__init__(**kwargs)
+
+
 def bad_reward(obs, action, reward, terminated, info):
     raise ValueError("reward exploded")
 
@@ -56,6 +68,7 @@ gym.register("Boom-v0", entry_point=UserEnv, max_episode_steps=20, kwargs={"boom
 gym.register("Huge-v0", entry_point=UserEnv, max_episode_steps=20, kwargs={"reward": 1e308})
 gym.register("Endless-v0", entry_point=UserEnv, kwargs={"ends": False})
 gym.register("Plain-v0", entry_point=UserEnv, max_episode_steps=20)
+gym.register("NoWorkers-v0", entry_point=NoWorkers, max_episode_steps=20)
 gym.register("Tuple-v0", entry_point=UserEnv, max_episode_steps=20,
              kwargs={"obs": gym.spaces.Tuple((gym.spaces.Box(-1, 1, (2,)), gym.spaces.Discrete(3)))})
 gym.register("Image-v0", entry_point=UserEnv, max_episode_steps=20,
@@ -110,6 +123,15 @@ def test_an_env_that_raises_in_a_training_env_worker_is_one_line_naming_it(tmp_p
                     "n_steps=64", "--set", "batch_size=64", "--no-progress", "--out", out)
     assert_one_line_error(proc, "env worker", env("Boom-v0"), "RuntimeError: simulator diverged", f"{MODULE}.py:")
     assert "Traceback" not in proc.stderr + proc.stdout
+
+
+def test_an_env_no_training_env_worker_can_make_is_one_line_naming_why(tmp_path):
+    """--n-envs 2: a worker that cannot make its env stops before SB3 hears from it; the trainer says why in
+    one line (the worker's error and where it was raised), not ConnectionResetError from a closed pipe."""
+    proc = run_here("train", env("NoWorkers-v0"), "--algo", "ppo", "--timesteps", "256", "--n-envs", "2", "--set",
+                    "n_steps=64", "--set", "batch_size=64", "--no-progress", "--out", tmp_path / "train")
+    assert_one_line_error(proc, "env worker", "could not make its env", "the licence server refused a second process")
+    assert "Traceback" not in proc.stderr + proc.stdout and "ConnectionResetError" not in proc.stderr + proc.stdout
 
 
 @pytest.mark.parametrize("workers", ["1", "2"])
