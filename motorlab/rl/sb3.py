@@ -32,6 +32,7 @@ from motorlab import algos, processes, trackers
 from motorlab.algos import OnPolicy, SB3Algorithm
 from motorlab.envs import make_env
 from motorlab.envs.spaces import is_dict
+from motorlab.envs.wrappers import user_code_error
 from motorlab.errors import MotorlabError, did_you_mean
 from motorlab.evaluation import EpisodeSuccess, success_mode
 from motorlab.faults import fault_of
@@ -149,8 +150,8 @@ def build_model(cfg: TrainConfig, run_dir: Path) -> BaseAlgorithm:
             processes.serve_parent(parent)  # a SubprocVecEnv worker: stopped by this process, and with it
             return _ReportsFailure(make_env(env_cfg, dict_obs=True), report)
         except BaseException as e:  # SB3's worker would die with the trainer seeing only a reset pipe
-            why = str(e) if isinstance(e, MotorlabError) else _where(e)
-            _leave_report(report, f"an env worker of --n-envs could not make its env: {why}")
+            error = e if isinstance(e, MotorlabError) else user_code_error(f"making {env_cfg.id}", e)
+            _leave_report(report, f"an env worker of --n-envs could not make its env: {error}")
             os._exit(2)  # quietly: the trainer says it, once (SB3's worker would print its traceback)
 
     try:
@@ -320,15 +321,6 @@ def _leave_report(report: Path, line: str) -> None:
         tmp = report.with_name(f"{report.name}.{os.getpid()}.tmp")
         tmp.write_text(line)
         os.replace(tmp, report)
-
-
-def _where(e: BaseException) -> str:
-    """`Type: message (file:line)` of an exception, at the innermost frame that raised it."""
-    import traceback
-
-    frames = traceback.extract_tb(e.__traceback__)
-    at = f" ({Path(frames[-1].filename).name}:{frames[-1].lineno})" if frames else ""
-    return f"{type(e).__name__}: {e}{at}"
 
 
 def _worker_failure() -> str:

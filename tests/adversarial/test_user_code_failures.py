@@ -130,7 +130,8 @@ def test_an_env_no_training_env_worker_can_make_is_one_line_naming_why(tmp_path)
     one line (the worker's error and where it was raised), not ConnectionResetError from a closed pipe."""
     proc = run_here("train", env("NoWorkers-v0"), "--algo", "ppo", "--timesteps", "256", "--n-envs", "2", "--set",
                     "n_steps=64", "--set", "batch_size=64", "--no-progress", "--out", tmp_path / "train")
-    assert_one_line_error(proc, "env worker", "could not make its env", "the licence server refused a second process")
+    assert_one_line_error(proc, "env worker", "could not make its env", env("NoWorkers-v0"),
+                          "OSError: the licence server refused a second process", f"{MODULE}.py:")
     assert "Traceback" not in proc.stderr + proc.stdout and "ConnectionResetError" not in proc.stderr + proc.stdout
 
 
