@@ -198,7 +198,7 @@ class Run(Result):
     @api_function
     def plot(self) -> list[Path]:
         """Draw plots/learning_curve.png and plots/observation_trace.png (`motorlab plot RUN`)."""
-        from motorlab.evaluation.figures import plot_run
+        from motorlab.media.figures import plot_run
 
         return plot_run(self.path)
 

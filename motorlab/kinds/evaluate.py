@@ -201,7 +201,7 @@ class EvaluateKind(StepKind[EvaluateSettings, EvaluateSummary]):
         return ["success_rate" if h.get("success_rate") is not None else "return_mean"]
 
     def figures(self, run_dir: Path) -> None:
-        from motorlab.evaluation.figures import plot_run
+        from motorlab.media.figures import plot_run
 
         plot_run(run_dir)
 

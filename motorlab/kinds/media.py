@@ -50,7 +50,7 @@ class VideoKind(StepKind[VideoSettings, VideoSummary]):
 
     def run(self, settings: VideoSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> VideoSummary:
-        from motorlab.evaluation.videos import render_video
+        from motorlab.media.videos import render_video
 
         s = settings
         folder = out if out is not None else require_run_dir(Path(s.run)) / "videos"

@@ -63,7 +63,7 @@ class PlotCommand(Command[PlotSettings]):
     examples = ("motorlab plot runs/ppo   # -> runs/ppo/plots/*.png",)
 
     def execute(self, settings: PlotSettings, how: NoFolder, console: Console | None, progress: bool) -> list[Path]:
-        from motorlab.evaluation.figures import plot_run
+        from motorlab.media.figures import plot_run
 
         return plot_run(settings.run_dir)
 

@@ -87,7 +87,7 @@ class CompareKind(StepKind[CompareSettings, CompareSummary]):
 
     def run(self, settings: CompareSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> CompareSummary:
-        from motorlab.evaluation.activations import load_activations
+        from motorlab.synergies.activations import load_activations
         from motorlab.synergies.naming import fitted_activations, names_for, sar_file
         from motorlab.synergies.sar import load_sar
         from motorlab.synergies.similarity import aligned, chance, match

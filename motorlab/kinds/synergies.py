@@ -13,10 +13,10 @@ from rich.console import Console
 from rich.table import Table
 
 from motorlab.errors import MotorlabError
-from motorlab.evaluation.activations import ACTIVATIONS, collect, load_activations, save_activations
 from motorlab.report.results import Metric, Number
 from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
+from motorlab.synergies.activations import ACTIVATIONS, collect, load_activations, save_activations
 from motorlab.synergies.naming import SAR_FILE  # the fit folder's file, named once
 from motorlab.synergies.sar import check_nmf_input, fit_sar, require_sklearn, save_sar
 

@@ -272,7 +272,7 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
             ["success_rate" if h.get("success_rate") is not None else "return_mean"]
 
     def figures(self, run_dir: Path) -> None:
-        from motorlab.evaluation.figures import plot_run
+        from motorlab.media.figures import plot_run
 
         plot_run(run_dir)
 
@@ -280,7 +280,7 @@ class TrainKind(StepKind[TrainConfig, TrainSummary]):
         return last_timesteps(run_dir), settings.timesteps
 
     def warm_up(self) -> None:
-        import motorlab.evaluation.figures  # noqa: F401  (the study's figures: SB3 policies, torch)
+        import motorlab.media.figures  # noqa: F401  (the study's figures: SB3 policies, torch)
         import motorlab.rl.checkpoint  # noqa: F401  (can_resume, in the background thread)
         import motorlab.rl.sb3  # noqa: F401  (torch and SB3 themselves: the modules above import them when used)
 

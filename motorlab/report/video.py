@@ -1,5 +1,5 @@
 """Filming an env: offscreen frames of its episodes, written as H.264 MP4. `motorlab video RUN_DIR`
-films a run's policy (motorlab.evaluation.videos), `mpc --video` a planner's episode.
+films a run's policy (motorlab.media.videos), `mpc --video` a planner's episode.
 
 Rendering uses MuJoCo's own offscreen renderer on the unwrapped env's model and
 data, so it works for Gymnasium's MuJoCo envs and MyoSuite alike; set

@@ -5,7 +5,7 @@
 here because users reach synergies by this name, as the CLI's `motorlab synergies ...`. The domain
 code is in the modules: `sar` (SAR, fit_sar, vaf_curve), `wrapper` (SynergyActionWrapper),
 `sklearn_import` and `sklearn_export`. They sit below the envs, which act in synergy space through
-the wrapper; the activations a fit starts from are rollouts of a policy (motorlab.evaluation.activations).
+the wrapper; the activations a fit starts from are rollouts of a policy (motorlab.synergies.activations).
 """
 
 # Looked up when first used, by name, with plain imports the import graph sees: this module is a

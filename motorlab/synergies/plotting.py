@@ -14,8 +14,8 @@ def plot_synergies(sar_path: Path, out: Path, activations: Path | None = None, v
                    episodes: int = 3, names_from: str | None = None) -> list[Path]:
     """heatmap.png, and coefficients.png / vaf.png where their inputs are there; the paths written."""
     import motorlab.synergies.figures as figures
-    from motorlab.evaluation.activations import load_activations
     from motorlab.runs import read_json
+    from motorlab.synergies.activations import load_activations
     from motorlab.synergies.analysis import Choice, CrossValidatedVaf, choices
     from motorlab.synergies.naming import fitted_activations, names_for, sar_file
     from motorlab.synergies.sar import load_sar

@@ -70,11 +70,12 @@ def test_a_finished_out_is_refused_before_the_work(finished, collected, tmp_path
     from motorlab.api.running import run_kind
     from motorlab.dynamics import open_loop
     from motorlab.errors import MotorlabError
-    from motorlab.evaluation import activations, zeroshot
+    from motorlab.evaluation import zeroshot
     from motorlab.kinds import KINDS
     from motorlab.kinds import evaluate as steps
     from motorlab.kinds import synergies as synergy_steps
     from motorlab.robustness_curves import curves
+    from motorlab.synergies import activations
 
     def work(*args, **kwargs):
         raise AssertionError("the work started before the finished --out was refused")

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from motorlab.envs import EnvConfig
-from motorlab.evaluation.figures import plot_run
 from motorlab.kinds.evaluate import EVALUATE
+from motorlab.media.figures import plot_run
 from motorlab.report.plots import comparison_bars, obs_labels, observation_trace
 from tests.helpers import ENV_ID, assert_ok, assert_png, run_cli, run_kind
 
