@@ -69,6 +69,14 @@ def imported_names() -> list[str]:
     return [n for n in os.environ.get(ENV_VAR, "").split(",") if n]
 
 
+def adopt(names: list[str]) -> None:
+    """In a worker process: make the parent's user modules this process's, and import them. A fork server's
+    child inherits the server's environment as it was when the server started, not its parent's now: its
+    $MOTORLAB_IMPORTS may name modules the parent imported since, or modules gone since (a test's own)."""
+    os.environ[ENV_VAR] = ",".join(names)
+    import_modules(names, f"passed on in ${ENV_VAR}")
+
+
 def import_inherited() -> None:
     """Import the modules a parent process passed on (a worker, before it builds an env)."""
     import_modules(imported_names(), f"passed on in ${ENV_VAR}")

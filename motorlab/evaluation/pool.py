@@ -41,7 +41,7 @@ from motorlab.envs.catalog import SUCCESS_KEYS
 from motorlab.envs.wrappers import UserCodeError
 from motorlab.errors import MotorlabError
 from motorlab.faults import fault_of
-from motorlab.user_modules import ENV_VAR, import_modules, imported_names
+from motorlab.user_modules import adopt, imported_names
 
 
 def step_success(info: dict, keys: tuple[str, ...] = SUCCESS_KEYS) -> bool | None:
@@ -172,10 +172,7 @@ def _serve(conn, imports: list[str], parent: int) -> None:
     envs: list[gym.Env] = []
     keys = SUCCESS_KEYS
     try:
-        # forkserver children inherit the server's environment from when it started: set the user's
-        # modules from the parent's (passed on, like every process motorlab starts)
-        os.environ[ENV_VAR] = ",".join(imports)
-        import_modules(imports, f"passed on in ${ENV_VAR}")
+        adopt(imports)  # the parent's user modules, not the fork server's environment's
         while True:
             command, arg = conn.recv()
             if command == "step":

@@ -28,7 +28,7 @@ from stable_baselines3.common.logger import TensorBoardOutputFormat
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 from stable_baselines3.her.her_replay_buffer import HerReplayBuffer
 
-from motorlab import algos, processes, trackers
+from motorlab import algos, processes, trackers, user_modules
 from motorlab.algos import OnPolicy, SB3Algorithm
 from motorlab.envs import make_env
 from motorlab.envs.spaces import is_dict
@@ -139,7 +139,7 @@ def build_model(cfg: TrainConfig, run_dir: Path) -> BaseAlgorithm:
     """
     env_cfg = cfg.env
     vec_cls = SubprocVecEnv if cfg.n_envs > 1 else DummyVecEnv
-    parent = os.getpid()
+    parent, imports = os.getpid(), user_modules.imported_names()
     _worker_report(parent).unlink(missing_ok=True)
 
     def env_fn() -> gym.Env:
@@ -148,6 +148,7 @@ def build_model(cfg: TrainConfig, run_dir: Path) -> BaseAlgorithm:
         report = _worker_report(parent)
         try:
             processes.serve_parent(parent)  # a SubprocVecEnv worker: stopped by this process, and with it
+            user_modules.adopt(imports)  # SB3 starts workers from a fork server: its environment may be stale
             return _ReportsFailure(make_env(env_cfg, dict_obs=True), report)
         except BaseException as e:  # SB3's worker would die with the trainer seeing only a reset pipe
             error = e if isinstance(e, MotorlabError) else user_code_error(f"making {env_cfg.id}", e)
