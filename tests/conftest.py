@@ -249,7 +249,7 @@ def user_modules_stay_in_their_file():
 def ppo_run(tmp_path_factory) -> Path:
     """A finished tiny PPO run folder, written by the CLI."""
     out = tmp_path_factory.mktemp("runs") / "ppo"
-    assert_ok(run_cli("train", ENV_ID, *TINY_PPO, "--seed", "0", "--no-progress", "--out", out))
+    assert_ok(run_cli("train", ENV_ID, *TINY_PPO, "--seed", "0", "--no-progress", "--out", out, user_modules=False))
     return out
 
 
@@ -258,7 +258,7 @@ def fast_run(tmp_path_factory) -> Path:
     """A finished run of the `fast` preset (linear model + LQR), stopped once solved."""
     out = tmp_path_factory.mktemp("runs") / "fast"
     assert_ok(run_cli("train", ENV_ID, "--preset", "fast", "--until-solved", "--timesteps", "3000",
-                      "--no-progress", "--out", out))
+                      "--no-progress", "--out", out, user_modules=False))
     return out
 
 
@@ -270,7 +270,8 @@ def hand_play_run(tmp_path_factory) -> Path:
     from tests.helpers import HAND_ID, TINY_HAND_SAC
 
     out = tmp_path_factory.mktemp("runs") / "play"
-    assert_ok(run_cli("train", HAND_ID, *TINY_HAND_SAC, "--seed", "0", "--no-progress", "--out", out))
+    assert_ok(run_cli("train", HAND_ID, *TINY_HAND_SAC, "--seed", "0", "--no-progress", "--out", out,
+                      user_modules=False))
     return out
 
 
@@ -281,7 +282,8 @@ def hand_activations(hand_play_run, tmp_path_factory) -> Path:
     from tests.helpers import COLLECT_ARGS
 
     out = tmp_path_factory.mktemp("collect") / "w1"
-    proc = run_cli("synergies", "collect", hand_play_run, *COLLECT_ARGS, "--workers", "1", "--out", out)
+    proc = run_cli("synergies", "collect", hand_play_run, *COLLECT_ARGS, "--workers", "1", "--out", out,
+                   user_modules=False)
     assert_ok(proc)
     assert "kept 4 episodes" in proc.stdout
     return out / "activations.npz"
@@ -316,5 +318,5 @@ def sar_hand_quick(tmp_path_factory) -> tuple[Path, Path]:
     steps are checked (test_sar_study.py); both files are one unit of `make test` (SHARED)."""
     folder = tmp_path_factory.mktemp("sar-hand-quick")
     recipe = scaled_recipe("sar-hand-quick", folder)
-    assert_ok(run_cli("run", recipe, "--out", folder / "study", timeout=900))
+    assert_ok(run_cli("run", recipe, "--out", folder / "study", timeout=900, user_modules=False))
     return recipe, folder / "study"

@@ -59,12 +59,16 @@ def free_port() -> int:
 
 
 def run_cli(*args: str | os.PathLike, cwd: Path | None = None, timeout: float = 300,
-            env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
-    """`python -m motorlab ARGS` in a fresh process, as a user would run it (`env`: variables to add)."""
+            env: dict[str, str] | None = None, user_modules: bool = True) -> subprocess.CompletedProcess:
+    """`python -m motorlab ARGS` in a fresh process, as a user would run it (`env`: variables to add).
+    `user_modules=False`: without the user modules this process passes on ($MOTORLAB_IMPORTS), for a run that
+    tests of other files share (a session fixture): a run records them, and a later file's process may not
+    find a module the file that first asked for the fixture had imported."""
+    inherited = {k: v for k, v in os.environ.items() if user_modules or k != "MOTORLAB_IMPORTS"}
     return subprocess.run(
         [sys.executable, "-m", "motorlab", *map(str, args)],
         capture_output=True, text=True, cwd=cwd, timeout=timeout,
-        env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **(env or {})},
+        env={**inherited, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **(env or {})},
     )
 
 
