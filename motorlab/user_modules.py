@@ -79,7 +79,7 @@ def adopt(names: list[str]) -> None:
 
 def import_inherited() -> None:
     """Import the modules a parent process passed on (a worker, before it builds an env)."""
-    import_modules(imported_names(), f"passed on in ${ENV_VAR}")
+    adopt(imported_names())
 
 
 def remember(names: list[str]) -> None:
