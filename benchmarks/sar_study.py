@@ -66,10 +66,10 @@ def steady_rate(run_dir: Path, warm_up: int) -> float:
 
 
 def main() -> None:
+    from motorlab.api.synergies import import_sklearn
     from motorlab.kinds.train import TRAIN
     from motorlab.rl.config import resolve
     from motorlab.rl.train import train
-    from motorlab.synergies import import_sklearn
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=4000, help="env steps per setting (the first 1000-2048 warm up)")

@@ -89,7 +89,7 @@ def hand_activations(samples: int, seed: int = 0) -> tuple[np.ndarray, np.ndarra
     """`samples` steps of the hand under pink-noise muscle commands: data.act and each step's episode."""
     from motorlab.dynamics.collection import random_actions
     from motorlab.envs import EnvConfig, make_env
-    from motorlab.synergies.activations import muscle_activations
+    from motorlab.synergy_runs.activations import muscle_activations
 
     env = make_env(EnvConfig(id=HAND), shaped=False)
     rng = np.random.default_rng(seed)

@@ -20,26 +20,19 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 __version__ = "0.1.0"
 
-# The API's names, loaded from motorlab.api when first used. `motorlab.dynamics` and `motorlab.synergies`
-# are the domain packages; their collect / fit / ... are the API's (see their __init__.py).
+# The API's names, loaded from motorlab.api when first used. The API's forward-model and synergy steps are
+# `motorlab.api.dynamics` and `motorlab.api.synergies`: `motorlab.dynamics` and `motorlab.synergies` are
+# the domain packages (a subpackage's name is its own once imported, so it cannot also be the API's).
 __all__ = ["train", "evaluate", "video", "zeroshot", "robustness", "compare", "mpc", "mbrl", "run_recipe", "sweep",
-           "tune", "step", "recipe", "load", "synergies", "Result", "Run", "Study", "Sweep", "Tune", "MotorlabError", "SettingsError",
-           "ArgumentError", "StorageError", "dynamics", "tracking", "register_env"]
+           "tune", "step", "recipe", "load", "Result", "Run", "Study", "Sweep", "Tune", "MotorlabError", "SettingsError",
+           "ArgumentError", "StorageError", "tracking", "register_env"]
 
 
 # This module is a façade at the top of the layers, beside motorlab.api (tests/test_layers.py): its
-# imports are plain statements run when a name is first used, so the import graph sees them.
+# import is a plain statement run when a name is first used, so the import graph sees it.
 def __getattr__(name: str):
-    if name == "dynamics":
-        import motorlab.dynamics
-
-        return motorlab.dynamics
-    if name == "synergies":
-        import motorlab.synergies
-
-        return motorlab.synergies
-    if name in __all__:
+    if name == "api" or name in __all__:  # `motorlab.api.dynamics.fit(...)` after a bare `import motorlab`
         import motorlab.api
 
-        return getattr(motorlab.api, name)
+        return motorlab.api if name == "api" else getattr(motorlab.api, name)
     raise AttributeError(f"module 'motorlab' has no attribute {name!r}")

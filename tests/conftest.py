@@ -292,7 +292,7 @@ def hand_activations(hand_play_run, tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def hand_sar(tmp_path_factory) -> Path:
     """The SAR published with MyoSuite for the hand (20 synergies x 39 muscles), imported to sar.npz."""
-    from motorlab.synergies import import_sklearn
+    from motorlab.api.synergies import import_sklearn
     from tests.helpers import PUBLISHED_SAR
 
     out = tmp_path_factory.mktemp("sar") / "hand.npz"
@@ -303,7 +303,7 @@ def hand_sar(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def legs_sar(tmp_path_factory) -> Path:
     """The SAR published with MyoSuite for the legs (20 synergies x 80 muscles), imported to sar.npz."""
-    from motorlab.synergies import import_sklearn
+    from motorlab.api.synergies import import_sklearn
     from tests.helpers import PUBLISHED_SAR
 
     out = tmp_path_factory.mktemp("sar") / "legs.npz"

@@ -1,6 +1,6 @@
 """Evaluation: batched rollouts of any policy (returns, success, falls, numerical faults),
 and zero-shot transfer to envs a policy never trained on. (The motor signals of a policy's good episodes, for
-synergies: motorlab.synergies.activations; a run's figures and videos: motorlab.media.)
+synergies: motorlab.synergy_runs.activations; a run's figures and videos: motorlab.media.)
 
     from motorlab.evaluation import evaluate, Evaluator, Rollouts
 """

@@ -1,5 +1,5 @@
 """The `ablate` step kind: what each synergy of a SAR policy does, measured as the return and
-success its policy loses when that synergy's command is zeroed (motorlab.synergies.ablation)."""
+success its policy loses when that synergy's command is zeroed (motorlab.synergy_runs.ablation)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Ref, StepKind, warn_faults
 
 if TYPE_CHECKING:
-    from motorlab.synergies.ablation import MeanInterval
+    from motorlab.synergy_runs.ablation import MeanInterval
 
 FIGURE = "ablation.png"
 
@@ -97,7 +97,7 @@ class AblateKind(StepKind[AblateSettings, AblateSummary]):
 
     def run(self, settings: AblateSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> AblateSummary:
-        from motorlab.synergies.ablation import INTERVAL_METHOD, ablate, ablation_plot
+        from motorlab.synergy_runs.ablation import INTERVAL_METHOD, ablate, ablation_plot
 
         s = settings
         a = ablate(Path(s.run), s.episodes, s.seed, s.workers, progress,

@@ -15,8 +15,8 @@ from motorlab.report.results import Metric
 from motorlab.runs import atomic_write_npz
 from motorlab.settings import Settings, Summary
 from motorlab.stepkind import Artifact, StepKind
-from motorlab.synergies.activations import ACTIVATIONS
 from motorlab.synergies.emg import BAND, DOWNSAMPLE, LOWPASS, ORDER, TRIAL_COLUMN
+from motorlab.synergy_runs.activations import ACTIVATIONS
 
 EMG = "emg"  # the signal an imported file holds, as activations.npz and sar.npz record it
 
@@ -101,7 +101,7 @@ class ImportEmgKind(StepKind[ImportEmgSettings, ImportEmgSummary]):
                 "scale": [float(v) for v in env.scale], "clipped": env.clipped,
                 "trials": list(env.trials), "signal": EMG}
         n = len(env.names)
-        # the layout save_activations writes (motorlab.synergies.activations), so load_activations reads it
+        # the layout save_activations writes (motorlab.synergy_runs.activations), so load_activations reads it
         atomic_write_npz(run_dir / ACTIVATIONS, activations=env.activations, names=np.array(env.names, dtype=str),
                          episode=env.episode, signal=np.array(EMG), low=np.zeros(n), high=np.ones(n),
                          metadata=np.array(json.dumps(meta)))

@@ -87,11 +87,11 @@ class CompareKind(StepKind[CompareSettings, CompareSummary]):
 
     def run(self, settings: CompareSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> CompareSummary:
-        from motorlab.synergies.activations import load_activations
-        from motorlab.synergies.naming import fitted_activations, names_for, sar_file
         from motorlab.synergies.sar import load_sar
         from motorlab.synergies.similarity import aligned, chance, match
         from motorlab.synergies.vectors import vectors_of
+        from motorlab.synergy_runs.activations import load_activations
+        from motorlab.synergy_runs.naming import fitted_activations, names_for, sar_file
 
         a, b = load_sar(sar_file(settings.a)), load_sar(sar_file(settings.b))
         names_a, from_a = names_for(a, settings.names_from, "A")

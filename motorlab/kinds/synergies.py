@@ -16,9 +16,9 @@ from motorlab.errors import MotorlabError
 from motorlab.report.results import Metric, Number
 from motorlab.settings import MAX_SEED, Settings, Summary
 from motorlab.stepkind import Artifact, Ref, StepKind, warn_faults
-from motorlab.synergies.activations import ACTIVATIONS, collect, load_activations, save_activations
-from motorlab.synergies.naming import SAR_FILE  # the fit folder's file, named once
 from motorlab.synergies.sar import check_nmf_input, fit_sar, require_sklearn, save_sar
+from motorlab.synergy_runs.activations import ACTIVATIONS, collect, load_activations, save_activations
+from motorlab.synergy_runs.naming import SAR_FILE  # the fit folder's file, named once
 
 # ---- collect ----------------------------------------------------------------------------------
 
@@ -199,7 +199,7 @@ class VafKind(StepKind[VafSettings, VafSummary]):
     def run(self, settings: VafSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> VafSummary:
         from motorlab.synergies.analysis import choices, cross_validated_vaf
-        from motorlab.synergies.figures import vaf_with_band
+        from motorlab.synergy_runs.figures import vaf_with_band
 
         acts, meta = load_activations(Path(settings.activations))
         if settings.method == "nmf":
@@ -328,7 +328,7 @@ class FitKind(StepKind[FitSettings, FitSummary]):
 
     def run(self, settings: FitSettings, out: Path | None = None, console: Console | None = None,
             progress: bool = True) -> FitSummary:
-        import motorlab.synergies.figures as figures
+        import motorlab.synergy_runs.figures as figures
         from motorlab.synergies.vectors import vectors_of
 
         if (settings.n_synergies, settings.vaf, settings.muscle_vaf, settings.elbow) == (None, None, None, False):

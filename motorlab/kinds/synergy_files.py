@@ -130,7 +130,7 @@ class PlotCommand(Command[PlotSettings]):
                 "--out figures")
 
     def execute(self, settings: PlotSettings, how: NoFolder, console: Console | None, progress: bool) -> Any:
-        from motorlab.synergies.plotting import plot_synergies
+        from motorlab.synergy_runs.plotting import plot_synergies
 
         return plot_synergies(settings.sar, settings.out, settings.activations, settings.vaf, settings.episodes,
                               settings.names_from)

@@ -75,7 +75,7 @@ def test_a_finished_out_is_refused_before_the_work(finished, collected, tmp_path
     from motorlab.kinds import evaluate as steps
     from motorlab.kinds import synergies as synergy_steps
     from motorlab.robustness_curves import curves
-    from motorlab.synergies import activations
+    from motorlab.synergy_runs import activations
 
     def work(*args, **kwargs):
         raise AssertionError("the work started before the finished --out was refused")

@@ -107,7 +107,7 @@ def test_every_mistake_is_a_motorlab_error(call, tmp_path):
     (lambda: motorlab.train(5), ArgumentError, "env=5"),
     (lambda: motorlab.compare({"a": "run"}), ArgumentError, "groups"),
     (lambda: motorlab.load(Path("no/such/run")), MotorlabError, "does not exist"),
-    (lambda: motorlab.synergies.load_sar("no/such/sar.npz"), MotorlabError, "sar.npz"),
+    (lambda: motorlab.api.synergies.load_sar("no/such/sar.npz"), MotorlabError, "sar.npz"),
 ])
 def test_listed_mistakes(call, kind, fragment):
     with pytest.raises(kind, match=None) as raised:

@@ -113,10 +113,10 @@ def test_video_from_python(api_run, tmp_path):
 
 
 def test_forward_model_and_mpc_from_python(tmp_path):
-    data = motorlab.dynamics.collect("Reacher-v5", 20, out=tmp_path / "data", workers=1, progress=False)
-    model = motorlab.dynamics.fit(data, epochs=2, out=tmp_path / "model", progress=False)
+    data = motorlab.api.dynamics.collect("Reacher-v5", 20, out=tmp_path / "data", workers=1, progress=False)
+    model = motorlab.api.dynamics.fit(data, epochs=2, out=tmp_path / "model", progress=False)
     assert (model.path / "model.safetensors").is_file() and model.kind == "dynamics-fit"
-    check = motorlab.dynamics.check(model, episodes=1, out=tmp_path / "check", progress=False)
+    check = motorlab.api.dynamics.check(model, episodes=1, out=tmp_path / "check", progress=False)
     assert check.figures and check.kind == "dynamics-check"
     control = motorlab.mpc("Reacher-v5", model, episodes=1, horizon=3, population=16, iterations=1, elites=4,
                            out=tmp_path / "mpc", progress=False)
@@ -126,13 +126,13 @@ def test_forward_model_and_mpc_from_python(tmp_path):
 
 
 def test_synergies_from_python(api_run, tmp_path):
-    acts = motorlab.synergies.collect(api_run, 4, signal="action", percentile=0, workers=1,
+    acts = motorlab.api.synergies.collect(api_run, 4, signal="action", percentile=0, workers=1,
                                       out=tmp_path / "collect", progress=False)
     assert (acts.path / "activations.npz").is_file()
-    vaf = motorlab.synergies.vaf(acts, out=tmp_path / "vaf")
-    sar = motorlab.synergies.fit(acts, 1, out=tmp_path / "fit")
+    vaf = motorlab.api.synergies.vaf(acts, out=tmp_path / "vaf")
+    sar = motorlab.api.synergies.fit(acts, 1, out=tmp_path / "fit")
     assert vaf.kind == "vaf" and sar.summary["n_synergies"] == 1
-    assert motorlab.synergies.load_sar(sar).n_synergies == 1  # the fit's sar.npz, found from its result
+    assert motorlab.api.synergies.load_sar(sar).n_synergies == 1  # the fit's sar.npz, found from its result
 
 
 def test_a_recipe_a_sweep_and_a_search_from_python(tmp_path):

@@ -11,7 +11,7 @@ import motorlab.envs.ids
 from motorlab.envs import EnvConfig, check_env_id, make_env
 from motorlab.errors import MotorlabError
 from motorlab.evaluation import step_success
-from motorlab.synergies.activations import muscle_activations
+from motorlab.synergy_runs.activations import muscle_activations
 from tests.helpers import HAND_ID, HAND_MUSCLES, assert_one_line_error, run_cli
 
 pytestmark = pytest.mark.fast  # make test-fast: cheap, unit-level

@@ -1,4 +1,4 @@
-"""`synergies collect` (motorlab.synergies.activations): muscle activations of a policy's
+"""`synergies collect` (motorlab.synergy_runs.activations): muscle activations of a policy's
 episodes at or above the P-th percentile of the preview returns; the result depends on seeds,
 not on workers."""
 
@@ -15,7 +15,7 @@ from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.kinds.synergies import COLLECT
 from motorlab.policies import load_run_policy
-from motorlab.synergies.activations import Episode
+from motorlab.synergy_runs.activations import Episode
 from tests.helpers import (
     COLLECT_EPISODES,
     COLLECT_PERCENTILE,
@@ -29,7 +29,7 @@ from tests.helpers import (
     run_kind,
 )
 
-collect_mod = importlib.import_module("motorlab.synergies.activations")
+collect_mod = importlib.import_module("motorlab.synergy_runs.activations")
 
 
 def collect(run_dir, out, progress=False, **fields):

@@ -202,7 +202,7 @@ def test_evaluate_step_takes_workers(pid_run, tmp_path):
 
 
 def test_collect_does_not_depend_on_workers(pid_run, tmp_path):
-    from motorlab.synergies.activations import collect
+    from motorlab.synergy_runs.activations import collect
 
     kwargs = dict(episodes=2, percentile=50.0, preview=3, seed=0, signal="ctrl", progress=False)
     one, two = (collect(pid_run, workers=w, **kwargs) for w in (1, 2))

@@ -8,8 +8,8 @@ import tomllib
 
 import pytest
 
+from motorlab.api.synergies import load_sar
 from motorlab.recipes import load_recipe
-from motorlab.synergies import load_sar
 from tests.helpers import assert_ok, assert_one_line_error, read_summary, run_cli, run_here, scaled_recipe
 
 TERRAINS = {"rough": "myoLegRoughTerrainWalk-v0", "hilly": "myoLegHillyTerrainWalk-v0",

@@ -12,10 +12,10 @@ import tomllib
 import pytest
 from rich.console import Console
 
+from motorlab.api.synergies import load_sar
 from motorlab.recipes import bundled, load_recipe, parse_recipe
 from motorlab.runs import run_folders
 from motorlab.studies import run_study
-from motorlab.synergies import load_sar
 from tests.helpers import HAND_MUSCLES, assert_ok, assert_one_line_error, assert_png, read_summary, run_cli, run_here
 
 # The bundled sar-hand-quick at the tests' scale (conftest.py's sar_hand_quick, run once for this

@@ -18,7 +18,7 @@ from motorlab.errors import MotorlabError
 from motorlab.evaluation.rollouts import Rollouts
 from motorlab.kinds.ablate import ABLATE
 from motorlab.synergies import fit_sar, save_sar
-from motorlab.synergies.ablation import (
+from motorlab.synergy_runs.ablation import (
     MIN_EPISODES,
     Ablation,
     MeanInterval,

@@ -18,9 +18,9 @@ from scipy.optimize import linear_sum_assignment
 from motorlab.errors import MotorlabError
 from motorlab.kinds.import_emg import IMPORT_EMG
 from motorlab.kinds.synergies import VAF
-from motorlab.synergies.activations import load_activations
 from motorlab.synergies.emg import EnvelopeFilters, import_emg
 from motorlab.synergies.sar import fit_sar, load_sar
+from motorlab.synergy_runs.activations import load_activations
 from tests.helpers import assert_ok, assert_one_line_error, read_summary, run_cli, run_here, run_kind
 
 RATE = 2000.0

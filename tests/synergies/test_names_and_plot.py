@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from motorlab.envs import EnvConfig, make_env
-from motorlab.synergies.activations import load_activations, resolve_signal, signal_bounds, signal_names
+from motorlab.synergy_runs.activations import load_activations, resolve_signal, signal_bounds, signal_names
 from tests.helpers import HAND_ID, assert_ok, assert_one_line_error, run_cli
 
 

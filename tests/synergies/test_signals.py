@@ -16,8 +16,8 @@ from motorlab.envs import EnvConfig, make_env
 from motorlab.errors import MotorlabError
 from motorlab.kinds.synergies import COLLECT, FIT
 from motorlab.synergies import SynergyActionWrapper, fit_sar, save_sar
-from motorlab.synergies.activations import load_activations, read_signal, resolve_signal, signal_bounds
 from motorlab.synergies.sar import load_sar, signal_of
+from motorlab.synergy_runs.activations import load_activations, read_signal, resolve_signal, signal_bounds
 from tests.helpers import (
     ENV_ID,
     HAND_ID,

@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import pytest
 
-from motorlab.synergies import load_sar
+from motorlab.api.synergies import load_sar
 from tests.helpers import (
     HAND_ID,
     HAND_MUSCLES,

@@ -13,13 +13,13 @@ from motorlab.errors import MotorlabError
 def plot_synergies(sar_path: Path, out: Path, activations: Path | None = None, vaf_run: Path | None = None,
                    episodes: int = 3, names_from: str | None = None) -> list[Path]:
     """heatmap.png, and coefficients.png / vaf.png where their inputs are there; the paths written."""
-    import motorlab.synergies.figures as figures
+    import motorlab.synergy_runs.figures as figures
     from motorlab.runs import read_json
-    from motorlab.synergies.activations import load_activations
     from motorlab.synergies.analysis import Choice, CrossValidatedVaf, choices
-    from motorlab.synergies.naming import fitted_activations, names_for, sar_file
     from motorlab.synergies.sar import load_sar
     from motorlab.synergies.vectors import SynergyVectors, vectors_of
+    from motorlab.synergy_runs.activations import load_activations
+    from motorlab.synergy_runs.naming import fitted_activations, names_for, sar_file
 
     sar = load_sar(sar_file(sar_path))
     names, _ = names_for(sar, names_from, "the SAR")

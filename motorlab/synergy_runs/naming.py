@@ -47,7 +47,7 @@ def names_for(sar: Any, names_from: str | None, which: str) -> tuple[list[str], 
         raise MotorlabError(f"{which} was saved without muscle names (a published or older SAR): give --names-from "
                             "ENV_ID, the env whose model it was fitted on (e.g. myoHandReorient8-v0), to read them.")
     from motorlab.envs import EnvConfig, make_env
-    from motorlab.synergies.activations import resolve_signal, signal_bounds, signal_names
+    from motorlab.synergy_runs.activations import resolve_signal, signal_bounds, signal_names
 
     env = make_env(EnvConfig(id=names_from))
     try:
