@@ -234,17 +234,20 @@ COLLECT_ARGS = ["--episodes", str(COLLECT_EPISODES), "--percentile", str(COLLECT
 # max(1, n // divisor); a string replaces the match (re.sub).
 # collect in-process: at this scale a pool of fresh interpreters costs more than it saves (pools: test_collect.py)
 ONE_WORKER = (r'(kind = "collect"\n)', r"\1workers = 1\n")
-# SAC's 8 gradient steps per env step (most of a training's time at this scale) become 1.
+# sar-sac-fast's 4 env processes: each training would start 4 MyoSuite interpreters (~5 s a training
+# here); the trainings run the same code in one (the 4-process path: tests/rl/test_myosuite_presets.py).
+ONE_ENV_PROCESS = (r'(preset = "sar-sac-fast"\n)', r"\1n_envs = 1\n")
+# sar-ant-quick's 8 gradient steps per episode (most of a training's time at this scale) become 1.
 ONE_GRADIENT_STEP = (r"gradient_steps = (\d+)", 8)
 SCALED = {
     # ~3.5 min on 2 cores as bundled: collect 5 of 5 preview episodes, zero-shot 5 episodes per env
     "sar-hand-quick": [(r"timesteps = (\d+)", 10), (r"eval_every = (\d+)", 5), (r"episodes = (\d+)", 10),
-                       (r"preview = (\d+)", 4), ONE_WORKER, ONE_GRADIENT_STEP],
+                       (r"preview = (\d+)", 4), ONE_WORKER, ONE_ENV_PROCESS],
     # its collection (5000 episodes), fit (20 epochs) and MPC (10 episodes); the check keeps its 3 episodes
     "reacher-quick": [(r"episodes = (\d{2,})", 5), (r"epochs = (\d+)", 4)],
     # every step of the legs study: 1000 + 1000 env steps of SAC beside 2000, 4 episodes collected
     "sar-legs-quick": [(r"timesteps = (\d+)", 5), (r"eval_every = (\d+)", 5), (r"episodes = (\d+)", 5),
-                       (r"preview = (\d+)", 5), ONE_WORKER, ONE_GRADIENT_STEP],
+                       (r"preview = (\d+)", 5), ONE_WORKER],
     # ~2 min on 2 cores as bundled
     "sar-ant-quick": [(r"timesteps = (\d+)", 4), (r"eval_every = (\d+)", 4), ONE_WORKER, ONE_GRADIENT_STEP],
     # 2 seeds each: 2 rounds x 1 evaluation episode on a small planner and model; SAC 400 env steps (100

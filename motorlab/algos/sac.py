@@ -42,12 +42,11 @@ ALGORITHM = OffPolicy(
         # The reference SAC with what a 2-core CPU can afford: the same networks, learning rate,
         # buffer, batch, tau, gamma and normalization, four env processes, and one gradient step
         # per 25 env steps instead of one per env step. An update of the [400, 300] nets on a
-        # 256 batch is ~2 GFLOP (~45 updates/s on one core, ~58 on two), so one update per env
-        # step caps the reference at ~40 env steps/s (~35 h for the 5M-step hand study); at 1/25
-        # the study takes under 2 h. It learns much less per env step than the reference: on
-        # myoFingerPoseRandom-v0 after 30k env steps, success ~32% against ~97% over 3 seeds each
-        # (benchmarks/sar_study.py, results/sar_study.json). PPO, though faster still, did not
-        # learn Reorient8 in 300k steps.
+        # 256 batch is ~2 GFLOP, so one update per env step caps the reference at the rate of
+        # updates a core does (benchmarks/learner_per_hour.py and sar_study.py measure both
+        # learners' rates and what they learn: results/learner_per_hour.json, sar_study.json;
+        # docs/benchmarks.md). It learns less per env step than the reference, and more per
+        # wall-clock minute: the learner the SAR recipes use.
         "sar-sac-fast": Preset(
             "sar-sac for a 2-core CPU: 4 env processes, 4 gradient steps every 25 vectorized steps",
             {**SAR_SAC,

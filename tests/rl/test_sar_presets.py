@@ -46,3 +46,15 @@ def test_ppo_contender_trains_on_four_env_processes_and_evaluates(tmp_path):
     assert s["timesteps"] == 4 * 64 * 2  # whole rollouts of 4 envs x n_steps, to the first past the budget
     assert n_updates(tmp_path / "ppo") == 2 * 2  # rollouts x epochs (SB3's PPO counts epochs)
     assert 0.0 <= s["eval_success_rate"] <= 1.0 and s["eval_episodes"] == 2
+
+
+def test_sar_sac_fast_trains_on_four_env_processes_at_four_updates_per_hundred_env_steps(tmp_path):
+    """The SAR recipes' learner, as they run it: 4 env processes, 4 gradient steps every 25 vectorized
+    steps (100 env steps), trained once learning starts."""
+    cfg = resolve({"env": {"id": TASK}, "preset": "sar-sac-fast", "timesteps": STEPS, "solve_episodes": 2,
+                   "progress": False, "hyperparams": {"learning_starts": STARTS}})
+    s = TRAIN.perform(cfg, tmp_path / "fast").keys()
+    assert cfg.n_envs == 4 and cfg.normalize and s["timesteps"] == STEPS
+    # rollouts of 100 env steps end at 100, 200, 300, 400; SB3 trains after those past learning_starts
+    assert n_updates(tmp_path / "fast") == 4 * ((STEPS - STARTS) // 100)
+    assert 0.0 <= s["eval_success_rate"] <= 1.0 and s["eval_episodes"] == 2
