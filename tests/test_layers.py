@@ -219,7 +219,7 @@ def test_the_design_docs_example_kind_passes_the_checks(tmp_path):
     shutil.copy(PACKAGE.parent / "pyproject.toml", tmp_path)
     (tmp_path / where).write_text(code)
     module = where.removesuffix(".py").replace("/", ".")
-    registry = tmp_path / "motorlab" / "kinds" / "__init__.py"
+    registry = tmp_path / "motorlab" / "kinds" / "registry.py"
     text = registry.read_text()
     text = text.replace("\nKINDS: dict", f"\nfrom {module} import NOISE  # noqa: E402\n\nKINDS: dict", 1)
     registry.write_text(text.replace("    MBRL,\n)}", "    MBRL,\n    NOISE,\n)}", 1))
@@ -238,3 +238,38 @@ def test_the_design_docs_example_kind_passes_the_checks(tmp_path):
     assert checks.returncode == 0, checks.stdout[-3000:]
     command = run(sys.executable, "-m", "motorlab", "noise", "--help")
     assert command.returncode == 0 and "--std" in command.stdout and "POLICY" in command.stdout, command.stdout
+
+
+LOGIC = (ast.ClassDef, ast.For, ast.AsyncFor, ast.While, ast.If, ast.With, ast.Try, ast.AsyncFunctionDef)
+
+
+def init_logic(source: str) -> list[str]:
+    """What a package's __init__.py holds beyond re-exports: any class, loop, branch or function at
+    module level but a lazy `__getattr__` (a re-export on first use), whose body may branch, import,
+    return and raise, nothing more."""
+    found = []
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.FunctionDef) and node.name == "__getattr__":
+            found += [f"line {n.lineno}: {type(n).__name__} in __getattr__" for n in ast.walk(node)
+                      if isinstance(n, (*LOGIC[:-1], ast.Assign, ast.FunctionDef, ast.Lambda)) and n is not node
+                      and not isinstance(n, ast.If)]
+        elif isinstance(node, (*LOGIC, ast.FunctionDef)):
+            found.append(f"line {node.lineno}: {type(node).__name__}")
+    return found
+
+
+def test_package_inits_re_export_and_hold_no_logic():
+    """An __init__.py names what its package gives (imports, __all__); the code is in its modules, where a
+    reader looks for it (registries: `_registry.py`, `kinds/registry.py`)."""
+    held = {str(p.relative_to(PACKAGE.parent)): found for p in sorted(PACKAGE.rglob("__init__.py"))
+            if (found := init_logic(p.read_text()))}
+    assert not held, held
+
+
+@pytest.mark.parametrize("statement", ["def names():\n    return ()\n", "class Spec:\n    pass\n",
+                                       "for k in ():\n    pass\n", "if True:\n    X = 1\n",
+                                       "def __getattr__(name):\n    for k in ():\n        pass\n"])
+def test_the_init_check_finds_logic(statement):
+    lazy = 'def __getattr__(name):\n    if name == "x":\n        import json\n\n        return json\n    raise AttributeError(name)\n'
+    assert init_logic('"""doc"""\nimport os\n\n__all__ = ["x"]\n' + lazy) == []
+    assert init_logic('"""doc"""\n' + statement)

@@ -5,14 +5,6 @@ by name (`pid`) or from a run folder's policy.json, and below the algorithm regi
 (motorlab.algos), whose LQR learner fits them.
 """
 
-from __future__ import annotations
+from motorlab.controllers.files import save_controller
 
-from pathlib import Path
-from typing import Any
-
-from motorlab.runs import POLICY_JSON, write_json
-
-
-def save_controller(run_dir: Path, controller: Any) -> None:
-    """Write policy.json for a PID or LQR controller (all numbers inline)."""
-    write_json(Path(run_dir) / POLICY_JSON, controller.to_dict())
+__all__ = ["save_controller"]

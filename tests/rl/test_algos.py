@@ -17,8 +17,8 @@ from motorlab.errors import MotorlabError
 pytestmark = pytest.mark.fast
 
 
-def test_every_module_but_base_is_one_registered_algorithm():
-    modules = {m.name for m in pkgutil.iter_modules(algos.__path__)} - algos.NOT_ALGORITHMS
+def test_every_module_but_base_and_private_ones_is_one_registered_algorithm():
+    modules = {m.name for m in pkgutil.iter_modules(algos.__path__) if not m.name.startswith("_")} - algos.NOT_ALGORITHMS
     registered = {name: type(a).__module__ for name, a in algos.registry().items()}
     for module in modules:
         algo = importlib.import_module(f"motorlab.algos.{module}").ALGORITHM

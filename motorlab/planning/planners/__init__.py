@@ -5,44 +5,13 @@ algorithms. A new planner is one file.
 A planner class takes (score, low, high, **settings) and says which of the plan's settings it takes
 (`SETTINGS`); `plan(states, goals)` returns each env's first action."""
 
-from __future__ import annotations
+from motorlab.planning.planners._registry import (
+    PLANNERS,
+    about,
+    make_planner,
+    names,
+    planner_class,
+    settings_of,
+)
 
-import functools
-import importlib
-from typing import Any
-
-from motorlab.errors import MotorlabError, did_you_mean
-from motorlab.plugins import help_lines, module_names
-
-PLANNERS = __name__
-
-
-@functools.cache
-def names() -> tuple[str, ...]:
-    """Every planner's name (its module's), in a fixed order: cem first, the default."""
-    return module_names(__path__, first="cem")
-
-
-def _module(name: str) -> Any:
-    if name not in names():
-        raise MotorlabError(f"--optimizer {name!r}: choose {', '.join(names())}{did_you_mean(name, names())}.")
-    return importlib.import_module(f"{PLANNERS}.{name}")
-
-
-def planner_class(name: str) -> type:
-    return _module(name).PLANNER
-
-
-def about() -> str:
-    """Each planner in a line, for --help: its module docstring's first line, read without importing the
-    module (a planner imports torch; --help does not need it)."""
-    return help_lines(PLANNERS, names(), "--optimizer")
-
-
-def settings_of(name: str) -> tuple[str, ...]:
-    """The plan settings (horizon, population, ...) the planner `name` takes."""
-    return _module(name).SETTINGS
-
-
-def make_planner(optimizer: str, score: Any, low: Any, high: Any, **settings: Any) -> Any:
-    return planner_class(optimizer)(score, low, high, **settings)
+__all__ = ["PLANNERS", "about", "make_planner", "names", "planner_class", "settings_of"]
