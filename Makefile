@@ -15,7 +15,7 @@ $(VENV)/.browser: $(STAMP) scripts/setup.sh
 
 setup: $(STAMP)
 
-demo: $(STAMP)  ## the pendulum study, the SAR pipeline on the MyoSuite hand and forward model + MPC on Reacher, in miniature (3.5 min on 2 quiet cores; 4.3 min from a fresh clone, set-up from the local wheel cache included)
+demo: $(STAMP)  ## the pendulum study, the SAR pipeline on the MyoSuite hand and forward model + MPC on Reacher, in miniature (5.1 min from a fresh clone on 2 quiet cores, set-up from the local wheel cache included: session 24)
 	$(VENV)/bin/motorlab run pendulum --out runs/demo-pendulum --resume
 	$(VENV)/bin/motorlab run sar-hand-quick --out runs/demo-sar-hand-quick --resume
 	$(VENV)/bin/motorlab run reacher-quick --out runs/demo-reacher-quick --resume
