@@ -10,9 +10,9 @@ from motorlab.kinds.export import EXPORT
 from motorlab.kinds.report import PLOT, REPORT
 from motorlab.kinds.synergy_files import EXPORT_SKLEARN, IMPORT_SKLEARN, PLOT_SYNERGIES
 from motorlab.recipe_list import RECIPES
-from motorlab.studies.command import RUN
-from motorlab.sweeps.command import SWEEP
-from motorlab.tuning.command import TUNE
+from motorlab.studies.run_command import RUN
+from motorlab.sweeps.sweep_command import SWEEP
+from motorlab.tuning.tune_command import TUNE
 
 OTHERS: tuple[Command, ...] = (EXPORT, REPORT, PLOT, IMPORT_SKLEARN, EXPORT_SKLEARN, PLOT_SYNERGIES, RUN, SWEEP, TUNE, RECIPES)
 # by the words that run them on the command line ("train", "dynamics fit"); kinds for recipes only have none

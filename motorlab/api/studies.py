@@ -102,7 +102,7 @@ def sweep(target: str | Path | Target, seeds: int | list[int] | None = None,
     Returns:
         The sweep: `.aggregate`, `.table`, `.summary`, `.report()`.
     """
-    from motorlab.sweeps.command import SWEEP
+    from motorlab.sweeps.sweep_command import SWEEP
 
     given = {"seeds": seeds} if not isinstance(seeds, list) else {}
     how = SWEEP.how(out=out, track=track, resume=resume, overwrite=overwrite)
@@ -147,7 +147,7 @@ def tune(target: str | Path | Target, space: list[str] | dict[str, Any], *, tria
     Returns:
         The search: `.best` (best.toml), `.trials`, `.summary` (with the fresh seeds' numbers).
     """
-    from motorlab.tuning.command import TUNE
+    from motorlab.tuning.tune_command import TUNE
 
     how = TUNE.how(out=out, track=track, resume=resume, overwrite=overwrite)
     settings = TUNE.make(how, target=str(target) if isinstance(target, Path) else target, space=space, trials=trials,

@@ -1,6 +1,6 @@
 """Studies: run a recipe's steps in order, then tabulate and plot them.
 
-The runner is imported when it is first used: `motorlab.studies.command` (the `run` command, read
+The runner is imported when it is first used: `motorlab.studies.run_command` (the `run` command, read
 whenever the CLI starts) must not bring matplotlib and the report with it."""
 
 from __future__ import annotations

@@ -171,8 +171,8 @@ def test_the_apis_sweep_and_tune_take_their_defaults_from_the_commands_settings(
     command's settings model gives the value (what `motorlab sweep/tune --help` shows)."""
     import inspect
 
-    from motorlab.sweeps.command import SWEEP
-    from motorlab.tuning.command import TUNE
+    from motorlab.sweeps.sweep_command import SWEEP
+    from motorlab.tuning.tune_command import TUNE
 
     for function, command in ((motorlab.sweep, SWEEP), (motorlab.tune, TUNE)):
         params = inspect.signature(function).parameters

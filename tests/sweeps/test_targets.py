@@ -18,11 +18,11 @@ import motorlab
 from motorlab.commandline import command_line, parse
 from motorlab.errors import MotorlabError
 from motorlab.kinds import for_command
-from motorlab.sweeps.command import SWEEP
 from motorlab.sweeps.sweep import plan
+from motorlab.sweeps.sweep_command import SWEEP
 from motorlab.sweeps.targets import RecipeTarget, StepTarget, read_target
-from motorlab.tuning.command import TUNE
 from motorlab.tuning.space import parse_space
+from motorlab.tuning.tune_command import TUNE
 from tests.helpers import ENV_ID
 
 finite = st.floats(min_value=1e-6, max_value=1.0, allow_nan=False, allow_infinity=False)
