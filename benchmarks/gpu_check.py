@@ -20,7 +20,9 @@ for the rates, also on the CPU (fewer steps: the CPU's rate needs fewer to settl
      runs end to end, its wall time, and its findings. Its success rates at 1/50 say nothing of SAR.
 Output: one JSON object on stdout (progress on stderr), with the device's name, each rate on the device
 and on the CPU and their ratio, and provenance (date, command line, commit, versions, machine).
-Projections of the full published protocol from these rates are in docs/benchmarks.md.
+`projection`: the full published protocol's training hours (sar-hand-reference: play 1M, SAR-RL and RL-E2E
+5 seeds each; protocol_time.py) at the SAC rate measured on each device, on one machine and on Ray clusters
+of 2 and 5 machines (docs/benchmarks.md#gpu-check).
 --quick (CI, on the CPU): the same steps at tiny sizes (SAC 300 steps, 20 collected episodes, the study at
 1/5000 with one seed per arm), ~2-3 min; it checks that every part runs and the JSON's shape.
 """
@@ -37,7 +39,8 @@ import time
 import zipfile
 from pathlib import Path
 
-from provenance import Recorder  # benchmarks/ is the script's folder
+from protocol_time import training_hours  # benchmarks/ is the script's folder
+from provenance import Recorder
 
 HAND = "myoHandReorient8-v0"
 FULL = {"sac_steps": {"device": 6000, "cpu": 1600}, "learning_starts": 1000, "collect_episodes": 200,
@@ -47,6 +50,7 @@ QUICK = {"sac_steps": {"device": 300, "cpu": 300}, "learning_starts": 100, "coll
 STUDY = "sar-hand-reference"
 STUDY_STEPS = {"play": 1_000_000, "sar-rl": 1_500_000, "rl-e2e": 2_500_000}  # the recipe's budgets
 STUDY_EPISODES = {"collect": 1000, "zeroshot": 500}
+CLUSTERS = (1, 2, 5)  # machines the projection is given for
 
 
 def say(text: str) -> None:
@@ -123,6 +127,13 @@ def device_over_cpu(by_device: dict[str, dict], device: str, key: str, faster: s
     return ratio(a, b) if faster == "higher" else ratio(b, a)
 
 
+def projection(sac: dict[str, dict]) -> dict:
+    """The full protocol's training hours at each device's measured SAC rate, by machines."""
+    return {"recipe": STUDY, "counts": "training env steps only (protocol_time.py): a lower bound",
+            **{d: {str(m): round(training_hours(STUDY, r["env_steps_per_second"], m), 1) for m in CLUSTERS}
+               for d, r in sac.items()}}
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog=__doc__.split("\n\n", 1)[1])
@@ -167,7 +178,8 @@ def main(argv: list[str] | None = None) -> None:
               "forward_model": {**model,
                                 "plan_speedup_device_over_cpu": device_over_cpu(model, d, "plan_ms_per_env_step", "lower"),
                                 "fit_speedup_device_over_cpu": device_over_cpu(model, d, "fit_train_seconds", "lower")},
-              "study": sar, "wall_seconds": round(time.perf_counter() - started, 1)}
+              "study": sar, "projection": projection(sac),
+              "wall_seconds": round(time.perf_counter() - started, 1)}
     recorder.record(result, file="gpu_check" + ("-quick" if args.quick else ""))
 
 

@@ -33,6 +33,9 @@ def test_a_cpu_rehearsal_runs_every_part_and_records_its_rates(tmp_path):
     assert {"sar-rl.success_rate", "rl-e2e.success_rate"} <= set(study["findings"])
     assert all(0.0 <= v <= 1.0 for v in study["findings"].values())
     assert recorded["argv"][:2] == ["--device", "cpu"] and recorded["date"]
+    hours = recorded["projection"]["cpu"]  # the full protocol at the measured rate: more machines, less time
+    assert recorded["projection"]["recipe"] == "sar-hand-reference" and list(hours) == ["1", "2", "5"]
+    assert hours["1"] > hours["2"] > hours["5"] > 0
 
 
 @pytest.mark.fast

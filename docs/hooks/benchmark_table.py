@@ -28,7 +28,7 @@ PAGE = "benchmarks.md"
 ROOT = Path(__file__).resolve().parents[2]
 BENCHMARKS = ROOT / "benchmarks"
 # modules in benchmarks/ that the benchmarks import: not benchmarks of their own
-HELPERS = frozenset({"provenance", "mbrl_body", "user_reacher_reward", "bodies", "sac_tune"})
+HELPERS = frozenset({"provenance", "mbrl_body", "user_reacher_reward", "bodies", "sac_tune", "protocol_time"})
 
 
 def _results_hook():

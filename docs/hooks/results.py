@@ -17,6 +17,9 @@ becomes its text, e.g. `{{ result("sar_study", "settings.sar_sac_fast.projected_
   median), from the per-seed records at `path` (`steps_of`); `steps_ratio(file, a_path, b_path)`:
   b's median / a's.
 - `date(file)`: the day the file's run finished.
+- `protocol_hours(file, rate_path, recipe, machines)`: the training hours of a bundled recipe at the
+  env steps/s recorded at `rate_path`, on one machine or a Ray cluster of `machines`
+  (benchmarks/protocol_time.py: the recipe's own budgets, training only).
 
 A path is the JSON's keys joined by "." (a key that holds a dot itself, like "delayed_tau_0.2s", is
 matched whole). A missing file or key, an unknown macro or form fails the build with the page's name.
@@ -222,8 +225,21 @@ def date(file: str) -> str:
     return day[:10]
 
 
+def protocol_hours(file: str, rate_path: str, recipe: str, machines: int) -> str:
+    import sys
+
+    if str(ROOT / "benchmarks") not in sys.path:  # protocol_time is a benchmarks/ script's module
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+    from protocol_time import training_hours
+
+    rate = lookup(load(file), rate_path, file)
+    if not isinstance(rate, (int, float)) or not rate > 0:
+        raise MacroError(f"{file}.json: {rate_path!r} is {rate!r}, not a rate in env steps/s")
+    return form("h")(training_hours(recipe, float(rate), int(machines)))
+
+
 MACROS: dict[str, Callable[..., str]] = {f.__name__: f for f in (result, seeds, pooled, p_better, steps,
-                                                                 steps_ratio, date)}
+                                                                 steps_ratio, date, protocol_hours)}
 
 
 def call(name: str, args: str) -> str:
