@@ -90,6 +90,10 @@ def _deadline(seconds: float) -> None:
     thread, nothing the interrupted code may hold; the timer is never cancelled, as the process is
     on its way out)."""
     if hasattr(signal, "setitimer"):
+        import faulthandler
+
+        # where it hung, on stderr, just before the end: a cleanup that never finishes says where it waits
+        faulthandler.dump_traceback_later(max(seconds - 1.0, seconds / 2), exit=False)
         signal.signal(signal.SIGALRM, signal.SIG_DFL)
         signal.setitimer(signal.ITIMER_REAL, seconds)
 

@@ -7,6 +7,9 @@ Steps-to-success: the env steps used to produce the first policy for which
 
 from __future__ import annotations
 
+import itertools
+import os
+import socket
 import time
 from collections import deque
 from pathlib import Path
@@ -14,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from tensorboard.compat.proto.event_pb2 import Event
 from tensorboard.compat.proto.summary_pb2 import Summary
-from tensorboard.summary.writer.event_file_writer import EventFileWriter
+from tensorboard.summary.writer.record_writer import RecordWriter
 
 from motorlab import trackers
 from motorlab.evaluation import Evaluator
@@ -26,16 +29,26 @@ from motorlab.runs import METRICS, MetricsWriter
 METRIC_FIELDS = ["timesteps", "wall_seconds", "episode_return", "episode_length", "episode_success",
                  "success_rate_100", "eval_return_mean", "eval_return_min", "eval_success_rate", FAULT_KEY, "train_seconds"]
 
+_FILES = itertools.count()  # event files this process opened: a unique name even within one second
 EVAL_SEED_OFFSET = 10_000  # evaluation episodes never share seeds with training episodes
 
 
 class ScalarWriter:
-    """TensorBoard scalars as torch's SummaryWriter writes them (tensorboard's own event file writer,
-    the same records: one Summary simple_value per scalar, wall time and step), without torch: an
-    LQR run does not import it, and starts a second sooner (every tune or sweep trial does)."""
+    """TensorBoard scalars as torch's SummaryWriter writes them (the same event file name and records: one
+    Summary simple_value per scalar, wall time and step), without torch (an LQR run does not import it, and
+    starts a second sooner) and without a writer thread. tensorboard's EventFileWriter writes from a
+    thread that its close() joins; a stop signal landing while training wrote a scalar left that join
+    waiting until the worker's grace ran out and the kernel ended it (seen under load: exit -14 in place
+    of 130). Written here in the caller's thread, a close is a file's close: nothing to wait for."""
 
     def __init__(self, log_dir: Path | str):
-        self._events = EventFileWriter(str(log_dir), 10, 120, "")  # SummaryWriter's queue and flush interval
+        folder = Path(log_dir)
+        folder.mkdir(parents=True, exist_ok=True)
+        name = f"events.out.tfevents.{int(time.time()):010d}.{socket.gethostname()}.{os.getpid()}.{next(_FILES)}"
+        self._file = open(folder / name, "wb")  # buffered: flushed at each evaluation and at close
+        self._records = RecordWriter(self._file)
+        self._write(Event(wall_time=time.time(), file_version="brain.Event:2"))
+        self.flush()
 
     def add_scalar(self, tag: str, scalar_value: float, global_step: int | None = None,
                    walltime: float | None = None) -> None:
@@ -44,14 +57,16 @@ class ScalarWriter:
         event.wall_time = time.time() if walltime is None else walltime
         if global_step is not None:
             event.step = int(global_step)
-        self._events.add_event(event)
+        self._write(event)
+
+    def _write(self, event: Event) -> None:
+        self._records.write(event.SerializeToString())
 
     def flush(self) -> None:
-        self._events.flush()
+        self._file.flush()
 
     def close(self) -> None:
-        self._events.flush()
-        self._events.close()
+        self._file.close()  # flushes first
 
 
 class TrainingMonitor:
@@ -158,6 +173,7 @@ class TrainingMonitor:
         self.tb.add_scalar("eval/return_mean", s["return_mean"], steps)
         self.tb.add_scalar("eval/return_min", s["return_min"], steps)
         self.tb.add_scalar("eval/solved", float(solved), steps)
+        self.tb.flush()  # an evaluation's scalars on disk with its metrics.csv row
         if solved and self.steps_to_success is None:
             self.steps_to_success = int(steps)
         return solved

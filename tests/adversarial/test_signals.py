@@ -143,3 +143,32 @@ def test_children_of_a_killed_command_die_with_it(tmp_path):
     assert not alive, f"outlived a killed command: {[_cmdline(p) for p in alive]}"
     for seed in seeds:  # each stopped as on SIGTERM: unfinished, its checkpoint kept
         assert (seed / "checkpoint" / "latest.json").is_file() and not (seed / "summary.json").exists()
+
+
+HUNG_CLEANUP = """
+import threading, time
+from motorlab.processes import stopped_by_signals
+
+def cleanup_that_never_finishes():
+    threading.Event().wait()
+
+with stopped_by_signals(grace=2.0):
+    try:
+        print("ready", flush=True)
+        time.sleep(60)
+    except KeyboardInterrupt:
+        cleanup_that_never_finishes()
+"""
+
+
+def test_a_cleanup_that_hangs_past_its_grace_ends_and_says_where_it_waited():
+    """After a stop signal a process has its grace to clean up; one whose cleanup never finishes is
+    ended by the kernel (SIGALRM) and leaves, on stderr, the stack it hung in."""
+    proc = subprocess.Popen([sys.executable, "-c", HUNG_CLEANUP], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    assert proc.stdout.readline().strip() == "ready"
+    proc.send_signal(signal.SIGINT)
+    started = time.monotonic()
+    _, stderr = proc.communicate(timeout=30)
+    assert proc.returncode == -signal.SIGALRM and time.monotonic() - started < 10
+    assert "cleanup_that_never_finishes" in stderr and "Timeout" in stderr
