@@ -1,9 +1,9 @@
 """Forward models from Python (`motorlab dynamics ...`): collect transitions, fit, check open loop.
 
 ```python
-data = motorlab.dynamics.collect("Reacher-v5", episodes=2000)
-model = motorlab.dynamics.fit(data, epochs=50)
-motorlab.dynamics.check(model)                    # error vs horizon against the simulator
+data = motorlab.api.dynamics.collect("Reacher-v5", episodes=2000)
+model = motorlab.api.dynamics.fit(data, epochs=50)
+motorlab.api.dynamics.check(model)                    # error vs horizon against the simulator
 motorlab.mpc("Reacher-v5", model, episodes=20)
 ```
 """

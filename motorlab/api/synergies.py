@@ -2,9 +2,9 @@
 
 ```python
 play = motorlab.train("myoHandReorient8-v0", preset="sar-sac-fast", timesteps=50_000)
-acts = motorlab.synergies.collect(play, episodes=200)
-motorlab.synergies.vaf(acts)                      # how many synergies explain 80%?
-sar = motorlab.synergies.fit(acts, n_synergies=20)
+acts = motorlab.api.synergies.collect(play, episodes=200)
+motorlab.api.synergies.vaf(acts)                      # how many synergies explain 80%?
+sar = motorlab.api.synergies.fit(acts, n_synergies=20)
 motorlab.train("myoHandReorient100-v0", sar=sar, phi=0.5)
 ```
 """
