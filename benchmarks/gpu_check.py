@@ -39,7 +39,7 @@ import time
 import zipfile
 from pathlib import Path
 
-from protocol_time import training_hours  # benchmarks/ is the script's folder
+from protocol_time import train_budgets, training_hours  # benchmarks/ is the script's folder
 from provenance import Recorder
 
 HAND = "myoHandReorient8-v0"
@@ -48,7 +48,6 @@ FULL = {"sac_steps": {"device": 6000, "cpu": 1600}, "learning_starts": 1000, "co
 QUICK = {"sac_steps": {"device": 300, "cpu": 300}, "learning_starts": 100, "collect_episodes": 20,
          "mpc_episodes": 2, "study_scale": 5000, "study_seeds": 1}
 STUDY = "sar-hand-reference"
-STUDY_STEPS = {"play": 1_000_000, "sar-rl": 1_500_000, "rl-e2e": 2_500_000}  # the recipe's budgets
 STUDY_EPISODES = {"collect": 1000, "zeroshot": 500}
 CLUSTERS = (1, 2, 5)  # machines the projection is given for
 
@@ -101,10 +100,11 @@ def model_rates(device: str, collected: Path, episodes: int, out: Path) -> dict:
 
 def study(device: str, scale: int, seeds: int, out: Path) -> dict:
     """The SAR hand study at 1/scale of its env steps, every train step on `device`."""
-    sets = [f"{name}.timesteps={max(100, steps // scale)}" for name, steps in STUDY_STEPS.items()]
+    budgets = {name: steps for name, steps, _ in train_budgets(STUDY)}  # the recipe's own
+    sets = [f"{name}.timesteps={max(100, steps // scale)}" for name, steps in budgets.items()]
     sets += [f"{name}.episodes={max(2 if name == 'zeroshot' else 5, n // scale)}" for name, n in STUDY_EPISODES.items()]
     sets += [f"sar-rl.seeds={seeds}", f"rl-e2e.seeds={seeds}", "device=" + device,
-             f"eval_every={max(100, STUDY_STEPS['play'] // scale // 4)}", f"collect.preview={max(5, 200 // scale)}"]
+             f"eval_every={max(100, budgets['play'] // scale // 4)}", f"collect.preview={max(5, 200 // scale)}"]
     t = time.perf_counter()
     motorlab("run", STUDY, *[a for s in sets for a in ("--set", s)], "--out", str(out), step=f"{STUDY} at 1/{scale}")
     summary = json.loads((out / "summary.json").read_text())

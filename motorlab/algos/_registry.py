@@ -4,13 +4,13 @@
 from __future__ import annotations
 
 import importlib
-import pkgutil
 import sys
 from functools import cache
 from typing import Any
 
 from motorlab.algos.base import Algorithm, SB3Algorithm
 from motorlab.errors import MotorlabError, did_you_mean
+from motorlab.plugins import module_names
 
 PACKAGE = __package__  # motorlab.algos: its __path__ is read at each look-up, so an extended one counts
 NOT_ALGORITHMS = {"base"}
@@ -20,10 +20,8 @@ NOT_ALGORITHMS = {"base"}
 def registry() -> dict[str, Algorithm]:
     """Every algorithm, by name, from the modules of this package (in module order)."""
     found: dict[str, Algorithm] = {}
-    for info in sorted(pkgutil.iter_modules(sys.modules[PACKAGE].__path__), key=lambda m: m.name):
-        if info.name in NOT_ALGORITHMS or info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"{PACKAGE}.{info.name}")
+    for name in module_names(sys.modules[PACKAGE].__path__, first="", skip=NOT_ALGORITHMS):  # by name
+        module = importlib.import_module(f"{PACKAGE}.{name}")
         algo = getattr(module, "ALGORITHM", None)
         if not isinstance(algo, Algorithm):
             raise TypeError(f"{module.__name__} defines no ALGORITHM (an Algorithm); every module in "
