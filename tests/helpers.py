@@ -59,17 +59,25 @@ def free_port() -> int:
 
 
 def run_cli(*args: str | os.PathLike, cwd: Path | None = None, timeout: float = 300,
-            env: dict[str, str] | None = None, user_modules: bool = True) -> subprocess.CompletedProcess:
+            env: dict[str, str] | None = None, user_modules: bool = True,
+            fresh: bool = False) -> subprocess.CompletedProcess:
     """`python -m motorlab ARGS` in a fresh process, as a user would run it (`env`: variables to add).
+    The process is a fork of one that has already imported the libraries every command imports
+    (tests/zygote.py: the same process after those imports, at a tenth of the start-up CPU), or with
+    `fresh=True`, or an environment those imports would have read differently, a new interpreter.
     `user_modules=False`: without the user modules this process passes on ($MOTORLAB_IMPORTS), for a run that
     tests of other files share (a session fixture): a run records them, and a later file's process may not
     find a module the file that first asked for the fixture had imported."""
+    from tests.zygote import zygote_for
+
     inherited = {k: v for k, v in os.environ.items() if user_modules or k != "MOTORLAB_IMPORTS"}
-    return subprocess.run(
-        [sys.executable, "-m", "motorlab", *map(str, args)],
-        capture_output=True, text=True, cwd=cwd, timeout=timeout,
-        env={**inherited, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **(env or {})},
-    )
+    full_env = {**inherited, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), **(env or {})}
+    cmd = [sys.executable, "-m", "motorlab", *map(str, args)]
+    # MOTORLAB_TESTS_FRESH=1: every command in a new interpreter (to compare, or to rule the zygote out)
+    zygote = None if fresh or os.environ.get("MOTORLAB_TESTS_FRESH") == "1" else zygote_for(full_env)
+    if zygote is not None:
+        return zygote.run(cmd[3:], str(cwd or os.getcwd()), full_env, timeout, cmd)
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=cwd, timeout=timeout, env=full_env)
 
 
 def run_here(*args: str | os.PathLike, cwd: Path | None = None) -> subprocess.CompletedProcess:
