@@ -95,6 +95,7 @@ SECONDS = {
     # issue 54's
     "tests/rl/test_sar_presets.py": 22, "tests/rl/test_wall_budget.py": 25, "tests/test_benchmark_learner_per_hour.py": 3,
     "tests/test_gpu_check.py": 3, "tests/test_benchmark_sar_hand_scaled.py": 5, "tests/planning/test_planner_registry.py": 5,
+    "tests/test_zygote.py": 9,  # issue 56's
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[sar_synergies]": 85,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[your_own_body]": 45,
     "tests/test_notebooks.py::test_notebook_runs_on_tiny_budgets[robust_pendulum]": 40,
