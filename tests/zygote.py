@@ -2,9 +2,10 @@
 libraries every command imports (tests/helpers.py run_cli).
 
 Why: a command that trains spends ~2.5 s of CPU importing torch, Stable-Baselines3, Gymnasium, MuJoCo and
-motorlab before it does anything, and make test starts ~200 of them. Measured 2026-11-30 (a make test run
-with every interpreter's CPU time logged): 537 interpreters used 950 of the suite's 1,650 CPU seconds, and
-a third of that was imports. A fork of a process that has imported them and done nothing else is the
+motorlab before it does anything, and ~1 s tearing them down at exit; make test starts ~200 of them.
+Measured 2026-11-30 (a make test run with every interpreter's CPU time logged): 537 interpreters used 950
+of the suite's 1,650 CPU seconds, the tests' ~200 commands 640 of them; forked from here, the same
+commands used 326. A fork of a process that has imported them and done nothing else is the
 process a fresh start would be after those imports: its own pid, exit status, working directory,
 environment, argv, descriptors 0-2 and fresh random seeds. What it cannot be is a process whose imports
 saw a different environment, so a command whose environment differs from the zygote's in a variable
@@ -109,8 +110,8 @@ def _become(request: dict, out: int, err: int, base_path: list[str]) -> None:
 
 
 def _wait_for_command(conn: socket.socket, base_path: list[str]) -> None:
-    """The waiter: fork the command, say its pid, wait for it, say its exit status, and leave (the
-    command's own SystemExit, raised in its fork, ends that process through the interpreter's exit)."""
+    """The waiter: fork the command (which never returns: _become ends it), say its pid, wait for it,
+    say its exit status, and leave."""
     try:
         data, fds, _, _ = socket.recv_fds(conn, 1 << 20, 2)
         while not data.endswith(b"\n"):
