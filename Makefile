@@ -46,7 +46,7 @@ lint: $(STAMP)  ## ruff (pyflakes, isort, bugbear) and the import layers (lint-i
 # rehearsals, learning comparisons, Ray clusters) run in make test-long; CI runs both.
 # The 25 slowest tests are listed at the end: where to look when the suite grows.
 # The site's strict build is a test (tests/test_docs.py), so make test does not build it a second time first.
-test: lint $(VENV)/.browser  ## the test suite but the long end-to-end runs (about 12 min on 2 cores); CI adds test-long
+test: lint $(VENV)/.browser  ## the test suite but the long end-to-end runs (about 11 min on 2 cores); CI adds test-long
 	$(VENV)/bin/python -m pytest -q -n 2 --dist loadfile --durations=25 -m "not long"
 
 # The documentation site (mkdocs.yml, docs/): strict, so a warning (a broken link, a docstring griffe

@@ -109,7 +109,7 @@ def seconds(nodeid: str) -> float:
 
 
 # ---- `make test` and `make test-long` --------------------------------------------------------------
-# make test (about 12 min on 2 cores) runs every test but these, marked `long`; make test-long runs them, and CI
+# make test (about 11 min on 2 cores) runs every test but these, marked `long`; make test-long runs them, and CI
 # runs both. Each is an end-to-end run whose parts make test covers on their
 # own, a benchmark's rehearsal, a learning comparison that needs a real budget, or a second backend's equality.
 LONG = {
