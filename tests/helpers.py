@@ -63,7 +63,7 @@ def run_cli(*args: str | os.PathLike, cwd: Path | None = None, timeout: float = 
             fresh: bool = False) -> subprocess.CompletedProcess:
     """`python -m motorlab ARGS` in a fresh process, as a user would run it (`env`: variables to add).
     The process is a fork of one that has already imported the libraries every command imports
-    (tests/zygote.py: the same process after those imports, at a tenth of the start-up CPU), or with
+    (tests/zygote.py: the same process after those imports, without their seconds of CPU), or with
     `fresh=True`, or an environment those imports would have read differently, a new interpreter.
     `user_modules=False`: without the user modules this process passes on ($MOTORLAB_IMPORTS), for a run that
     tests of other files share (a session fixture): a run records them, and a later file's process may not
